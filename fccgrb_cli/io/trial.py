@@ -1,0 +1,160 @@
+"""Marker trials in: C3D (ezc3d) and OpenSim TRC; out: TRC. SI (metres) inside.
+
+Gaps are NaN: a C3D point whose residual is negative, or an empty TRC field.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from fccgrb_cli.errors import InputError
+from fccgrb_cli.io.atomic import atomic_path
+from fccgrb_cli.io.c3d import UNIT_SCALE, write_markers
+
+
+@dataclass(frozen=True)
+class Trial:
+    """Marker positions (frames × markers × 3, metres, NaN in gaps) sampled at ``rate`` Hz."""
+
+    path: str
+    labels: tuple[str, ...]
+    markers: np.ndarray
+    rate: float
+
+    @property
+    def n_frames(self) -> int:
+        return self.markers.shape[0]
+
+    @property
+    def time(self) -> np.ndarray:
+        return np.arange(self.n_frames) / self.rate
+
+    def select(self, labels: list[str]) -> np.ndarray:
+        """The markers with these file labels, in that order (frames × len(labels) × 3)."""
+        index = {label: k for k, label in enumerate(self.labels)}
+        return self.markers[:, [index[label] for label in labels]]
+
+
+def _unit_scale(units: str, path: Path, key: str) -> float:
+    scale = UNIT_SCALE.get(units.strip().lower())
+    if scale is None:
+        raise InputError(f"{path}: {key}: expected a length unit {sorted(UNIT_SCALE)}, got "
+                         f"{units!r}")
+    return scale
+
+
+def read_c3d(path: Path) -> Trial:
+    import ezc3d
+
+    try:
+        c3d = ezc3d.c3d(str(path))
+    except Exception as exc:  # ezc3d raises bare RuntimeError/IOError on bad files
+        reason = str(exc).strip() or exc.__class__.__name__
+        raise InputError(f"{path}: not a readable C3D file ({reason})") from None
+    point = c3d["parameters"]["POINT"]
+    labels = tuple(str(label).strip() for label in point["LABELS"]["value"])
+    units = point.get("UNITS", {}).get("value") or ["mm"]
+    scale = _unit_scale(str(units[0]), path, "POINT:UNITS")
+    rate = float(point["RATE"]["value"][0])
+    if not rate > 0:
+        raise InputError(f"{path}: POINT:RATE: expected a positive rate, got {rate}")
+    xyz = np.transpose(c3d["data"]["points"][:3], (2, 1, 0)) * scale
+    residuals = c3d["data"]["meta_points"].get("residuals")
+    if residuals is not None and residuals.size:
+        xyz[np.transpose(residuals[0], (1, 0)) < 0] = np.nan
+    return Trial(str(path), labels[: xyz.shape[1]], xyz, rate)
+
+
+def read_trc(path: Path) -> Trial:
+    """OpenSim TRC: header line 3 holds DataRate … Units; line 4 the labels; data from line 6."""
+    try:
+        lines = path.read_text(encoding="utf-8", errors="strict").splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: cannot read the TRC file ({exc.__class__.__name__})") from None
+    if len(lines) < 5 or not lines[0].startswith("PathFileType"):
+        raise InputError(f"{path}: line 1: expected a TRC header starting with 'PathFileType'")
+    keys, values = lines[1].split("\t"), lines[2].split("\t")
+    header = dict(zip((k.strip() for k in keys), (v.strip() for v in values), strict=False))
+    try:
+        rate = float(header["DataRate"])
+        n_markers = int(header["NumMarkers"])
+    except (KeyError, ValueError):
+        raise InputError(f"{path}: lines 2-3: expected DataRate and NumMarkers values") from None
+    scale = _unit_scale(header.get("Units", "mm"), path, "Units")
+    names = [n.strip() for n in lines[3].split("\t")[2:]]
+    labels = tuple(n for n in names if n)
+    if len(labels) != n_markers:
+        raise InputError(f"{path}: line 4: expected {n_markers} marker labels (NumMarkers), "
+                         f"got {len(labels)}")
+    rows = []
+    for number, line in enumerate(lines[5:], start=6):
+        if not line.strip():
+            continue
+        coords = line.rstrip("\r\n").split("\t")[2:]
+        while len(coords) > 3 * n_markers and not coords[-1].strip():
+            coords.pop()
+        if len(coords) != 3 * n_markers:
+            raise InputError(f"{path}: line {number}: expected {3 * n_markers} marker columns "
+                             f"(x y z for {n_markers} markers) after frame and time, "
+                             f"got {len(coords)}")
+        try:
+            rows.append([float(c) if c.strip() else np.nan for c in coords])
+        except ValueError:
+            raise InputError(f"{path}: line {number}: expected numbers in every marker column") \
+                from None
+    if not rows:
+        raise InputError(f"{path}: expected at least one frame of data after the header")
+    xyz = np.array(rows).reshape(len(rows), n_markers, 3) * scale
+    return Trial(str(path), labels, xyz, rate)
+
+
+def read_trial(path: str | Path) -> Trial:
+    """Read a C3D or TRC marker file (by its ending)."""
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: trial file not found")
+    if path.is_dir():
+        raise InputError(f"{path}: expected a trial file, got a folder")
+    suffix = path.suffix.lower()
+    if suffix == ".trc":
+        return read_trc(path)
+    if suffix == ".c3d":
+        return read_c3d(path)
+    raise InputError(f"{path}: expected a .c3d or .trc trial file")
+
+
+def write_trc(path: str | Path, trial_labels: list[str], markers_m: np.ndarray, rate: float,
+              units: str = "mm") -> None:
+    """Write markers (frames × markers × 3, metres) as an OpenSim TRC file in ``units``."""
+    n_frames, n_markers, _ = markers_m.shape
+    data = markers_m / UNIT_SCALE[units]
+    name = Path(path).name
+    out = [
+        f"PathFileType\t4\t(X/Y/Z)\t{name}",
+        "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame"
+        "\tOrigNumFrames",
+        f"{rate:g}\t{rate:g}\t{n_frames}\t{n_markers}\t{units}\t{rate:g}\t1\t{n_frames}",
+        "Frame#\tTime\t" + "\t".join(f"{label}\t\t" for label in trial_labels).rstrip("\t"),
+        "\t\t" + "\t".join(f"X{k}\tY{k}\tZ{k}" for k in range(1, n_markers + 1)),
+        "",
+    ]
+    for f in range(n_frames):
+        values = "\t".join("" if np.isnan(x) else f"{x:.9g}" for x in data[f].ravel())
+        out.append(f"{f + 1}\t{f / rate:.6f}\t{values}")
+    with atomic_path(path) as tmp:
+        tmp.write_text("\n".join(out) + "\n", encoding="utf-8")
+
+
+def write_trial(path: str | Path, labels: list[str], markers_m: np.ndarray, rate: float,
+                units: str = "mm") -> None:
+    """Write a C3D or TRC file, chosen by the ending of ``path``."""
+    suffix = Path(path).suffix.lower()
+    if suffix == ".trc":
+        write_trc(path, labels, markers_m, rate, units)
+    elif suffix == ".c3d":
+        write_markers(path, labels, markers_m, rate, units)
+    else:
+        raise InputError(f"{path}: expected an output ending in .c3d or .trc")

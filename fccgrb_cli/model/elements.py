@@ -1,0 +1,212 @@
+"""Immutable model elements, named as in the FCC-GRB formulation (paper §2)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from types import MappingProxyType
+from typing import Literal
+
+import numpy as np
+
+from fccgrb_cli.model.motion import Motion
+
+GROUND = "ground"
+Form = Literal["full", "reduced"]
+Vec3 = tuple[float, float, float]
+
+# Scalar equations each joint type contributes (FORMULATION §2).
+JOINT_EQUATIONS: dict[str, int] = {
+    "spherical": 3,
+    "revolute": 5,
+    "universal": 4,
+    "cylindrical": 4,
+    "prismatic": 5,
+    "parallel": 2,
+}
+JOINTS_WITH_POINTS = frozenset({"spherical", "revolute", "universal", "cylindrical", "prismatic"})
+JOINTS_WITH_AXES = frozenset({"revolute", "universal", "cylindrical", "prismatic", "parallel"})
+
+
+@dataclass(frozen=True)
+class Point:
+    """A body-fixed point with local coordinates (a, b, c) along (u, v, w): r_P = C_P q (Eq. 2)."""
+
+    name: str
+    local: Vec3
+
+
+@dataclass(frozen=True)
+class Vector:
+    """A body-fixed unit vector with local components (α, β, γ): s = C_s q (Eq. 3)."""
+
+    name: str
+    local: Vec3
+
+
+@dataclass(frozen=True)
+class Pose:
+    """A body's reference point r and unit vectors u, v, w in the global frame (metres)."""
+
+    r: Vec3 = (0.0, 0.0, 0.0)
+    u: Vec3 = (1.0, 0.0, 0.0)
+    v: Vec3 = (0.0, 1.0, 0.0)
+    w: Vec3 = (0.0, 0.0, 1.0)
+
+    def as_array(self) -> np.ndarray:
+        """The fully-defined coordinates [r, u, v, w] (12,)."""
+        return np.concatenate([self.r, self.u, self.v, self.w]).astype(float)
+
+
+@dataclass(frozen=True)
+class Inertia:
+    """Mass (kg), centre of mass in local coordinates (m), inertia tensor about the CoM in the
+    body frame (kg·m²)."""
+
+    mass: float
+    com: Vec3
+    tensor: tuple[Vec3, Vec3, Vec3]
+
+
+def _frozen(mapping: dict) -> MappingProxyType:
+    return MappingProxyType(dict(mapping))
+
+
+@dataclass(frozen=True)
+class Body:
+    """A generic rigid body, fully-defined q = [r, u, v, w] or reduced q = [r, u, v] (Eq. 1, 4)."""
+
+    name: str
+    form: Form
+    points: MappingProxyType
+    vectors: MappingProxyType
+    pose: Pose = field(default_factory=Pose)
+    inertia: Inertia | None = None
+
+    @property
+    def ncoord(self) -> int:
+        return 12 if self.form == "full" else 9
+
+
+@dataclass(frozen=True)
+class Ground:
+    """The fixed frame: named points (m) and unit vectors in global coordinates."""
+
+    points: MappingProxyType
+    vectors: MappingProxyType
+
+
+@dataclass(frozen=True)
+class Joint:
+    """A kinematic joint between bodies i and j (either may be the ground).
+
+    ``points`` name the coincident point on each body; ``axes`` the joint axes (revolute,
+    cylindrical, prismatic, parallel: s_i ∥ s_j) or the perpendicular arms (universal: s_i ⟂ s_j);
+    ``lock`` two vectors kept perpendicular to stop a prismatic joint's rotation.
+    """
+
+    name: str
+    type: str
+    bodies: tuple[str, str]
+    points: tuple[str, str] | None = None
+    axes: tuple[str, str] | None = None
+    lock: tuple[str, str] | None = None
+
+
+@dataclass(frozen=True)
+class AngularCoordinate:
+    """θ_k, the angle between vector s1 of body 1 and vector s2 of body 2: s1·s2 = cos θ_k.
+
+    Used as an angular driver (AR, Eq. 23–26) or as a mixed coordinate (MCR, Eq. 10–22).
+    """
+
+    name: str
+    body1: str
+    vector1: str
+    body2: str
+    vector2: str
+    motion: Motion | None = None
+
+
+@dataclass(frozen=True)
+class TrackedPoint:
+    """A model point that follows a marker (tracking constraint TC, Eq. 29–36)."""
+
+    body: str
+    point: str
+    marker: str
+    weight: float | None = None
+
+
+@dataclass(frozen=True)
+class TrackedVector:
+    """A body vector that follows the unit vector from one marker to another (TOC, Eq. 37–38)."""
+
+    body: str
+    vector: str
+    from_marker: str
+    to_marker: str
+    weight: float | None = None
+
+    @property
+    def marker(self) -> str:
+        return f"{self.from_marker}->{self.to_marker}"
+
+
+@dataclass(frozen=True)
+class Model:
+    """A validated multibody model. Build it with :func:`fccgrb_cli.model.load_model`."""
+
+    name: str
+    gravity: Vec3
+    ground: Ground
+    bodies: tuple[Body, ...]
+    joints: tuple[Joint, ...]
+    angles: tuple[AngularCoordinate, ...]
+    tracked_points: tuple[TrackedPoint, ...] = ()
+    tracked_vectors: tuple[TrackedVector, ...] = ()
+    source: str = "<model>"
+    text: str = ""
+
+    def body(self, name: str) -> Body:
+        for body in self.bodies:
+            if body.name == name:
+                return body
+        raise KeyError(name)
+
+    @property
+    def marker_labels(self) -> tuple[str, ...]:
+        return tuple(tp.marker for tp in self.tracked_points)
+
+    def with_form(self, form: Form) -> Model:
+        """The same model with every body in the given form (paper Eq. 1 or Eq. 4)."""
+        return replace(self, bodies=tuple(replace(b, form=form) for b in self.bodies))
+
+    def with_tracked(self, markers: tuple[str, ...]) -> Model:
+        """The same model tracking only the named markers (points and vectors)."""
+        keep = set(markers)
+        return replace(
+            self,
+            tracked_points=tuple(t for t in self.tracked_points if t.marker in keep),
+            tracked_vectors=tuple(t for t in self.tracked_vectors if t.marker in keep),
+        )
+
+
+__all__ = [
+    "GROUND",
+    "JOINTS_WITH_AXES",
+    "JOINTS_WITH_POINTS",
+    "JOINT_EQUATIONS",
+    "AngularCoordinate",
+    "Body",
+    "Form",
+    "Ground",
+    "Inertia",
+    "Joint",
+    "Model",
+    "Point",
+    "Pose",
+    "TrackedPoint",
+    "TrackedVector",
+    "Vector",
+    "_frozen",
+]

@@ -1,0 +1,444 @@
+"""YAML → validated, immutable :class:`Model`.
+
+Every rejection is one :class:`InputError` line: ``FILE: KEY.PATH: expected …, got …``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from fccgrb_cli.errors import InputError
+from fccgrb_cli.model.elements import (
+    GROUND,
+    JOINT_EQUATIONS,
+    JOINTS_WITH_AXES,
+    JOINTS_WITH_POINTS,
+    AngularCoordinate,
+    Body,
+    Ground,
+    Inertia,
+    Joint,
+    Model,
+    Point,
+    Pose,
+    TrackedPoint,
+    TrackedVector,
+    Vector,
+    _frozen,
+)
+from fccgrb_cli.model.motion import Motion
+
+UNIT_TOL = 1e-6
+BODY_AXES = {"u": (1.0, 0.0, 0.0), "v": (0.0, 1.0, 0.0), "w": (0.0, 0.0, 1.0)}
+GROUND_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
+TOP_KEYS = {"name", "units", "gravity", "form", "ground", "bodies", "joints", "angles", "tracking"}
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """A safe loader that refuses duplicate mapping keys instead of keeping the last one."""
+
+
+def _construct_mapping(loader: _UniqueKeyLoader, node: yaml.MappingNode, deep: bool = False):
+    seen: dict = {}
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=deep)
+        mark = key_node.start_mark
+        if not isinstance(key, (str, int, float, bool)) and key is not None:
+            raise yaml.constructor.ConstructorError(
+                None, None, "a mapping key must be a name, not a list or mapping", mark)
+        if key in seen:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"duplicate key {key!r}, first given on line {seen[key] + 1}", mark)
+        seen[key] = mark.line
+    return loader.construct_mapping(node, deep=deep)
+
+
+_UniqueKeyLoader.add_constructor(
+    yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping
+)
+
+
+class _Reader:
+    """Reads values out of the parsed YAML, naming the file and key path in every error."""
+
+    def __init__(self, source: str):
+        self.source = source
+
+    def fail(self, path: str, expected: str, got: Any = None, *, show_got: bool = True) -> None:
+        tail = f", got {got!r}" if show_got else ""
+        raise InputError(f"{self.source}: {path or '(top level)'}: expected {expected}{tail}")
+
+    def mapping(self, value: Any, path: str, *, required: frozenset = frozenset(),
+                allowed: set | None = None) -> dict:
+        if not isinstance(value, dict):
+            self.fail(path, "a mapping", value)
+        for key in value:
+            if not isinstance(key, str):
+                self.fail(path, "string keys", key)
+            if allowed is not None and key not in allowed:
+                self.fail(f"{path}.{key}" if path else key,
+                          f"one of the keys {sorted(allowed)}", key, show_got=False)
+        for key in required:
+            if key not in value:
+                self.fail(f"{path}.{key}" if path else key, "this key to be present", None,
+                          show_got=False)
+        return value
+
+    def number(self, value: Any, path: str) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            self.fail(path, "a finite number", value)
+        try:
+            number = float(value)
+        except OverflowError:
+            number = math.inf
+        if not math.isfinite(number):
+            self.fail(path, "a finite number", value if isinstance(value, float) else "too large")
+        return number
+
+    def string(self, value: Any, path: str) -> str:
+        if not isinstance(value, str) or not value:
+            self.fail(path, "a non-empty string", value)
+        return value
+
+    def vec3(self, value: Any, path: str) -> tuple[float, float, float]:
+        if not isinstance(value, list) or len(value) != 3:
+            self.fail(path, "a list of 3 numbers", value)
+        x, y, z = (self.number(c, f"{path}[{k}]") for k, c in enumerate(value))
+        return (x, y, z)
+
+    def unit3(self, value: Any, path: str) -> tuple[float, float, float]:
+        vec = self.vec3(value, path)
+        norm = float(np.linalg.norm(vec))
+        if abs(norm - 1.0) > UNIT_TOL:
+            self.fail(path, f"a unit vector (norm 1 ± {UNIT_TOL:g}), got norm {norm:.6g}", None,
+                      show_got=False)
+        return vec
+
+    def pair(self, value: Any, path: str) -> tuple[str, str]:
+        if not isinstance(value, list) or len(value) != 2:
+            self.fail(path, "a list of 2 names", value)
+        return (self.string(value[0], f"{path}[0]"), self.string(value[1], f"{path}[1]"))
+
+    def items(self, value: Any, path: str) -> list:
+        if value is None:
+            return []
+        if not isinstance(value, list):
+            self.fail(path, "a list", value)
+        return value
+
+
+def _angle_scale(r: _Reader, doc: dict) -> float:
+    units = r.mapping(doc.get("units", {}), "units", allowed={"angle"})
+    angle = units.get("angle", "deg")
+    if angle not in ("deg", "rad"):
+        r.fail("units.angle", "'deg' or 'rad'", angle)
+    return math.pi / 180.0 if angle == "deg" else 1.0
+
+
+def _pose(r: _Reader, value: Any, path: str, form: str) -> Pose:
+    spec = r.mapping(value, path, required=frozenset({"r", "u", "v"}), allowed={"r", "u", "v", "w"})
+    origin = r.vec3(spec["r"], f"{path}.r")
+    u = np.array(r.unit3(spec["u"], f"{path}.u"))
+    v = np.array(r.unit3(spec["v"], f"{path}.v"))
+    w = np.array(r.unit3(spec["w"], f"{path}.w")) if "w" in spec else np.cross(u, v)
+    if "w" not in spec and form == "full":
+        r.fail(f"{path}.w", "w for a fully-defined body", None, show_got=False)
+    frame = np.column_stack([u, v, w])
+    error = float(np.abs(frame.T @ frame - np.eye(3)).max())
+    if error > UNIT_TOL:
+        r.fail(path, f"u, v, w unit and mutually orthogonal (within {UNIT_TOL:g}), "
+               f"got |UᵀU − I| = {error:.3g}", None, show_got=False)
+    if np.linalg.det(frame) < 0:
+        r.fail(path, "a right-handed frame (w = u × v)", None, show_got=False)
+    return Pose(origin, tuple(u), tuple(v), tuple(w))
+
+
+def _inertia(r: _Reader, spec: dict, path: str) -> Inertia | None:
+    if "mass" not in spec:
+        for key in ("com", "inertia"):
+            if key in spec:
+                r.fail(f"{path}.mass", f"a mass when {key} is given", None, show_got=False)
+        return None
+    mass = r.number(spec["mass"], f"{path}.mass")
+    if mass <= 0:
+        r.fail(f"{path}.mass", "a positive mass (kg)", mass)
+    com = r.vec3(spec.get("com", [0.0, 0.0, 0.0]), f"{path}.com")
+    raw = spec.get("inertia")
+    ipath = f"{path}.inertia"
+    if raw is None:
+        r.fail(ipath, "the inertia (kg·m²) when a mass is given", None, show_got=False)
+    if isinstance(raw, list) and len(raw) == 3 and all(not isinstance(x, list) for x in raw):
+        tensor = np.diag(r.vec3(raw, ipath))
+    elif isinstance(raw, list) and len(raw) == 3:
+        tensor = np.array([r.vec3(row, f"{ipath}[{k}]") for k, row in enumerate(raw)])
+    else:
+        r.fail(ipath, "3 principal moments [Iu, Iv, Iw] or a 3×3 tensor", raw)
+    if not np.allclose(tensor, tensor.T, atol=1e-12):
+        r.fail(ipath, "a symmetric tensor", raw)
+    moments = np.linalg.eigvalsh(tensor)
+    if moments[0] < 0:
+        r.fail(ipath, "non-negative principal moments", raw)
+    if moments[2] > moments[0] + moments[1] + 1e-12 * max(moments[2], 1.0):
+        r.fail(ipath, "principal moments satisfying the triangle inequality "
+               f"(largest ≤ sum of the other two), got {np.round(moments, 9).tolist()}", None,
+               show_got=False)
+    return Inertia(mass, com, tuple(tuple(row) for row in tensor.tolist()))
+
+
+def _named_vectors(r: _Reader, value: Any, path: str, builtin: dict) -> dict:
+    spec = r.mapping(value or {}, path)
+    out = {name: Vector(name, loc) for name, loc in builtin.items()}
+    for name, loc in spec.items():
+        if name in builtin:
+            r.fail(f"{path}.{name}", f"a name other than the built-in {sorted(builtin)}", name)
+        out[name] = Vector(name, r.unit3(loc, f"{path}.{name}"))
+    return out
+
+
+def _named_points(r: _Reader, value: Any, path: str) -> dict:
+    spec = r.mapping(value or {}, path)
+    return {name: Point(name, r.vec3(loc, f"{path}.{name}")) for name, loc in spec.items()}
+
+
+def _bodies(r: _Reader, doc: dict) -> tuple[Body, ...]:
+    default_form = doc.get("form", "full")
+    if default_form not in ("full", "reduced"):
+        r.fail("form", "'full' or 'reduced'", default_form)
+    spec = r.mapping(doc["bodies"], "bodies")
+    if not spec:
+        r.fail("bodies", "at least one body", spec)
+    bodies = []
+    allowed = {"form", "mass", "com", "inertia", "points", "vectors", "pose"}
+    for name, body in spec.items():
+        path = f"bodies.{name}"
+        if name == GROUND:
+            r.fail(path, f"a body name other than {GROUND!r} (the ground is its own section)", name)
+        body = r.mapping(body, path, allowed=allowed)
+        form = body.get("form", default_form)
+        if form not in ("full", "reduced"):
+            r.fail(f"{path}.form", "'full' or 'reduced'", form)
+        pose = _pose(r, body["pose"], f"{path}.pose", form) if "pose" in body else Pose()
+        bodies.append(Body(
+            name=name,
+            form=form,
+            points=_frozen(_named_points(r, body.get("points"), f"{path}.points")),
+            vectors=_frozen(_named_vectors(r, body.get("vectors"), f"{path}.vectors", BODY_AXES)),
+            pose=pose,
+            inertia=_inertia(r, body, path),
+        ))
+    return tuple(bodies)
+
+
+class _Names:
+    """Resolves ``body.point`` and ``body.vector`` references, naming what exists when unknown."""
+
+    def __init__(self, r: _Reader, ground: Ground, bodies: tuple[Body, ...]):
+        self.r = r
+        self.points = {GROUND: ground.points, **{b.name: b.points for b in bodies}}
+        self.vectors = {GROUND: ground.vectors, **{b.name: b.vectors for b in bodies}}
+
+    def body(self, name: str, path: str) -> str:
+        if name not in self.points:
+            self.r.fail(path, f"a body name (one of {sorted(self.points)})", name)
+        return name
+
+    def _member(self, table: dict, body: str, name: str, path: str, kind: str) -> str:
+        if name not in table[body]:
+            self.r.fail(path, f"a {kind} of {body} (one of {sorted(table[body])})", name)
+        return name
+
+    def point(self, body: str, name: str, path: str) -> str:
+        return self._member(self.points, body, name, path, "point")
+
+    def vector(self, body: str, name: str, path: str) -> str:
+        return self._member(self.vectors, body, name, path, "vector")
+
+    def dotted(self, value: Any, path: str, kind: str) -> tuple[str, str]:
+        text = self.r.string(value, path)
+        if text.count(".") != 1:
+            self.r.fail(path, f"'body.{kind}'", text)
+        body, member = text.split(".")
+        self.body(body, path)
+        lookup = self.point if kind == "point" else self.vector
+        return body, lookup(body, member, path)
+
+
+def _joints(r: _Reader, doc: dict, names: _Names) -> tuple[Joint, ...]:
+    joints = []
+    seen: set[str] = set()
+    for k, spec in enumerate(r.items(doc.get("joints"), "joints")):
+        path = f"joints[{k}]"
+        spec = r.mapping(spec, path, required=frozenset({"type", "bodies"}),
+                         allowed={"name", "type", "bodies", "points", "axes", "lock"})
+        jtype = spec["type"]
+        if not isinstance(jtype, str) or jtype not in JOINT_EQUATIONS:
+            r.fail(f"{path}.type", f"a joint type (one of {sorted(JOINT_EQUATIONS)})", jtype)
+        name = r.string(spec.get("name", f"{jtype}{k}"), f"{path}.name")
+        if name in seen:
+            r.fail(f"{path}.name", "a joint name not used before", name)
+        seen.add(name)
+        bodies = r.pair(spec["bodies"], f"{path}.bodies")
+        for side, body in enumerate(bodies):
+            names.body(body, f"{path}.bodies[{side}]")
+        if bodies[0] == bodies[1]:
+            r.fail(f"{path}.bodies", "two different bodies", list(bodies))
+        if bodies[0] == GROUND and bodies[1] == GROUND:
+            r.fail(f"{path}.bodies", "at least one moving body", list(bodies))
+
+        def members(key: str, lookup: Callable[[str, str, str], str], needed: bool,
+                    path: str = path, spec: dict = spec, bodies: tuple = bodies, jtype: str = jtype
+                    ) -> tuple[str, str] | None:
+            if key not in spec:
+                if needed:
+                    r.fail(f"{path}.{key}", f"{key} for a {jtype} joint", None, show_got=False)
+                return None
+            if not needed:
+                r.fail(f"{path}.{key}", f"no {key} for a {jtype} joint", spec[key])
+            pair = r.pair(spec[key], f"{path}.{key}")
+            return (lookup(bodies[0], pair[0], f"{path}.{key}[0]"),
+                    lookup(bodies[1], pair[1], f"{path}.{key}[1]"))
+
+        joints.append(Joint(
+            name=name,
+            type=jtype,
+            bodies=bodies,
+            points=members("points", names.point, jtype in JOINTS_WITH_POINTS),
+            axes=members("axes", names.vector, jtype in JOINTS_WITH_AXES),
+            lock=members("lock", names.vector, jtype == "prismatic"),
+        ))
+    return tuple(joints)
+
+
+def _motion(r: _Reader, value: Any, path: str, scale: float) -> Motion:
+    spec = r.mapping(value, path, required=frozenset({"mean"}), allowed={"mean", "terms"})
+    terms = []
+    for k, term in enumerate(r.items(spec.get("terms"), f"{path}.terms")):
+        tpath = f"{path}.terms[{k}]"
+        term = r.mapping(term, tpath, required=frozenset({"amplitude", "frequency"}),
+                         allowed={"amplitude", "frequency", "phase"})
+        frequency = r.number(term["frequency"], f"{tpath}.frequency")
+        if frequency < 0:
+            r.fail(f"{tpath}.frequency", "a non-negative frequency (Hz)", frequency)
+        terms.append((r.number(term["amplitude"], f"{tpath}.amplitude") * scale,
+                      frequency,
+                      r.number(term.get("phase", 0.0), f"{tpath}.phase") * scale))
+    motion = Motion(r.number(spec["mean"], f"{path}.mean") * scale, tuple(terms))
+    low, high = motion.bounds()
+    if low <= 0.0 or high >= math.pi:
+        r.fail(path, "a motion that stays inside (0, 180) deg, where s1·s2 = cos θ is "
+               f"invertible; it can reach [{math.degrees(low):.4g}, {math.degrees(high):.4g}] deg",
+               None, show_got=False)
+    return motion
+
+
+def _angles(r: _Reader, doc: dict, names: _Names, scale: float) -> tuple[AngularCoordinate, ...]:
+    angles = []
+    seen: set[str] = set()
+    for k, spec in enumerate(r.items(doc.get("angles"), "angles")):
+        path = f"angles[{k}]"
+        spec = r.mapping(spec, path, required=frozenset({"name", "vectors"}),
+                         allowed={"name", "vectors", "motion"})
+        name = r.string(spec["name"], f"{path}.name")
+        if name in seen:
+            r.fail(f"{path}.name", "an angle name not used before", name)
+        seen.add(name)
+        pair = r.pair(spec["vectors"], f"{path}.vectors")
+        body1, vec1 = names.dotted(pair[0], f"{path}.vectors[0]", "vector")
+        body2, vec2 = names.dotted(pair[1], f"{path}.vectors[1]", "vector")
+        if body1 == body2:
+            r.fail(f"{path}.vectors", "vectors of two different bodies", list(pair))
+        motion = _motion(r, spec["motion"], f"{path}.motion", scale) if "motion" in spec else None
+        angles.append(AngularCoordinate(name, body1, vec1, body2, vec2, motion))
+    return tuple(angles)
+
+
+def _weight(r: _Reader, spec: dict, path: str) -> float | None:
+    if "weight" not in spec:
+        return None
+    weight = r.number(spec["weight"], f"{path}.weight")
+    if weight <= 0:
+        r.fail(f"{path}.weight", "a positive weight", weight)
+    return weight
+
+
+def _tracking(r: _Reader, doc: dict, names: _Names
+              ) -> tuple[tuple[TrackedPoint, ...], tuple[TrackedVector, ...]]:
+    spec = r.mapping(doc.get("tracking") or {}, "tracking", allowed={"points", "vectors"})
+    points, vectors, labels = [], [], set()
+    for k, item in enumerate(r.items(spec.get("points"), "tracking.points")):
+        path = f"tracking.points[{k}]"
+        item = r.mapping(item, path, required=frozenset({"marker", "point"}),
+                         allowed={"marker", "point", "weight"})
+        marker = r.string(item["marker"], f"{path}.marker")
+        if marker in labels:
+            r.fail(f"{path}.marker", "a marker label not tracked before", marker)
+        labels.add(marker)
+        body, point = names.dotted(item["point"], f"{path}.point", "point")
+        if body == GROUND:
+            r.fail(f"{path}.point", "a point of a moving body", item["point"])
+        points.append(TrackedPoint(body, point, marker, _weight(r, item, path)))
+    for k, item in enumerate(r.items(spec.get("vectors"), "tracking.vectors")):
+        path = f"tracking.vectors[{k}]"
+        item = r.mapping(item, path, required=frozenset({"vector", "from", "to"}),
+                         allowed={"vector", "from", "to", "weight"})
+        body, vector = names.dotted(item["vector"], f"{path}.vector", "vector")
+        if body == GROUND:
+            r.fail(f"{path}.vector", "a vector of a moving body", item["vector"])
+        vectors.append(TrackedVector(body, vector, r.string(item["from"], f"{path}.from"),
+                                     r.string(item["to"], f"{path}.to"), _weight(r, item, path)))
+    return tuple(points), tuple(vectors)
+
+
+def parse_model(text: str, source: str = "<model>") -> Model:
+    """Validate a model given as YAML text; ``source`` names it in error messages."""
+    try:
+        doc = yaml.load(text, Loader=_UniqueKeyLoader)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise InputError(f"{source}: {where}invalid YAML ({problem})") from None
+    r = _Reader(source)
+    doc = r.mapping(doc, "", required=frozenset({"bodies"}), allowed=TOP_KEYS)
+    scale = _angle_scale(r, doc)
+    gravity = r.vec3(doc.get("gravity", [0.0, 0.0, -9.81]), "gravity")
+    gspec = r.mapping(doc.get("ground") or {}, "ground", allowed={"points", "vectors"})
+    ground = Ground(
+        points=_frozen(_named_points(r, gspec.get("points"), "ground.points")),
+        vectors=_frozen(_named_vectors(r, gspec.get("vectors"), "ground.vectors", GROUND_AXES)),
+    )
+    bodies = _bodies(r, doc)
+    names = _Names(r, ground, bodies)
+    tracked_points, tracked_vectors = _tracking(r, doc, names)
+    return Model(
+        name=r.string(doc.get("name", Path(source).stem), "name"),
+        gravity=gravity,
+        ground=ground,
+        bodies=bodies,
+        joints=_joints(r, doc, names),
+        angles=_angles(r, doc, names, scale),
+        tracked_points=tracked_points,
+        tracked_vectors=tracked_vectors,
+        source=source,
+        text=text,
+    )
+
+
+def load_model(path: str | Path) -> Model:
+    """Read and validate a model file (static checks; see ``system.structure`` for rank)."""
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{path}: expected a model file, got a folder")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError(f"{path}: model file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: cannot read the model file ({exc.__class__.__name__})") from None
+    return parse_model(text, str(path))

@@ -1,0 +1,111 @@
+"""A first-frame guess that needs no hand-given pose (FORMULATION §3).
+
+Bodies are visited outward from the ground along the joints. Each is fitted to what is known of
+it: its tracked markers plus the joint points it shares with bodies already placed. Three or more
+non-collinear points give a least-squares rigid fit (Söderkvist–Wedin, via the SVD); two give the
+segment's direction (the smallest rotation from the model pose); one, a translation of the pose.
+Mixed coordinates then follow from the fitted vectors, θ = acos(s1·s2).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from fccgrb_cli.model import GROUND
+from fccgrb_cli.system import System
+
+
+def rigid_fit(local: np.ndarray, world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """R, r minimizing Σ‖r + R pᵢ − yᵢ‖² (Söderkvist & Wedin 1993)."""
+    lc, wc = local.mean(axis=0), world.mean(axis=0)
+    H = (local - lc).T @ (world - wc)
+    U, _, Vt = np.linalg.svd(H)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+    R = Vt.T @ D @ U.T
+    return R, wc - R @ lc
+
+
+def rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotation taking direction a onto direction b."""
+    a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
+    axis = np.cross(a, b)
+    s, c = np.linalg.norm(axis), float(a @ b)
+    if s < 1e-12:
+        if c > 0:
+            return np.eye(3)
+        perp = np.cross(a, np.eye(3)[int(np.argmin(np.abs(a)))])
+        perp /= np.linalg.norm(perp)
+        return 2.0 * np.outer(perp, perp) - np.eye(3)
+    k = axis / s
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + s * K + (1 - c) * (K @ K)
+
+
+def _place(local: np.ndarray, world: np.ndarray, R0: np.ndarray, r0: np.ndarray
+           ) -> tuple[np.ndarray, np.ndarray]:
+    if len(local) >= 3:
+        spread = np.linalg.svd(local - local.mean(axis=0), compute_uv=False)
+        if spread[1] > 1e-6 * max(spread[0], 1e-12):
+            return rigid_fit(local, world)
+    if len(local) >= 2:
+        far = int(np.argmax(np.linalg.norm(local - local[0], axis=1)))
+        if np.linalg.norm(local[far] - local[0]) > 1e-9:
+            R = rotation_between(R0 @ (local[far] - local[0]), world[far] - world[0]) @ R0
+            return R, world[0] - R @ local[0]
+    if len(local) >= 1:
+        return R0, world[0] - R0 @ local[0]
+    return R0, r0
+
+
+def initial_guess(system: System, targets: np.ndarray) -> np.ndarray:
+    """q for the first frame from the tracked markers (targets: n_targets × 3, NaN in gaps)."""
+    model, layout = system.model, system.layout
+    q = layout.pose_q(model)
+    tracked: dict[str, list[tuple[tuple, np.ndarray]]] = {b.name: [] for b in model.bodies}
+    for tp, target in zip(model.tracked_points, targets, strict=False):
+        if np.all(np.isfinite(target)):
+            tracked[tp.body].append((model.body(tp.body).points[tp.point].local, target))
+    placed: dict[str, tuple[np.ndarray, np.ndarray]] = {GROUND: (np.eye(3), np.zeros(3))}
+    order = deque([GROUND])
+    while order:
+        here = order.popleft()
+        for joint in model.joints:
+            if here not in joint.bodies:
+                continue
+            side = joint.bodies.index(here)
+            other = joint.bodies[1 - side]
+            if other in placed:
+                continue
+            pairs = list(tracked[other])
+            for j in model.joints:
+                if other in j.bodies and j.points is not None:
+                    k = j.bodies.index(other)
+                    neighbour = j.bodies[1 - k]
+                    if neighbour in placed:
+                        pairs.append((model.body(other).points[j.points[k]].local,
+                                      _global_point(model, placed, neighbour, j.points[1 - k])))
+            body = model.body(other)
+            pose = body.pose
+            R0 = np.column_stack([pose.u, pose.v, pose.w])
+            local = np.array([p for p, _ in pairs]).reshape(-1, 3)
+            world = np.array([w for _, w in pairs]).reshape(-1, 3)
+            placed[other] = _place(local, world, R0, np.array(pose.r))
+            order.append(other)
+    for name, (R, r) in placed.items():
+        if name == GROUND:
+            continue
+        full = np.concatenate([r, R[:, 0], R[:, 1], R[:, 2]])
+        sl = layout.q_slice(name)
+        q[sl] = full[: sl.stop - sl.start]
+    if system.mixed:
+        q[layout.n_body_q:] = system.angles_at(q)
+    return q
+
+
+def _global_point(model, placed: dict, body: str, point: str) -> np.ndarray:
+    R, r = placed[body]
+    if body == GROUND:
+        return np.array(model.ground.points[point].local, dtype=float)
+    return r + R @ np.array(model.body(body).points[point].local)

@@ -1,0 +1,137 @@
+"""Mixed coordinates solved with Newton–Raphson on weighted least squares (NRM LS / WLS).
+
+Topology + MCR + TC/TOC is over-determined; each frame solves the Gauss–Newton normal equations
+(Φ_qᵀ W Φ_q) Δq = −Φ_qᵀ W Φ with W = diag(1 for topological rows, w for tracking rows): LS is
+W = I, WLS takes w = 1e-3 unless a tracked point has its own weight (FORMULATION §3, paper §2.5).
+A marker missing in a frame (NaN) drops its tracking rows for that frame only.
+"""
+
+from __future__ import annotations
+
+import time as clock
+from collections.abc import Callable
+
+import numpy as np
+
+from fccgrb_cli.errors import InputError
+from fccgrb_cli.solvers.initial import initial_guess
+from fccgrb_cli.solvers.newton import gauss_newton
+from fccgrb_cli.solvers.rates import central_derivatives, consistent_rates
+from fccgrb_cli.solvers.result import KinematicResult
+from fccgrb_cli.system import Drive, System
+
+NEAR_SINGULAR = np.radians(5.0)
+
+
+def row_weights(system: System, tracking_weight: float | None) -> np.ndarray:
+    """W's diagonal: 1 on topological rows; on tracking rows 1 (LS, tracking_weight None) or the
+    tracked element's own weight, else ``tracking_weight`` (WLS)."""
+    w = np.ones(system.n_rows)
+    if tracking_weight is not None:
+        start = 3 * len(system.lin_a)
+        for k, own in enumerate(system.trk_weight):
+            w[start + 3 * k:start + 3 * k + 3] = tracking_weight if own is None else own
+    return w
+
+
+def predict(history: list[np.ndarray], warm_start: str) -> np.ndarray:
+    """The next frame's starting point: the previous solution, or a quadratic extrapolation of
+    the last three (which removes most of the iterations a smooth motion needs)."""
+    if warm_start == "previous" or len(history) == 1:
+        return history[-1].copy()
+    if len(history) == 2:
+        return 2.0 * history[-1] - history[-2]
+    return 3.0 * history[-1] - 3.0 * history[-2] + history[-3]
+
+
+def _rank(J: np.ndarray, w: np.ndarray) -> int:
+    s = np.linalg.svd(J * np.sqrt(w)[:, None], compute_uv=False)
+    return int((s > s[0] * max(J.shape) * 1e-10).sum())
+
+
+def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray, *,
+              tracking_weight: float | None = 1e-3, tol: float = 1e-10, max_iter: int = 50,
+              warm_start: str = "extrapolate", skip_unsolvable: bool = False,
+              target_labels: tuple[str, ...] = (), method: str | None = None,
+              progress: Callable[[int, int], None] | None = None) -> KinematicResult:
+    """Solve every frame; ``targets`` is (frames × n_targets × 3), metres, NaN in gaps."""
+    if not system.mixed or not system.n_targets:
+        raise ValueError("solve_nrm needs angles='coordinate' and track=True")
+    n, nq, n_body = len(time), system.nq, system.layout.n_body_q
+    base_w = row_weights(system, tracking_weight)
+    trk0 = 3 * len(system.lin_a)
+    top = system.masks()["topology"]
+    q_all = np.zeros((n, nq))
+    iterations = np.zeros(n, dtype=int)
+    seconds = np.zeros(n)
+    phi_norm = np.full(n, np.nan)
+    phi_top = np.full(n, np.nan)
+    converged = np.zeros(n, dtype=bool)
+    messages: list[str] = []
+    checked: dict[bytes, bool] = {}
+    history: list[np.ndarray] = []
+    labels = target_labels or tuple(f"target {k}" for k in range(system.n_targets))
+    for f in range(n):
+        started = clock.perf_counter()
+        y = targets[f]
+        missing = ~np.all(np.isfinite(y), axis=1)
+        w = base_w
+        if missing.any():
+            w = base_w.copy()
+            for k in np.flatnonzero(missing):
+                w[trk0 + 3 * k:trk0 + 3 * k + 3] = 0.0
+            y = np.where(missing[:, None], 0.0, y)
+        drive = Drive(ref=y)
+        q = predict(history, warm_start) if history else initial_guess(system, targets[f])
+        key = missing.tobytes()
+        if key not in checked:
+            checked[key] = _rank(system.jacobian(q), w) == nq
+        if not checked[key]:
+            gone = ", ".join(labels[k] for k in np.flatnonzero(missing))
+            text = (f"frame {f} (t = {time[f]:.3f} s): the markers left cannot determine the "
+                    f"model (missing: {gone or 'none'})")
+            if not skip_unsolvable:
+                raise InputError(text)
+            messages.append(text + "; frame left unsolved")
+            q_all[f] = np.nan
+            continue
+        it = gauss_newton(system, q, drive, w, tol, max_iter if history else 4 * max_iter)
+        seconds[f] = clock.perf_counter() - started
+        q_all[f] = it.q
+        iterations[f], converged[f] = it.iterations, it.converged
+        if it.converged:
+            history = [*history[-2:], it.q]
+        else:
+            messages.append(f"frame {f} (t = {time[f]:.3f} s): no convergence in "
+                            f"{it.iterations} iterations")
+            history = []
+        phi = system.residual(it.q, drive)
+        phi_norm[f] = np.linalg.norm(phi[w > 0])
+        phi_top[f] = np.abs(phi[top]).max()
+        if progress is not None:
+            progress(f + 1, n)
+    theta = q_all[:, n_body:]
+    dt = float(time[1] - time[0]) if n > 1 else 1.0
+    theta_d, theta_dd = central_derivatives(theta, dt)
+    qd, qdd = consistent_rates(system, np.nan_to_num(q_all), np.nan_to_num(theta_d),
+                               np.nan_to_num(theta_dd))
+    messages += near_singular(theta, system.layout.angle_names, time)
+    return KinematicResult(
+        method=method or ("nrm-ls" if tracking_weight is None else "nrm-wls"), tol=tol,
+        time=np.asarray(time, dtype=float), q=q_all, qd=qd, qdd=qdd, theta=theta,
+        theta_d=theta_d, theta_dd=theta_dd, angle_names=system.layout.angle_names,
+        iterations=iterations, time_s=seconds, phi_norm=phi_norm, phi_top_max=phi_top,
+        converged=converged, messages=tuple(messages))
+
+
+def near_singular(theta: np.ndarray, names: tuple[str, ...], time: np.ndarray) -> list[str]:
+    """Warnings for angles that come within 5° of 0 or π, where s1·s2 = cos θ loses θ's sign."""
+    out = []
+    for k, name in enumerate(names):
+        close = np.flatnonzero(np.minimum(theta[:, k], np.pi - theta[:, k]) < NEAR_SINGULAR)
+        if len(close):
+            f = int(close[0])
+            out.append(f"angle {name} comes within 5 deg of 0 or 180 deg ({len(close)} frames, "
+                       f"first frame {f}, t = {time[f]:.3f} s, {np.degrees(theta[f, k]):.1f} deg); "
+                       "cos θ is ambiguous there: choose vectors 90 deg apart at the neutral pose")
+    return out

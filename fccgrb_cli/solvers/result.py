@@ -1,0 +1,42 @@
+"""One result type for every kinematic method (as scipy.optimize gives one OptimizeResult)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class KinematicResult:
+    """Per-frame coordinates and statistics of a kinematic solution.
+
+    q, qd, qdd: (frames × nq) system coordinates and their rates (SI); theta, theta_d, theta_dd:
+    (frames × n_angles) the angular coordinates (solved MC coordinates, or the AR drivers);
+    iterations, time_s, phi_norm (‖Φ‖), phi_top_max (max |topological Φ|), converged: per frame.
+    """
+
+    method: str
+    tol: float
+    time: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    theta: np.ndarray
+    theta_d: np.ndarray
+    theta_dd: np.ndarray
+    angle_names: tuple[str, ...]
+    iterations: np.ndarray
+    time_s: np.ndarray
+    phi_norm: np.ndarray
+    phi_top_max: np.ndarray
+    converged: np.ndarray
+    messages: tuple[str, ...] = field(default=())
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.time)
+
+    @property
+    def failed_frames(self) -> np.ndarray:
+        return np.flatnonzero(~self.converged)

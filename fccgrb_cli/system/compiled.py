@@ -1,0 +1,288 @@
+"""The model compiled once into constant arrays: Φ, Φ_q, ν and γ in a few array operations.
+
+Rows are ordered [linear vector equations | tracking equations | dot equations]. With
+F = A x + f0 the features and x the fully-defined equivalent coordinates (Eq. 5):
+
+* linear rows  Φ = F_a − F_b          Φ_x = A_a − A_b (constant)
+* tracking     Φ = F_a − y(t)         ν = ẏ, γ = ÿ − Φ_x V̇q̇ (Eq. 31–32, 35–36)
+* dot rows     Φ = F_a·F_b − c        Φ_x = F_bᵀA_a + F_aᵀA_b, γ = −2Ḟ_a·Ḟ_b − Φ_x V̇q̇
+* angular dot rows also carry −cos θ: MCR (θ a coordinate, Φ_θ = sin θ, γ −= θ̇² cos θ, Eq. 13–22)
+  or AR (θ*(t) prescribed, ν = −θ̇* sin θ*, γ −= θ̇*² cos θ* + θ̈* sin θ*, Eq. 23–26).
+
+Then Φ_q = Φ_x X_q with X_q = V (Eq. 7) for reduced bodies.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fccgrb_cli.model import Model
+from fccgrb_cli.system.constraints import AXES, collect
+from fccgrb_cli.system.features import FeatureTable
+from fccgrb_cli.system.layout import Layout, build_layout
+
+TOPOLOGY, DRIVER, TRACKING = 0, 1, 2
+_EMPTY = np.zeros(0)
+_EMPTY3 = np.zeros((0, 3))
+
+
+@dataclass(frozen=True)
+class Drive:
+    """The time-dependent data of one frame: prescribed angles θ*, θ̇*, θ̈* (rad, rad/s, rad/s²)
+    for AR drivers and tracking targets y, ẏ, ÿ (n_targets × 3, SI) for TC/TOC."""
+
+    theta: np.ndarray = field(default_factory=lambda: _EMPTY)
+    theta_d: np.ndarray = field(default_factory=lambda: _EMPTY)
+    theta_dd: np.ndarray = field(default_factory=lambda: _EMPTY)
+    ref: np.ndarray = field(default_factory=lambda: _EMPTY3)
+    ref_d: np.ndarray | None = None
+    ref_dd: np.ndarray | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class System:
+    """Constant arrays of a compiled model (build with :func:`compile_system`)."""
+
+    model: Model
+    layout: Layout
+    angle_mode: str
+    A: np.ndarray
+    A_flat: np.ndarray
+    f0: np.ndarray
+    lin_a: np.ndarray
+    lin_b: np.ndarray
+    trk_a: np.ndarray
+    trk_slot: np.ndarray
+    trk_weight: tuple[float | None, ...]
+    J_const: np.ndarray
+    c_const: np.ndarray
+    J_base: np.ndarray
+    scatter_index: np.ndarray
+    scatter_coef: np.ndarray
+    scatter_other: np.ndarray
+    dot_a: np.ndarray
+    dot_b: np.ndarray
+    dot_c: np.ndarray
+    angle_rows: np.ndarray
+    labels: tuple[str, ...]
+    kinds: np.ndarray
+
+    # --- sizes -------------------------------------------------------------------------------
+    @property
+    def nq(self) -> int:
+        return self.layout.nq
+
+    @property
+    def n_rows(self) -> int:
+        return len(self.labels)
+
+    @property
+    def n_linear_rows(self) -> int:
+        return len(self.J_const)
+
+    @property
+    def n_targets(self) -> int:
+        return len(self.trk_slot)
+
+    @property
+    def mixed(self) -> bool:
+        return self.angle_mode == "coordinate"
+
+    # --- evaluation ----------------------------------------------------------------------------
+    def features(self, x: np.ndarray) -> np.ndarray:
+        """F = A x + f0, one row per feature point or vector (n_features × 3)."""
+        return (self.A_flat @ x).reshape(-1, 3) + self.f0
+
+    def _theta(self, q: np.ndarray, drive: Drive) -> np.ndarray:
+        return q[self.layout.n_body_q:] if self.mixed else drive.theta
+
+    def residual(self, q: np.ndarray, drive: Drive) -> np.ndarray:
+        """Φ(q, t)."""
+        x = self.layout.expand(q)
+        return self._residual(self.features(x), q, drive, x)
+
+    def _residual(self, F: np.ndarray, q: np.ndarray, drive: Drive, x: np.ndarray) -> np.ndarray:
+        lin = self.J_const @ x + self.c_const
+        if self.n_targets:
+            start = 3 * len(self.lin_a)
+            lin[start:] -= drive.ref[self.trk_slot].ravel()
+        dot = np.einsum("ij,ij->i", F[self.dot_a], F[self.dot_b]) - self.dot_c
+        if len(self.angle_rows):
+            dot[self.angle_rows] -= np.cos(self._theta(q, drive))
+        return np.concatenate([lin, dot])
+
+    def _jacobian(self, F: np.ndarray) -> np.ndarray:
+        """Constant rows plus the dot rows F_bᵀ C_a + F_aᵀ C_b, scattered block by block: each
+        feature is Σ [c0 I, c1 I, c2 I, c3 I] over its body blocks (Eq. 2–3), so its product with
+        F_other is the 12 numbers c ⊗ F_other. Columns are q's when no body is reduced, else x's."""
+        values = (self.scatter_coef[:, :, None] * F[self.scatter_other][:, None, :]).ravel()
+        flat = np.bincount(self.scatter_index, values, minlength=self.J_base.size)
+        return self.J_base + flat.reshape(self.J_base.shape)
+
+    def _jacobian_q(self, J: np.ndarray, q: np.ndarray) -> np.ndarray:
+        xq = self.layout.expand_jacobian(q)
+        if xq is not None:
+            J = J @ xq
+            if self.mixed:
+                J = np.hstack([J, np.zeros((len(J), len(self.angle_rows)))])
+        if self.mixed:
+            n = self.layout.n_body_q
+            J[self.n_linear_rows + self.angle_rows, n + np.arange(len(self.angle_rows))] = \
+                np.sin(q[n:])
+        return J
+
+    def _jacobian_x(self, F: np.ndarray) -> np.ndarray:
+        """Φ_x (n_rows × nx)."""
+        return self._jacobian(F)[:, : self.layout.nx]
+
+    def evaluate(self, q: np.ndarray, drive: Drive) -> tuple[np.ndarray, np.ndarray]:
+        """Φ and Φ_q together (they share the features)."""
+        x = self.layout.expand(q)
+        F = self.features(x)
+        return self._residual(F, q, drive, x), self._jacobian_q(self._jacobian(F), q)
+
+    def jacobian(self, q: np.ndarray) -> np.ndarray:
+        """Φ_q (n_rows × nq)."""
+        return self._jacobian_q(self._jacobian(self.features(self.layout.expand(q))), q)
+
+    def nu(self, q: np.ndarray, drive: Drive) -> np.ndarray:
+        """ν = −Φ_t, so that Φ_q q̇ = ν."""
+        nu = np.zeros(self.n_rows)
+        if self.n_targets and drive.ref_d is not None:
+            start = 3 * len(self.lin_a)
+            nu[start:start + 3 * self.n_targets] = drive.ref_d[self.trk_slot].ravel()
+        if len(self.angle_rows) and not self.mixed:
+            nu[self.n_linear_rows + self.angle_rows] = -drive.theta_d * np.sin(drive.theta)
+        return nu
+
+    def gamma(self, q: np.ndarray, qd: np.ndarray, drive: Drive) -> np.ndarray:
+        """γ = −(Φ_q q̇)_q q̇ − 2Φ_qt q̇ − Φ_tt, so that Φ_q q̈ = γ."""
+        layout = self.layout
+        x = layout.expand(q)
+        F = self.features(x)
+        Fd = (self.A_flat @ layout.expand_rate(q, qd)).reshape(-1, 3)
+        gamma = -(self._jacobian_x(F) @ layout.expand_bias(qd))
+        start = self.n_linear_rows
+        gamma[start:] -= 2.0 * np.einsum("ij,ij->i", Fd[self.dot_a], Fd[self.dot_b])
+        if self.n_targets and drive.ref_dd is not None:
+            t0 = 3 * len(self.lin_a)
+            gamma[t0:t0 + 3 * self.n_targets] += drive.ref_dd[self.trk_slot].ravel()
+        if len(self.angle_rows):
+            rows = start + self.angle_rows
+            if self.mixed:
+                theta, theta_d = q[layout.n_body_q:], qd[layout.n_body_q:]
+                gamma[rows] -= theta_d**2 * np.cos(theta)
+            else:
+                th, thd, thdd = drive.theta, drive.theta_d, drive.theta_dd
+                gamma[rows] -= thd**2 * np.cos(th) + thdd * np.sin(th)
+        return gamma
+
+    # --- reading the solution ------------------------------------------------------------------
+    def point_positions(self, q: np.ndarray, which: list[tuple[str, str]]) -> np.ndarray:
+        """Global positions (k × 3) of the named (body, point) pairs at q."""
+        x = self.layout.expand(q)
+        out = np.empty((len(which), 3))
+        for k, (body, point) in enumerate(which):
+            local = self.model.body(body).points[point].local
+            start = self.layout.x_offset(body)
+            r, u, v, w = x[start:start + 12].reshape(4, 3)
+            out[k] = r + local[0] * u + local[1] * v + local[2] * w
+        return out
+
+    def angles_at(self, q: np.ndarray) -> np.ndarray:
+        """acos(s1·s2) of every angular coordinate at q, whatever the mode (rad)."""
+        F = self.features(self.layout.expand(q))
+        cos = np.einsum("ij,ij->i", F[self.dot_a[self.angle_rows]], F[self.dot_b[self.angle_rows]])
+        return np.arccos(np.clip(cos, -1.0, 1.0))
+
+    def masks(self) -> dict[str, np.ndarray]:
+        """Boolean row masks by kind."""
+        return {"topology": self.kinds == TOPOLOGY, "driver": self.kinds == DRIVER,
+                "tracking": self.kinds == TRACKING}
+
+
+def compile_system(model: Model, *, angles: str = "driver", track: bool = False) -> System:
+    """Compile the model once: angles as AR drivers ('driver', kinematic analysis with AD) or as
+    mixed coordinates ('coordinate', MCR); ``track`` adds TC/TOC for the tracked points/vectors."""
+    if angles not in ("driver", "coordinate"):
+        raise ValueError(f"angles must be 'driver' or 'coordinate', got {angles!r}")
+    names = tuple(a.name for a in model.angles) if angles == "coordinate" else ()
+    layout = build_layout(model, names)
+    table = FeatureTable(model, layout)
+    cl = collect(model, table, angles=angles, track=track)
+    A, f0 = table.arrays()
+    nx = layout.nx
+
+    def idx(values: list) -> np.ndarray:
+        return np.array(values, dtype=int)
+
+    lin_a, lin_b = idx([a for a, _, _ in cl.linear]), idx([b for _, b, _ in cl.linear])
+    no_reduced = not len(layout.reduced_w)
+    trk_a, trk_slot = idx([a for a, _, _, _ in cl.tracking]), idx([s for _, s, _, _ in cl.tracking])
+    dot_a, dot_b = idx([a for a, _, _, _ in cl.dots]), idx([b for _, b, _, _ in cl.dots])
+    j_lin = (A[lin_a] - A[lin_b]).reshape(-1, nx)
+    j_trk = A[trk_a].reshape(-1, nx)
+
+    labels: list[str] = []
+    kinds: list[int] = []
+    for _, _, label in cl.linear:
+        labels += [f"{label}: {ax}" for ax in AXES]
+        kinds += [TOPOLOGY] * 3
+    for _, _, label, _ in cl.tracking:
+        labels += [f"{label}: {ax}" for ax in AXES]
+        kinds += [TRACKING] * 3
+    angle_set = set(cl.angle_dots)
+    for k, (_, _, _, label) in enumerate(cl.dots):
+        labels.append(label)
+        kinds.append(DRIVER if (k in angle_set and angles == "driver") else TOPOLOGY)
+
+    j_const = np.vstack([j_lin, j_trk]) if len(j_lin) + len(j_trk) else np.zeros((0, nx))
+    width = layout.nq if no_reduced else nx
+    j_base = np.zeros((len(labels), width))
+    j_base[: len(j_const), :nx] = j_const
+    scatter = _dot_scatter(table, cl, len(j_const), width)
+    return System(
+        model=model,
+        layout=layout,
+        angle_mode=angles,
+        A=A,
+        A_flat=A.reshape(-1, nx),
+        f0=f0,
+        lin_a=lin_a,
+        lin_b=lin_b,
+        trk_a=trk_a,
+        trk_slot=trk_slot,
+        trk_weight=tuple(w for _, _, _, w in cl.tracking),
+        J_const=j_const,
+        c_const=np.concatenate([(f0[lin_a] - f0[lin_b]).ravel(), f0[trk_a].ravel()]),
+        J_base=j_base,
+        scatter_index=scatter[0],
+        scatter_coef=scatter[1],
+        scatter_other=scatter[2],
+        dot_a=dot_a,
+        dot_b=dot_b,
+        dot_c=np.array([c for _, _, c, _ in cl.dots], dtype=float),
+        angle_rows=idx(cl.angle_dots),
+        labels=tuple(labels),
+        kinds=np.array(kinds, dtype=int),
+    )
+
+
+def _dot_scatter(table: FeatureTable, cl, first_row: int, width: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Flat indices into Φ_q, block coefficients (n_blocks × 4) and the partner feature of every
+    body block of every dot row: ∂(F_a·F_b)/∂x_body = c ⊗ F_b over each block (start, c) of a."""
+    index, coef, other = [], [], []
+    offsets = np.arange(12)
+    for d, (a, b, _, _) in enumerate(cl.dots):
+        row = first_row + d
+        for mine, partner in ((a, b), (b, a)):
+            for start, c in table.blocks[mine]:
+                index.append(row * width + start + offsets)
+                coef.append(c)
+                other.append(partner)
+    if not index:
+        return np.zeros(0, dtype=int), np.zeros((0, 4)), np.zeros(0, dtype=int)
+    return np.concatenate(index), np.array(coef), np.array(other, dtype=int)

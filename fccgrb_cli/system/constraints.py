@@ -1,0 +1,116 @@
+"""The constraint library of FORMULATION §2, compiled into index arrays.
+
+Each constraint becomes either linear vector equations ``F_a − F_b`` (spherical joints, ground
+points), tracking equations ``F_a − y(t)`` (TC Eq. 29–36, TOC Eq. 37–38) or scalar dot equations
+``F_a · F_b − c`` (rigid body, joint axes, angular relations AR Eq. 23–28 and MCR Eq. 10–22, where
+``c`` is cos θ). Rows are labelled so rank reports and errors can name them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from fccgrb_cli.model import GROUND, Joint, Model
+from fccgrb_cli.system.features import FeatureTable, perpendiculars
+
+AXES = ("x", "y", "z")
+
+
+@dataclass
+class ConstraintList:
+    """Constraint equations gathered before they are frozen into a System."""
+
+    linear: list[tuple[int, int, str]] = field(default_factory=list)
+    tracking: list[tuple[int, int, str, float | None]] = field(default_factory=list)
+    dots: list[tuple[int, int, float, str]] = field(default_factory=list)
+    angle_dots: list[int] = field(default_factory=list)
+
+    def dot(self, a: int, b: int, const: float, label: str) -> int:
+        self.dots.append((a, b, const, label))
+        return len(self.dots) - 1
+
+
+def rigid_body(features: FeatureTable, out: ConstraintList, model: Model) -> None:
+    """u·u = v·v = w·w = 1, u·v = u·w = v·w = 0 (full), or the first three of u, v (reduced)."""
+    for body in model.bodies:
+        u, v = features.vector(body.name, "u"), features.vector(body.name, "v")
+        pairs = [(u, u, 1.0, "u·u"), (v, v, 1.0, "v·v"), (u, v, 0.0, "u·v")]
+        if body.form == "full":
+            w = features.vector(body.name, "w")
+            pairs += [(w, w, 1.0, "w·w"), (u, w, 0.0, "u·w"), (v, w, 0.0, "v·w")]
+        for a, b, const, what in pairs:
+            out.dot(a, b, const, f"rigid body {body.name}: {what}")
+
+
+def _axis_parallel(features: FeatureTable, out: ConstraintList, joint: Joint, label: str) -> None:
+    """s_i · a_j = 0 and s_i · b_j = 0 with a_j, b_j ⟂ s_j fixed in body j: s_i ∥ s_j."""
+    (bi, bj), (si, sj) = joint.bodies, joint.axes
+    a_local, b_local = perpendiculars(features.local_of(bj, sj))
+    axis_i = features.vector(bi, si)
+    out.dot(axis_i, features.body_vector(bj, a_local), 0.0, f"{label}: axis ⟂ a")
+    out.dot(axis_i, features.body_vector(bj, b_local), 0.0, f"{label}: axis ⟂ b")
+
+
+def _on_axis(features: FeatureTable, out: ConstraintList, joint: Joint, label: str) -> None:
+    """(P_j − P_i) · a_i = 0 and (P_j − P_i) · b_i = 0: P_j stays on body i's axis line."""
+    (bi, bj), (pi, pj), (si, _) = joint.bodies, joint.points, joint.axes
+    d = features.difference(features.point(bj, pj), features.point(bi, pi))
+    a_local, b_local = perpendiculars(features.local_of(bi, si))
+    out.dot(d, features.body_vector(bi, a_local), 0.0, f"{label}: offset ⟂ a")
+    out.dot(d, features.body_vector(bi, b_local), 0.0, f"{label}: offset ⟂ b")
+
+
+def joint(features: FeatureTable, out: ConstraintList, joint: Joint) -> None:
+    """The equations of one joint (FORMULATION §2 table)."""
+    label = f"joint {joint.name} ({joint.type})"
+    (bi, bj) = joint.bodies
+    if joint.type in ("spherical", "revolute", "universal"):
+        pi, pj = joint.points
+        out.linear.append((features.point(bi, pi), features.point(bj, pj), label))
+    if joint.type in ("revolute", "cylindrical", "prismatic", "parallel"):
+        _axis_parallel(features, out, joint, label)
+    if joint.type in ("cylindrical", "prismatic"):
+        _on_axis(features, out, joint, label)
+    if joint.type == "universal":
+        si, sj = joint.axes
+        out.dot(features.vector(bi, si), features.vector(bj, sj), 0.0, f"{label}: arms ⟂")
+    if joint.type == "prismatic":
+        li, lj = joint.lock
+        out.dot(features.vector(bi, li), features.vector(bj, lj), 0.0, f"{label}: lock ⟂")
+
+
+def angular(features: FeatureTable, out: ConstraintList, model: Model, kind: str) -> None:
+    """s1 · s2 − cos θ_k: AR (kind 'driver', Eq. 23) or MCR (kind 'coordinate', Eq. 10)."""
+    for angle in model.angles:
+        row = out.dot(features.vector(angle.body1, angle.vector1),
+                      features.vector(angle.body2, angle.vector2), 0.0,
+                      f"angle {angle.name} ({'AR' if kind == 'driver' else 'MCR'})")
+        out.angle_dots.append(row)
+
+
+def tracking(features: FeatureTable, out: ConstraintList, model: Model) -> None:
+    """TC for each tracked point, then TOC for each tracked vector; targets in that order."""
+    slot = 0
+    for tp in model.tracked_points:
+        out.tracking.append((features.point(tp.body, tp.point), slot, f"track {tp.marker}",
+                             tp.weight))
+        slot += 1
+    for tv in model.tracked_vectors:
+        out.tracking.append((features.vector(tv.body, tv.vector), slot, f"track {tv.marker}",
+                             tv.weight))
+        slot += 1
+
+
+def collect(model: Model, features: FeatureTable, *, angles: str, track: bool) -> ConstraintList:
+    """All constraint equations of the model for the given use of its angles."""
+    out = ConstraintList()
+    rigid_body(features, out, model)
+    for j in model.joints:
+        joint(features, out, j)
+    angular(features, out, model, angles)
+    if track:
+        tracking(features, out, model)
+    return out
+
+
+__all__ = ["AXES", "GROUND", "ConstraintList", "collect"]

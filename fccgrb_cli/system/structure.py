@@ -1,0 +1,107 @@
+"""Does the model determine its coordinates? Rank of Φ_q and redundant equations.
+
+Checked at the model's stated initial pose (with the angles it has there): the joints must leave
+exactly as many degrees of freedom as there are angular coordinates, and the AD Jacobian
+(topology + AR drivers) must then have full column rank.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+from fccgrb_cli.errors import InputError
+from fccgrb_cli.model import Model
+from fccgrb_cli.system.compiled import System, compile_system
+
+
+@dataclass(frozen=True)
+class StructureReport:
+    """What the model check found (printed by ``fccgrb check``)."""
+
+    n_bodies: int
+    nq: int
+    n_topology_rows: int
+    topology_rank: int
+    dof: int
+    n_angles: int
+    ad_rank: int
+    redundant: tuple[str, ...]
+    n_tracking_rows: int
+    mc_rank: int
+    nq_mixed: int
+
+    def lines(self) -> list[str]:
+        out = [
+            f"bodies {self.n_bodies}, coordinates {self.nq} (+{self.n_angles} mixed)",
+            f"topological equations {self.n_topology_rows}, rank {self.topology_rank}: "
+            f"{self.dof} degrees of freedom",
+            f"angular coordinates {self.n_angles}; AD Jacobian rank {self.ad_rank} of {self.nq}",
+            f"tracking equations {self.n_tracking_rows}; MC Jacobian rank {self.mc_rank} "
+            f"of {self.nq_mixed}",
+        ]
+        if self.redundant:
+            out.append(f"redundant equations ({len(self.redundant)}): "
+                       + "; ".join(self.redundant))
+        else:
+            out.append("redundant equations: none")
+        return out
+
+
+def _rank(J: np.ndarray) -> int:
+    if J.size == 0:
+        return 0
+    s = np.linalg.svd(J, compute_uv=False)
+    return int((s > s[0] * max(J.shape) * 1e-10).sum()) if s[0] > 0 else 0
+
+
+def dependent_rows(J: np.ndarray, labels: tuple[str, ...]) -> tuple[str, ...]:
+    """Rows of J that are linear combinations of earlier-pivoted rows (QR with pivoting of Jᵀ)."""
+    rank = _rank(J)
+    if rank == J.shape[0]:
+        return ()
+    _, _, pivots = scipy.linalg.qr(J.T, pivoting=True, mode="economic")
+    return tuple(labels[k] for k in sorted(pivots[rank:]))
+
+
+def pose_of(system: System) -> np.ndarray:
+    """q at the model's pose, mixed coordinates set to the angles the pose has."""
+    q = system.layout.pose_q(system.model)
+    if system.mixed:
+        q[system.layout.n_body_q:] = system.angles_at(q)
+    return q
+
+
+def analyse(model: Model) -> StructureReport:
+    """Rank analysis; raises InputError when the constraints cannot determine the coordinates."""
+    ad = compile_system(model, angles="driver")
+    J = ad.jacobian(pose_of(ad))
+    top = ad.masks()["topology"]
+    top_rank = _rank(J[top])
+    dof = ad.nq - top_rank
+    n_angles = len(model.angles)
+    if n_angles != dof:
+        detail = ("add angular coordinates for the free motions" if n_angles < dof
+                  else "remove angular coordinates that repeat a joint's motion")
+        raise InputError(
+            f"{model.source}: angles: expected {dof} angular coordinates for the {dof} degrees "
+            f"of freedom the joints leave, got {n_angles} ({detail})")
+    ad_rank = _rank(J)
+    if ad_rank < ad.nq:
+        order = np.concatenate([np.flatnonzero(top), np.flatnonzero(~top)])
+        culprits = [name for name in dependent_rows(J[order], tuple(ad.labels[k] for k in order))
+                    if name.startswith("angle ")]
+        raise InputError(
+            f"{model.source}: angles: expected angular coordinates that determine the "
+            f"coordinates at the initial pose, got Jacobian rank {ad_rank} of {ad.nq}: "
+            f"{', '.join(culprits) or 'the angles'} repeat another angle's motion or have "
+            "parallel vectors there")
+    mc = compile_system(model, angles="coordinate", track=True)
+    Jm = mc.jacobian(pose_of(mc))
+    return StructureReport(
+        n_bodies=len(model.bodies), nq=ad.nq, n_topology_rows=int(top.sum()),
+        topology_rank=top_rank, dof=dof, n_angles=n_angles, ad_rank=ad_rank,
+        redundant=dependent_rows(J, ad.labels),
+        n_tracking_rows=int(mc.masks()["tracking"].sum()), mc_rank=_rank(Jm), nq_mixed=mc.nq)
