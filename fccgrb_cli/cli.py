@@ -111,3 +111,156 @@ def synth(model: str, output: str, duration: float, rate: float, units: str, for
     click.echo(f"AD analysis: {r.iterations.mean():.2f} iterations/frame, "
                f"{1e3 * r.time_s.mean():.3f} ms/frame, max ‖Φ‖ {r.phi_norm.max():.2e}, "
                f"angles {np.degrees(r.theta.min()):.1f}..{np.degrees(r.theta.max()):.1f} deg")
+
+
+def _split(text: str | None) -> tuple[str, ...]:
+    return tuple(part.strip() for part in (text or "").split(",") if part.strip())
+
+
+def _mapping(pairs: tuple[str, ...]) -> dict[str, str]:
+    out = {}
+    for item in pairs:
+        for pair in _split(item):
+            if pair.count("=") != 1:
+                raise InputError(f"--map: expected MODEL_NAME=FILE_LABEL, got {pair!r}")
+            name, label = (p.strip() for p in pair.split("="))
+            out[name] = label
+    return out
+
+
+def format_summary(row: dict) -> str:
+    """A two-line table: header and values, numbers in a compact engineering form."""
+    def fmt(value) -> str:
+        if isinstance(value, str):
+            return value
+        if isinstance(value, int):
+            return str(value)
+        return f"{value:.3g}" if abs(value) < 1e4 else f"{value:.0f}"
+
+    cells = [(key, fmt(value)) for key, value in row.items()]
+    widths = [max(len(k), len(v)) for k, v in cells]
+    head = "  ".join(k.rjust(w) for (k, _), w in zip(cells, widths, strict=True))
+    body = "  ".join(v.rjust(w) for (_, v), w in zip(cells, widths, strict=True))
+    return f"{head}\n{body}"
+
+
+@main.command()
+@click.argument("model")
+@click.argument("trial")
+@click.option("--method", type=click.Choice(["ad", "nrm-ls", "nrm-wls"]), default="nrm-wls",
+              show_default=True,
+              help="ad: kinematic analysis driven by the true angles of a synthesized trial; "
+                   "nrm-ls / nrm-wls: mixed coordinates by Newton–Raphson on least squares / "
+                   "weighted least squares.")
+@click.option("-o", "--output", default="results.h5", show_default=True,
+              type=click.Path(dir_okay=False),
+              help="HDF5 results file; an existing one gains (or replaces) this run.")
+@click.option("--name", default=None,
+              help="Run name inside the results file [default: METHOD, plus -P<mm> if perturbed].")
+@click.option("--tol", type=click.FloatRange(min=0, min_open=True), default=1e-10,
+              show_default=True, help="Newton–Raphson tolerance on ‖Δq‖∞ (m and rad).")
+@click.option("--tracking-weight", type=click.FloatRange(min=0, min_open=True), default=1e-3,
+              show_default=True,
+              help="WLS weight of the tracking equations (topological equations weigh 1); a "
+                   "tracked point's own 'weight' in the model overrides it.")
+@click.option("--form", type=FORM, default="model", show_default=True,
+              help="Body form for every body (fully-defined or reduced), or as the model says.")
+@click.option("--track", default=None, metavar="NAMES",
+              help="Comma-separated model marker names to track [default: all the model's].")
+@click.option("--map", "maps", multiple=True, metavar="NAME=LABEL",
+              help="Map a model marker name to a file label (repeatable, or comma-separated).")
+@click.option("--perturb", "perturb_mm", type=click.FloatRange(min=0), default=0.0,
+              show_default=True,
+              help="Soft-tissue-artefact level in mm: the largest deviation per axis.")
+@click.option("--perturb-markers", default=None, metavar="NAMES",
+              help="Comma-separated model marker names to perturb [default: all tracked].")
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="Seed of the perturbation (same seed, same artefact).")
+@click.option("--warm-start", type=click.Choice(["extrapolate", "previous"]),
+              default="extrapolate", show_default=True,
+              help="Each frame starts from a quadratic extrapolation of the last three "
+                   "solutions, or from the previous solution (the paper's choice).")
+@click.option("--hessian", type=click.Choice(["auto", "gauss-newton", "exact"]), default="auto",
+              show_default=True,
+              help="NRM iteration matrix: gauss-newton (Φ_qᵀWΦ_q, the paper's NRM), exact "
+                   "(adds Σ wΦ∇²Φ: Newton on the weighted least squares), or auto: "
+                   "Gauss–Newton until it converges only linearly (noisy markers), then exact.")
+@click.option("--skip-unsolvable", is_flag=True,
+              help="Report frames whose remaining markers cannot determine the model as "
+                   "unsolved and go on, instead of stopping with an error.")
+@reports_input_errors
+def solve(model: str, trial: str, method: str, output: str, name: str | None, tol: float,
+          tracking_weight: float, form: str, track: str | None, maps: tuple[str, ...],
+          perturb_mm: float, perturb_markers: str | None, seed: int, warm_start: str,
+          hessian: str, skip_unsolvable: bool) -> None:
+    """Solve the kinematics of MODEL (YAML) over TRIAL (C3D or TRC markers) and write HDF5.
+
+    Prints a one-row summary: ms/frame (positions), iterations/frame, mean ‖Φ‖ over the active
+    equations, max |topological Φ|, mean and max Euclidean distance (mm) between each tracked
+    model point and its reference marker, and the number of frames that did not converge.
+    """
+    from fccgrb_cli.io.results import write_run
+    from fccgrb_cli.io.trial import read_trial
+    from fccgrb_cli.pipeline import solve_trial, summary
+
+    loaded = load_checked(model, form)
+    if track is not None:
+        wanted = _split(track)
+        unknown = sorted(set(wanted) - set(loaded.marker_labels))
+        if unknown:
+            raise InputError(f"--track: expected marker names of {model} "
+                             f"({', '.join(loaded.marker_labels)}), got {', '.join(unknown)}")
+        loaded = loaded.with_tracked(wanted)
+    data = read_trial(trial)
+    run = solve_trial(loaded, data, method=method, tol=tol, mapping=_mapping(maps),
+                      perturb_level_m=perturb_mm * 1e-3, perturb_markers=_split(perturb_markers),
+                      seed=seed, tracking_weight=tracking_weight, warm_start=warm_start,
+                      hessian=hessian, skip_unsolvable=skip_unsolvable, name=name,
+                      progress=Progress(f"solve {method}"))
+    write_run(output, run, " ".join(["fccgrb", *sys.argv[1:]]))
+    for message in run.result.messages:
+        click.echo(f"fccgrb: warning: {message}", err=True)
+    click.echo(format_summary(summary(run)))
+    click.echo(f"wrote run {run.name!r} ({run.result.n_frames} frames) to {output}")
+
+
+@main.command("perturb")
+@click.argument("source")
+@click.argument("target")
+@click.option("--level", "level_mm", type=click.FloatRange(min=0), required=True,
+              help="Soft-tissue-artefact level in mm: the largest deviation per axis.")
+@click.option("--markers", default=None, metavar="LABELS",
+              help="Comma-separated file labels to perturb [default: every marker].")
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="Seed of the perturbation (same seed, same artefact).")
+@click.option("--units", type=click.Choice(["mm", "m"]), default="mm", show_default=True,
+              help="Length unit written to TARGET.")
+@reports_input_errors
+def perturb_command(source: str, target: str, level_mm: float, markers: str | None, seed: int,
+                    units: str) -> None:
+    """Add a soft-tissue artefact to the markers of SOURCE and write TARGET (.c3d or .trc).
+
+    Each perturbed marker and axis gets a seeded sum of sinusoids in the band of human movement
+    (0.3–3 Hz) scaled to the level. A truth file beside SOURCE is copied beside TARGET, so
+    results on TARGET still compare with the unperturbed reference.
+    """
+    import shutil
+
+    from fccgrb_cli.io.trial import read_trial, write_trial
+    from fccgrb_cli.io.truth import truth_path
+    from fccgrb_cli.perturb import perturb
+
+    data = read_trial(source)
+    only = _split(markers)
+    unknown = sorted(set(only) - set(data.labels))
+    if unknown:
+        raise InputError(f"--markers: expected labels of {source}, got {', '.join(unknown)}")
+    if Path(target).resolve() == Path(source).resolve():
+        raise InputError(f"{target}: expected an output other than the input (inputs are never "
+                         "modified)")
+    out = perturb(data.markers, data.labels, data.rate, level_mm * 1e-3, seed, only or None)
+    write_trial(target, list(data.labels), out, data.rate, units)
+    if truth_path(source).exists():
+        shutil.copyfile(truth_path(source), truth_path(target))
+    click.echo(f"wrote {target}: {len(only) or len(data.labels)} of {len(data.labels)} markers "
+               f"perturbed at {level_mm:g} mm (seed {seed})")

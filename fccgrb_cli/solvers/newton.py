@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import lapack
 
 from fccgrb_cli.system import Drive, System
 
@@ -37,27 +38,66 @@ def newton_raphson(system: System, q0: np.ndarray, drive: Drive, tol: float,
         except np.linalg.LinAlgError:
             return Iterate(q, k, False)
         q += step
-        if not np.all(np.isfinite(q)):
+        size = np.abs(step).max()
+        if not np.isfinite(size):
             return Iterate(q0, k, False)
-        if np.abs(step).max() < tol:
+        if size < tol:
             return Iterate(q, k, True)
     return Iterate(q, max_iter, False)
 
 
+HESSIANS = ("auto", "gauss-newton", "exact")
+
+
 def gauss_newton(system: System, q0: np.ndarray, drive: Drive, weights: np.ndarray, tol: float,
-                 max_iter: int) -> Iterate:
-    """(Φ_qᵀ W Φ_q) Δq = −Φ_qᵀ W Φ until ‖Δq‖∞ < tol (NRM with LS or WLS)."""
+                 max_iter: int, hessian: str = "gauss-newton") -> Iterate:
+    """(Φ_qᵀ W Φ_q) Δq = −Φ_qᵀ W Φ until ‖Δq‖∞ < tol (NRM with LS or WLS).
+
+    The full step is taken whenever it lowers ½ΦᵀWΦ enough (Armijo); otherwise it is halved.
+    Near a solution that is always the case, so the iteration is the plain one of the paper;
+    far from it (large marker noise) the line search keeps Gauss–Newton from oscillating.
+    ``hessian``: 'gauss-newton' (the paper's NRM), 'exact' (the matrix gains Σ wᵢΦᵢ ∇²Φᵢ:
+    Newton's method on the weighted least-squares objective, quadratic instead of linear
+    convergence when noisy markers leave large residuals), or 'auto': Gauss–Newton until a
+    step shrinks by less than 4× (linear convergence), exact from then on. Where the exact
+    matrix is not positive definite the Gauss–Newton step is used.
+    """
     q = q0.copy()
+    unit = bool(np.all(weights == 1.0))
+    phi, J = system.evaluate(q, drive)
+    cost = float(phi @ (weights * phi))
+    exact = hessian == "exact"
+    previous = np.inf
     for k in range(1, max_iter + 1):
-        phi, J = system.evaluate(q, drive)
-        JW = J.T * weights
-        try:
-            step = np.linalg.solve(JW @ J, -(JW @ phi))
-        except np.linalg.LinAlgError:
+        JW = J if unit else J * weights[:, None]
+        gradient = JW.T @ phi
+        normal = JW.T @ J
+        info = 1
+        if exact:
+            _, step, info = lapack.dposv(normal + system.residual_hessian(q, weights * phi),
+                                         -gradient)
+        if info != 0:
+            _, step, info = lapack.dposv(normal, -gradient)
+        if info != 0:
             return Iterate(q, k, False)
-        q += step
-        if not np.all(np.isfinite(q)):
-            return Iterate(q0, k, False)
-        if np.abs(step).max() < tol:
-            return Iterate(q, k, True)
+        size = np.abs(step).max()
+        if not np.isfinite(size):
+            return Iterate(q, k, False)
+        exact = exact or (hessian == "auto" and size > 0.25 * previous)
+        previous = size
+        if size < tol:
+            return Iterate(q + step, k, True)
+        slope = float(gradient @ step)
+        alpha = 1.0
+        trial = q + step
+        trial_phi, trial_J = system.evaluate(trial, drive)
+        trial_cost = float(trial_phi @ (weights * trial_phi))
+        while trial_cost > cost + 2e-4 * alpha * slope and alpha >= 1e-3:
+            alpha *= 0.5
+            trial = q + alpha * step
+            trial_phi = system.residual(trial, drive)
+            trial_cost = float(trial_phi @ (weights * trial_phi))
+            trial_J = None
+        q, phi, cost = trial, trial_phi, trial_cost
+        J = system.jacobian(q) if trial_J is None else trial_J
     return Iterate(q, max_iter, False)

@@ -52,6 +52,7 @@ def _rank(J: np.ndarray, w: np.ndarray) -> int:
 def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray, *,
               tracking_weight: float | None = 1e-3, tol: float = 1e-10, max_iter: int = 50,
               warm_start: str = "extrapolate", skip_unsolvable: bool = False,
+              hessian: str = "auto",
               target_labels: tuple[str, ...] = (), method: str | None = None,
               progress: Callable[[int, int], None] | None = None) -> KinematicResult:
     """Solve every frame; ``targets`` is (frames × n_targets × 3), metres, NaN in gaps."""
@@ -95,7 +96,8 @@ def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray, *,
             messages.append(text + "; frame left unsolved")
             q_all[f] = np.nan
             continue
-        it = gauss_newton(system, q, drive, w, tol, max_iter if history else 4 * max_iter)
+        it = gauss_newton(system, q, drive, w, tol, max_iter if history else 4 * max_iter,
+                          hessian=hessian)
         seconds[f] = clock.perf_counter() - started
         q_all[f] = it.q
         iterations[f], converged[f] = it.iterations, it.converged

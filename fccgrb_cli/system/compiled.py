@@ -21,7 +21,7 @@ import numpy as np
 from fccgrb_cli.model import Model
 from fccgrb_cli.system.constraints import AXES, collect
 from fccgrb_cli.system.features import FeatureTable
-from fccgrb_cli.system.layout import Layout, build_layout
+from fccgrb_cli.system.layout import Layout, build_layout, skew
 
 TOPOLOGY, DRIVER, TRACKING = 0, 1, 2
 _EMPTY = np.zeros(0)
@@ -61,9 +61,14 @@ class System:
     J_base: np.ndarray
     scatter_index: np.ndarray
     scatter_coef: np.ndarray
-    scatter_other: np.ndarray
+    scatter_gather: np.ndarray
+    hess_index: np.ndarray
+    hess_coef: np.ndarray
+    hess_row: np.ndarray
     dot_a: np.ndarray
     dot_b: np.ndarray
+    dot_a3: np.ndarray
+    dot_b3: np.ndarray
     dot_c: np.ndarray
     angle_rows: np.ndarray
     labels: tuple[str, ...]
@@ -108,7 +113,9 @@ class System:
         if self.n_targets:
             start = 3 * len(self.lin_a)
             lin[start:] -= drive.ref[self.trk_slot].ravel()
-        dot = np.einsum("ij,ij->i", F[self.dot_a], F[self.dot_b]) - self.dot_c
+        flat = F.ravel()
+        products = flat[self.dot_a3] * flat[self.dot_b3]
+        dot = products[0::3] + products[1::3] + products[2::3] - self.dot_c
         if len(self.angle_rows):
             dot[self.angle_rows] -= np.cos(self._theta(q, drive))
         return np.concatenate([lin, dot])
@@ -117,7 +124,7 @@ class System:
         """Constant rows plus the dot rows F_bᵀ C_a + F_aᵀ C_b, scattered block by block: each
         feature is Σ [c0 I, c1 I, c2 I, c3 I] over its body blocks (Eq. 2–3), so its product with
         F_other is the 12 numbers c ⊗ F_other. Columns are q's when no body is reduced, else x's."""
-        values = (self.scatter_coef[:, :, None] * F[self.scatter_other][:, None, :]).ravel()
+        values = self.scatter_coef * F.ravel()[self.scatter_gather]
         flat = np.bincount(self.scatter_index, values, minlength=self.J_base.size)
         return self.J_base + flat.reshape(self.J_base.shape)
 
@@ -178,6 +185,35 @@ class System:
                 th, thd, thdd = drive.theta, drive.theta_d, drive.theta_dd
                 gamma[rows] -= thd**2 * np.cos(th) + thdd * np.sin(th)
         return gamma
+
+    def residual_hessian(self, q: np.ndarray, c: np.ndarray) -> np.ndarray:
+        """Σ_i c_i ∇²_q Φ_i (nq × nq): the second-order term of Newton's method on ½ΦᵀWΦ
+        (c = WΦ). Dot rows have the constant x-Hessian C_aᵀC_b + C_bᵀC_a, assembled as
+        kron(K, I3) from the 4×4 coefficient blocks; reduced bodies add the curvature of
+        w = u × v; MCR rows add c_k cos θ_k on the diagonal."""
+        layout = self.layout
+        n_bodies = len(layout.body_names)
+        dots = c[self.n_linear_rows:]
+        K = np.bincount(self.hess_index, self.hess_coef * dots[self.hess_row],
+                        minlength=16 * n_bodies * n_bodies).reshape(4 * n_bodies, 4 * n_bodies)
+        Sx = np.kron(K, np.eye(3))
+        xq = layout.expand_jacobian(q)
+        H = np.zeros((self.nq, self.nq))
+        nb = layout.n_body_q
+        if xq is None:
+            H[:nb, :nb] = Sx
+        else:
+            H[:nb, :nb] = xq.T @ Sx @ xq
+            F = self.features(layout.expand(q))
+            g = self._jacobian(F)[:, : layout.nx].T @ c
+            for u, v, w in zip(layout.reduced_u, layout.reduced_v, layout.reduced_w, strict=True):
+                block = skew(g[w])
+                H[np.ix_(u, v)] -= block
+                H[np.ix_(v, u)] += block
+        if self.mixed:
+            rows = self.angle_rows
+            H[nb + np.arange(len(rows)), nb + np.arange(len(rows))] += dots[rows] * np.cos(q[nb:])
+        return H
 
     # --- reading the solution ------------------------------------------------------------------
     def point_positions(self, q: np.ndarray, which: list[tuple[str, str]]) -> np.ndarray:
@@ -243,6 +279,7 @@ def compile_system(model: Model, *, angles: str = "driver", track: bool = False)
     j_base = np.zeros((len(labels), width))
     j_base[: len(j_const), :nx] = j_const
     scatter = _dot_scatter(table, cl, len(j_const), width)
+    hessian = _dot_hessian(table, cl, len(model.bodies))
     return System(
         model=model,
         layout=layout,
@@ -259,10 +296,16 @@ def compile_system(model: Model, *, angles: str = "driver", track: bool = False)
         c_const=np.concatenate([(f0[lin_a] - f0[lin_b]).ravel(), f0[trk_a].ravel()]),
         J_base=j_base,
         scatter_index=scatter[0],
-        scatter_coef=scatter[1],
-        scatter_other=scatter[2],
+        scatter_coef=np.repeat(scatter[1][:, :, None], 3, axis=2).ravel(),
+        hess_index=hessian[0],
+        hess_coef=hessian[1],
+        hess_row=hessian[2],
+        scatter_gather=(3 * scatter[2][:, None, None] + np.zeros((1, 4, 1), dtype=int)
+                        + np.arange(3)[None, None, :]).ravel(),
         dot_a=dot_a,
         dot_b=dot_b,
+        dot_a3=(3 * dot_a[:, None] + np.arange(3)).ravel(),
+        dot_b3=(3 * dot_b[:, None] + np.arange(3)).ravel(),
         dot_c=np.array([c for _, _, c, _ in cl.dots], dtype=float),
         angle_rows=idx(cl.angle_dots),
         labels=tuple(labels),
@@ -286,3 +329,24 @@ def _dot_scatter(table: FeatureTable, cl, first_row: int, width: int
     if not index:
         return np.zeros(0, dtype=int), np.zeros((0, 4)), np.zeros(0, dtype=int)
     return np.concatenate(index), np.array(coef), np.array(other, dtype=int)
+
+
+def _dot_hessian(table: FeatureTable, cl, n_bodies: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Flat indices into the 4n_b × 4n_b coefficient matrix K, the coefficients and the dot row
+    of every term of ∇²(F_a·F_b) = C_aᵀC_b + C_bᵀC_a, block pair by block pair."""
+    index, coef, row = [], [], []
+    side = 4 * n_bodies
+    m = np.arange(4)
+    for d, (a, b, _, _) in enumerate(cl.dots):
+        for sa, ca in table.blocks[a]:
+            for sb, cb in table.blocks[b]:
+                ra, rb = 4 * (sa // 12) + m, 4 * (sb // 12) + m
+                outer = np.outer(ca, cb)
+                for rows, cols, values in ((ra, rb, outer), (rb, ra, outer.T)):
+                    index.append((rows[:, None] * side + cols[None, :]).ravel())
+                    coef.append(values.ravel())
+                    row.append(np.full(16, d))
+    if not index:
+        return np.zeros(0, dtype=int), np.zeros(0), np.zeros(0, dtype=int)
+    return np.concatenate(index), np.concatenate(coef), np.concatenate(row)

@@ -1,0 +1,95 @@
+"""HDF5 results, written atomically (a temporary copy, then a rename).
+
+Contract (SI units: m, rad, s):
+  root attributes: ``model`` (YAML text), ``command`` (the command line), ``versions`` (JSON of
+      package versions), ``trial`` (path)
+  /reference/markers   frames × markers × 3, m; attributes ``labels`` (model marker names),
+                       ``rate`` (Hz). The exact markers of a synthesized trial's truth file when
+                       there is one, else the trial's markers as read (NaN in gaps).
+  /truth/theta         frames × angles, rad (only for synthesized trials); attribute ``names``
+  /runs/<name>/        attributes ``method``, ``tol``, ``perturb_level_m``, ``perturb_markers``,
+                       ``perturb_seed``, ``tracking_weight`` (NaN for LS), ``warm_start``,
+                       ``hessian``, ``form``
+      q, qd, qdd                 frames × nq
+      theta, theta_d, theta_dd   frames × angles; attribute ``names``
+      model_points               frames × markers × 3, same marker order as /reference/markers
+      markers_input              frames × markers × 3, the (perturbed) markers the solver saw
+      iterations, time_s, phi_norm, phi_top_max, converged   per frame
+      ed, ed_input               frames × markers: distance of each model point to the
+                                 reference marker and to the input marker, m
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from fccgrb_cli.errors import InputError
+from fccgrb_cli.io.atomic import atomic_path
+from fccgrb_cli.pipeline import Run
+
+
+def _versions() -> dict[str, str]:
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {}
+    for name in ("fccgrb-cli", "numpy", "scipy", "h5py", "ezc3d", "click", "pyyaml"):
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            out[name] = "unknown"
+    return out
+
+
+def write_run(path: str | Path, run: Run, command: str) -> None:
+    """Add (or replace) one run in the results file, creating it when absent."""
+    import h5py
+
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        if path.exists():
+            try:
+                with h5py.File(path, "r"):
+                    pass
+            except OSError:
+                raise InputError(f"{path}: exists and is not an HDF5 results file; "
+                                 "choose another output") from None
+            shutil.copyfile(path, tmp)
+        with h5py.File(tmp, "a") as h5:
+            h5.attrs["model"] = run.model_text
+            h5.attrs["command"] = command
+            h5.attrs["versions"] = json.dumps(_versions())
+            h5.attrs["trial"] = run.trial_path
+            if "reference" in h5:
+                del h5["reference"]
+            ref = h5.create_group("reference")
+            ref["markers"] = run.reference
+            ref["markers"].attrs["labels"] = list(run.labels)
+            ref["markers"].attrs["rate"] = run.rate
+            if run.truth_theta is not None:
+                if "truth" in h5:
+                    del h5["truth"]
+                h5.create_group("truth")["theta"] = run.truth_theta
+                h5["truth/theta"].attrs["names"] = list(run.result.angle_names)
+            runs = h5.require_group("runs")
+            if run.name in runs:
+                del runs[run.name]
+            g = runs.create_group(run.name)
+            r = run.result
+            g.attrs.update({
+                "method": r.method, "tol": r.tol, "perturb_level_m": run.perturb_level_m,
+                "perturb_markers": list(run.perturb_markers), "perturb_seed": run.perturb_seed,
+                "tracking_weight": np.nan if run.tracking_weight is None else run.tracking_weight,
+                "warm_start": run.warm_start, "hessian": run.hessian, "form": run.form,
+            })
+            for key in ("q", "qd", "qdd", "iterations", "time_s", "phi_norm", "phi_top_max",
+                        "converged"):
+                g.create_dataset(key, data=getattr(r, key), compression="gzip")
+            for key in ("theta", "theta_d", "theta_dd"):
+                g[key] = getattr(r, key)
+                g[key].attrs["names"] = list(r.angle_names)
+            for key in ("model_points", "markers_input", "ed", "ed_input"):
+                g.create_dataset(key, data=getattr(run, key), compression="gzip")
