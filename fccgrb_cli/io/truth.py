@@ -50,12 +50,11 @@ def write_truth(path: str | Path, truth: Truth) -> None:
         h5.attrs["model"] = truth.model_text
         h5.attrs["fccgrb_version"] = __version__
         h5["time"] = truth.time
+        for key in ("theta", "theta_d", "theta_dd", "q", "markers"):
+            h5.create_dataset(key, data=getattr(truth, key), compression="gzip")
         for key in ("theta", "theta_d", "theta_dd"):
-            h5[key] = getattr(truth, key)
             h5[key].attrs["names"] = list(truth.angle_names)
-        h5["q"] = truth.q
         h5["q"].attrs["form"] = truth.form
-        h5["markers"] = truth.markers
         h5["markers"].attrs["labels"] = list(truth.labels)
 
 
