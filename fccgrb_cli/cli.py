@@ -201,8 +201,13 @@ def solve(model: str, trial: str, method: str, output: str, name: str | None, to
     """
     from fccgrb_cli.io.results import write_run
     from fccgrb_cli.io.trial import read_trial
+    from fccgrb_cli.io.truth import truth_path
     from fccgrb_cli.pipeline import solve_trial, summary
 
+    inputs = {Path(p).resolve() for p in (model, trial, truth_path(trial))}
+    if Path(output).resolve() in inputs:
+        raise InputError(f"{output}: expected a results file other than the model, the trial or "
+                         "its truth file (inputs are never modified)")
     loaded = load_checked(model, form)
     if track is not None:
         wanted = _split(track)
@@ -260,7 +265,8 @@ def perturb_command(source: str, target: str, level_mm: float, markers: str | No
                          "modified)")
     out = perturb(data.markers, data.labels, data.rate, level_mm * 1e-3, seed, only or None)
     write_trial(target, list(data.labels), out, data.rate, units)
-    if truth_path(source).exists():
-        shutil.copyfile(truth_path(source), truth_path(target))
+    sidecar = truth_path(source)
+    if sidecar.exists() and sidecar.resolve() != truth_path(target).resolve():
+        shutil.copyfile(sidecar, truth_path(target))
     click.echo(f"wrote {target}: {len(only) or len(data.labels)} of {len(data.labels)} markers "
                f"perturbed at {level_mm:g} mm (seed {seed})")

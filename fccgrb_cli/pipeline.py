@@ -119,7 +119,7 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
                            skip_unsolvable=skip_unsolvable,
                            target_labels=model.marker_labels + tuple(
                                tv.marker for tv in model.tracked_vectors),
-                           method=method, progress=progress)
+                           method=method, source=trial.path, progress=progress)
     which = [(tp.body, tp.point) for tp in model.tracked_points]
     points = np.array([system.point_positions(q, which) for q in result.q])
     level = f"-P{perturb_level_m * 1e3:g}" if perturb_level_m > 0 else ""

@@ -136,7 +136,8 @@ def write_trc(path: str | Path, trial_labels: list[str], markers_m: np.ndarray, 
         f"PathFileType\t4\t(X/Y/Z)\t{name}",
         "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame"
         "\tOrigNumFrames",
-        f"{rate:g}\t{rate:g}\t{n_frames}\t{n_markers}\t{units}\t{rate:g}\t1\t{n_frames}",
+        f"{rate:.12g}\t{rate:.12g}\t{n_frames}\t{n_markers}\t{units}\t{rate:.12g}\t1"
+        f"\t{n_frames}",
         "Frame#\tTime\t" + "\t".join(f"{label}\t\t" for label in trial_labels).rstrip("\t"),
         "\t\t" + "\t".join(f"X{k}\tY{k}\tZ{k}" for k in range(1, n_markers + 1)),
         "",

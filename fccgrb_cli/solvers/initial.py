@@ -4,7 +4,10 @@ Bodies are visited outward from the ground along the joints. Each is fitted to w
 it: its tracked markers plus the joint points it shares with bodies already placed. Three or more
 non-collinear points give a least-squares rigid fit (Söderkvist–Wedin, via the SVD); two give the
 segment's direction (the smallest rotation from the model pose); one, a translation of the pose.
-Mixed coordinates then follow from the fitted vectors, θ = acos(s1·s2).
+A two-point segment's rotation about its own axis is then chosen to satisfy its joints' axis
+equations with the bodies already placed (a universal joint's perpendicular arms, a revolute's
+parallel axes), the closest such roll to the model pose winning ties. Mixed coordinates follow
+from the fitted vectors, θ = acos(s1·s2).
 """
 
 from __future__ import annotations
@@ -43,8 +46,43 @@ def rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.eye(3) + s * K + (1 - c) * (K @ K)
 
 
-def _place(local: np.ndarray, world: np.ndarray, R0: np.ndarray, r0: np.ndarray
-           ) -> tuple[np.ndarray, np.ndarray]:
+def axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rotation by ``angle`` about the unit vector ``axis`` (Rodrigues)."""
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * (K @ K)
+
+
+def best_roll(R: np.ndarray, axis_world: np.ndarray,
+              pairs: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
+    """Rotate R about ``axis_world`` so that every (fixed world vector p, body-local vector s)
+    pair is as perpendicular as possible: min Σ (p · Rot(φ) R s)²; the smallest |φ| among
+    equally good rolls (a trigonometric polynomial, sampled then refined)."""
+    if not pairs:
+        return R
+    P = np.array([p for p, _ in pairs])
+    S = np.array([R @ s for _, s in pairs])
+    k = axis_world / np.linalg.norm(axis_world)
+    # p · Rot(φ) s = A cos φ + B sin φ + C
+    A = np.einsum("ij,ij->i", P, S - np.outer(S @ k, k))
+    B = np.einsum("ij,ij->i", P, np.cross(k, S))
+    C = (P @ k) * (S @ k)
+    phis = np.linspace(-np.pi, np.pi, 721)
+    cost = ((np.outer(np.cos(phis), A) + np.outer(np.sin(phis), B) + C) ** 2).sum(axis=1)
+    good = cost <= cost.min() + 1e-9 * max(1.0, cost.min())
+    phi = phis[good][np.argmin(np.abs(phis[good]))]
+    for _ in range(20):
+        res = A * np.cos(phi) + B * np.sin(phi) + C
+        d1 = -A * np.sin(phi) + B * np.cos(phi)
+        d2 = -A * np.cos(phi) - B * np.sin(phi)
+        grad, hess = 2 * res @ d1, 2 * (d1 @ d1 + res @ d2)
+        if hess <= 0:
+            break
+        phi -= grad / hess
+    return axis_rotation(k, phi) @ R
+
+
+def _place(local: np.ndarray, world: np.ndarray, R0: np.ndarray, r0: np.ndarray,
+           perpendicular: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
     if len(local) >= 3:
         spread = np.linalg.svd(local - local.mean(axis=0), compute_uv=False)
         if spread[1] > 1e-6 * max(spread[0], 1e-12):
@@ -52,11 +90,45 @@ def _place(local: np.ndarray, world: np.ndarray, R0: np.ndarray, r0: np.ndarray
     if len(local) >= 2:
         far = int(np.argmax(np.linalg.norm(local - local[0], axis=1)))
         if np.linalg.norm(local[far] - local[0]) > 1e-9:
-            R = rotation_between(R0 @ (local[far] - local[0]), world[far] - world[0]) @ R0
+            direction = world[far] - world[0]
+            R = rotation_between(R0 @ (local[far] - local[0]), direction) @ R0
+            R = best_roll(R, direction, perpendicular)
             return R, world[0] - R @ local[0]
     if len(local) >= 1:
         return R0, world[0] - R0 @ local[0]
     return R0, r0
+
+
+def _perpendicular_pairs(model, placed: dict, body: str) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(world vector of a placed body, local vector of ``body``) pairs that the joints between
+    them keep perpendicular: universal arms; a revolute's axis against two perpendiculars."""
+    from fccgrb_cli.system.features import perpendiculars
+
+    out = []
+    for joint in model.joints:
+        if body not in joint.bodies or joint.axes is None:
+            continue
+        k = joint.bodies.index(body)
+        other = joint.bodies[1 - k]
+        if other not in placed:
+            continue
+        mine = np.array(_vectors(model, body)[joint.axes[k]].local)
+        theirs = _world_vector(model, placed, other, joint.axes[1 - k])
+        if joint.type == "universal":
+            out.append((theirs, mine))
+        else:
+            a, b = perpendiculars(mine)
+            out += [(theirs, a), (theirs, b)]
+    return out
+
+
+def _vectors(model, body: str):
+    return model.ground.vectors if body == GROUND else model.body(body).vectors
+
+
+def _world_vector(model, placed: dict, body: str, name: str) -> np.ndarray:
+    R, _ = placed[body]
+    return R @ np.array(_vectors(model, body)[name].local)
 
 
 def initial_guess(system: System, targets: np.ndarray) -> np.ndarray:
@@ -91,7 +163,8 @@ def initial_guess(system: System, targets: np.ndarray) -> np.ndarray:
             R0 = np.column_stack([pose.u, pose.v, pose.w])
             local = np.array([p for p, _ in pairs]).reshape(-1, 3)
             world = np.array([w for _, w in pairs]).reshape(-1, 3)
-            placed[other] = _place(local, world, R0, np.array(pose.r))
+            placed[other] = _place(local, world, R0, np.array(pose.r),
+                                   _perpendicular_pairs(model, placed, other))
             order.append(other)
     for name, (R, r) in placed.items():
         if name == GROUND:

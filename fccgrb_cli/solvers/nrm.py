@@ -54,6 +54,7 @@ def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray, *,
               warm_start: str = "extrapolate", skip_unsolvable: bool = False,
               hessian: str = "auto",
               target_labels: tuple[str, ...] = (), method: str | None = None,
+              source: str = "",
               progress: Callable[[int, int], None] | None = None) -> KinematicResult:
     """Solve every frame; ``targets`` is (frames × n_targets × 3), metres, NaN in gaps."""
     if not system.mixed or not system.n_targets:
@@ -89,8 +90,9 @@ def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray, *,
             checked[key] = _rank(system.jacobian(q), w) == nq
         if not checked[key]:
             gone = ", ".join(labels[k] for k in np.flatnonzero(missing))
-            text = (f"frame {f} (t = {time[f]:.3f} s): the markers left cannot determine the "
-                    f"model (missing: {gone or 'none'})")
+            where = f"{source}: " if source else ""
+            text = (f"{where}frame index {f} (t = {time[f]:.3f} s): the markers left cannot "
+                    f"determine the model (missing: {gone or 'none'})")
             if not skip_unsolvable:
                 raise InputError(text)
             messages.append(text + "; frame left unsolved")
@@ -104,7 +106,7 @@ def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray, *,
         if it.converged:
             history = [*history[-2:], it.q]
         else:
-            messages.append(f"frame {f} (t = {time[f]:.3f} s): no convergence in "
+            messages.append(f"frame index {f} (t = {time[f]:.3f} s): no convergence in "
                             f"{it.iterations} iterations")
             history = []
         phi = system.residual(it.q, drive)
@@ -115,8 +117,7 @@ def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray, *,
     theta = q_all[:, n_body:]
     dt = float(time[1] - time[0]) if n > 1 else 1.0
     theta_d, theta_dd = central_derivatives(theta, dt)
-    qd, qdd = consistent_rates(system, np.nan_to_num(q_all), np.nan_to_num(theta_d),
-                               np.nan_to_num(theta_dd))
+    qd, qdd = consistent_rates(system, q_all, theta_d, theta_dd)
     messages += near_singular(theta, system.layout.angle_names, time)
     return KinematicResult(
         method=method or ("nrm-ls" if tracking_weight is None else "nrm-wls"), tol=tol,
@@ -134,6 +135,7 @@ def near_singular(theta: np.ndarray, names: tuple[str, ...], time: np.ndarray) -
         if len(close):
             f = int(close[0])
             out.append(f"angle {name} comes within 5 deg of 0 or 180 deg ({len(close)} frames, "
-                       f"first frame {f}, t = {time[f]:.3f} s, {np.degrees(theta[f, k]):.1f} deg); "
+                       f"first frame index {f}, t = {time[f]:.3f} s, "
+                       f"{np.degrees(theta[f, k]):.1f} deg); "
                        "cos θ is ambiguous there: choose vectors 90 deg apart at the neutral pose")
     return out

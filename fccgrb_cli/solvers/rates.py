@@ -36,11 +36,15 @@ def central_derivatives(y: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarra
 
 def consistent_rates(system: System, q: np.ndarray, theta_d: np.ndarray,
                      theta_dd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """q̇, q̈ (frames × nq) of a mixed system given θ̇, θ̈ (frames × n_angles)."""
+    """q̇, q̈ (frames × nq) of a mixed system given θ̇, θ̈ (frames × n_angles); NaN where the
+    frame or its neighbours were left unsolved."""
     n_body = system.layout.n_body_q
     top = system.masks()["topology"]
-    qd, qdd = np.zeros_like(q), np.zeros_like(q)
+    qd, qdd = np.full_like(q, np.nan), np.full_like(q, np.nan)
     for f in range(len(q)):
+        if not (np.isfinite(q[f]).all() and np.isfinite(theta_d[f]).all()
+                and np.isfinite(theta_dd[f]).all()):
+            continue
         J = system.jacobian(q[f])[top]
         Jb, Jt = J[:, :n_body], J[:, n_body:]
         qd[f, n_body:], qdd[f, n_body:] = theta_d[f], theta_dd[f]

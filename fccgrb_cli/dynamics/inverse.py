@@ -1,0 +1,70 @@
+"""Inverse dynamics of the classical (AD-driven) system: M q̈ + Φ_qᵀ λ = g (FORMULATION §4).
+
+Written on the fully-defined equivalent x: Φ_qᵀ λ = X_qᵀ (g_x − M_x ẍ), ẍ = X_q q̈ + V̇ q̇, which
+also covers reduced bodies (their mass matrix then depends on q). λ by least squares, minimum norm
+where constraints are redundant. The moment of angular driver k, conjugate to θ_k and positive in
+the direction that increases it, is τ_k = λ_k sin θ_k.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from fccgrb_cli.dynamics.loads import ExternalLoad
+from fccgrb_cli.dynamics.mass import gravity_forces, mass_matrix
+from fccgrb_cli.solvers.newton import linear_solve
+from fccgrb_cli.system import System
+
+
+@dataclass(frozen=True)
+class InverseDynamics:
+    """Per-frame multipliers λ (frames × rows), joint moments τ (frames × angles, N·m),
+    kinetic and potential energy (J), the external loads' power (W) and the residual
+    ‖Φ_qᵀλ − (g − Mq̈)‖ (a least-squares fit that is not exact flags inconsistent data)."""
+
+    angle_names: tuple[str, ...]
+    lam: np.ndarray
+    joint_moments: np.ndarray
+    kinetic: np.ndarray
+    potential: np.ndarray
+    external_power: np.ndarray
+    residual: np.ndarray
+
+
+def inverse_dynamics(system: System, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+                     theta: np.ndarray, loads: Sequence[ExternalLoad] = ()) -> InverseDynamics:
+    """λ and τ for every frame of an AD system's motion (q, q̇, q̈: frames × nq; θ the drivers)."""
+    if system.mixed:
+        raise ValueError("inverse_dynamics needs the classical system (angles='driver')")
+    model, layout = system.model, system.layout
+    M = mass_matrix(model)
+    g = gravity_forces(model)
+    driver_rows = system.n_linear_rows + system.angle_rows
+    n = len(q)
+    lam = np.zeros((n, system.n_rows))
+    kinetic, potential, power, residual = (np.zeros(n) for _ in range(4))
+    offsets = {name: layout.x_offset(name) for name in layout.body_names}
+    for f in range(n):
+        x = layout.expand(q[f])
+        xd = layout.expand_rate(q[f], qd[f])
+        xq = layout.expand_jacobian(q[f])
+        xdd = (qdd[f] if xq is None else xq @ qdd[f]) + layout.expand_bias(qd[f])
+        forces = g.copy()
+        for load in loads:
+            s = offsets[load.body]
+            forces[s:s + 12] += load.generalized(x[s:s + 12], f)
+            power[f] += load.power(x[s:s + 12], xd[s:s + 12], f)
+        rhs_x = forces - M @ xdd
+        rhs = rhs_x if xq is None else xq.T @ rhs_x
+        J = system.jacobian(q[f])
+        lam[f] = linear_solve(J.T, rhs)
+        residual[f] = np.linalg.norm(J.T @ lam[f] - rhs)
+        kinetic[f] = 0.5 * xd @ M @ xd
+        potential[f] = -g @ x
+    return InverseDynamics(
+        angle_names=tuple(a.name for a in model.angles), lam=lam,
+        joint_moments=lam[:, driver_rows] * np.sin(theta), kinetic=kinetic, potential=potential,
+        external_power=power, residual=residual)

@@ -1,0 +1,40 @@
+"""External forces and moments on bodies, as generalized forces on x (FORMULATION §4).
+
+A force f applied at a point with local coordinates (a, b, c) of body i gives C_Pᵀ f =
+[f, a f, b f, c f]; a moment n gives ½ n × u, ½ n × v, ½ n × w on the u, v, w blocks. The point
+may move over the body (a centre of pressure): its local coordinates are found each frame from
+its global position.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class ExternalLoad:
+    """Force (frames × 3, N) at ``point`` (frames × 3, global, m) and a free moment
+    (frames × 3, N·m) acting on ``body``. ``name`` labels it in results."""
+
+    name: str
+    body: str
+    force: np.ndarray
+    point: np.ndarray
+    moment: np.ndarray
+
+    def generalized(self, x_body: np.ndarray, frame: int) -> np.ndarray:
+        """The 12 generalized forces on the body's fully-defined coordinates at one frame."""
+        r, u, v, w = x_body.reshape(4, 3)
+        frame_axes = np.column_stack([u, v, w])
+        local = np.linalg.solve(frame_axes, self.point[frame] - r)
+        f = self.force[frame]
+        n = self.moment[frame]
+        return np.concatenate([f, local[0] * f + 0.5 * np.cross(n, u),
+                               local[1] * f + 0.5 * np.cross(n, v),
+                               local[2] * f + 0.5 * np.cross(n, w)])
+
+    def power(self, x_body: np.ndarray, xd_body: np.ndarray, frame: int) -> float:
+        """Power of the load: f · (velocity of the body point under it) + n · ω."""
+        return float(self.generalized(x_body, frame) @ xd_body)

@@ -1,0 +1,624 @@
+"""Trial input for ``fccgrb solve`` and ``fccgrb perturb``: bad files, gaps, TRC and C3D.
+
+Bad trial input (a missing file, a file that is not C3D, labels absent from the file, every
+marker of a body missing in a frame, a TRC with inconsistent columns or header, an unknown
+ending) must give ONE line on stderr, ``fccgrb: error: …``, naming the file (and the frame, line
+or label where relevant), exit status 2, no traceback, and leave no results file nor temporary
+file behind. Inputs are never modified: each case hashes its input before and after.
+
+The trials come from ``fccgrb synth`` (pendulum and five-bar, 1 s at 100 Hz, module fixture) and
+are varied with ``write_trial`` or ezc3d. The file also covers ``--skip-unsolvable``, TRC round
+trips (units, gaps, labels), C3D gaps (negative residuals), label prefixes and ``--map``,
+``fccgrb perturb``, the ``solve`` summary and results files that gain runs, and two C3D files from
+commercial systems in ``shared/data/c3d`` (skipped when absent, never copied).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import subprocess
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import ezc3d
+import h5py
+import numpy as np
+import pytest
+import yaml
+from click.testing import CliRunner, Result
+
+from fccgrb_cli.cli import main
+from fccgrb_cli.io.trial import read_trial, write_trial
+
+MODELS = Path(__file__).resolve().parents[1] / "configs" / "models"
+PENDULUM = MODELS / "pendulum.yaml"
+FIVE_BAR = MODELS / "five_bar.yaml"
+SHARED_C3D = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d"
+FCCGRB = shutil.which("fccgrb")
+
+GAP_FRAME = 50  # 0-based frame index, t = 0.500 s at 100 Hz
+B5_MARKERS = ("P6",)  # the tracked marker on five-bar body B5 (P5 is tracked on B4)
+SUMMARY_COLUMNS = ("method", "ms/frame", "iter/frame", "mean |Phi|", "max |Phi_top|",
+                   "mean ED mm", "max ED mm", "failed")
+
+
+# ---- helpers ------------------------------------------------------------------------------
+
+
+def run_cli(*args: object) -> Result:
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def digest(path: Path) -> str | None:
+    """SHA-256 of a file's bytes (None when it is absent or not a file)."""
+    return hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file() else None
+
+
+def listing(folder: Path) -> list[str]:
+    """Every name in the folder, hidden ones (temporary files) included."""
+    return sorted(os.listdir(folder))
+
+
+def one_error_line(result: Result, *fragments: str) -> str:
+    """Exit status 2, one stderr line ``fccgrb: error: …`` holding every fragment, no traceback."""
+    assert result.exit_code == 2, (result.exit_code, result.output, result.exception)
+    assert result.exception is None or isinstance(result.exception, SystemExit), \
+        repr(result.exception)
+    assert "Traceback" not in result.output
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1, result.stderr
+    line = lines[0]
+    assert line.startswith("fccgrb: error: "), line
+    for fragment in fragments:
+        assert fragment in line, (fragment, line)
+    assert "fccgrb: error:" not in result.stdout
+    return line
+
+
+def solved(result: Result) -> None:
+    assert result.exit_code == 0, (result.output, result.exception)
+    assert result.exception is None, repr(result.exception)
+
+
+def runs(path: Path) -> dict[str, dict[str, np.ndarray]]:
+    """Every run of a results file: name → {dataset: array}."""
+    with h5py.File(path, "r") as h5:
+        return {name: {key: g[key][()] for key in g} for name, g in h5["runs"].items()}
+
+
+@dataclass(frozen=True)
+class Synth:
+    """A synthesized trial: the C3D, its model and the markers as read (m)."""
+
+    path: Path
+    model: Path
+    labels: tuple[str, ...]
+    markers: np.ndarray
+    rate: float
+
+
+@pytest.fixture(scope="module")
+def trials(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Synth]:
+    """``fccgrb synth MODEL -o <tmp>/NAME.c3d --duration 1`` for the pendulum and the five-bar."""
+    folder = tmp_path_factory.mktemp("synth")
+    out = {}
+    for name, model, file in (("pendulum", PENDULUM, "p.c3d"), ("five_bar", FIVE_BAR, "f.c3d")):
+        path = folder / file
+        result = run_cli("synth", model, "-o", path, "--duration", "1")
+        solved(result)
+        assert path.exists() and path.with_name(path.stem + ".truth.h5").exists()
+        trial = read_trial(path)
+        assert trial.n_frames == 100 and trial.rate == 100.0
+        out[name] = Synth(path, model, trial.labels, trial.markers, trial.rate)
+    return out
+
+
+def with_b5_gap(synth: Synth) -> np.ndarray:
+    """The five-bar markers with every tracked marker of body B5 NaN in GAP_FRAME."""
+    markers = synth.markers.copy()
+    markers[GAP_FRAME, [synth.labels.index(m) for m in B5_MARKERS]] = np.nan
+    return markers
+
+
+def test_b5_markers_are_the_ones_the_model_tracks_on_b5() -> None:
+    """The body-missing cases rest on this: B5 carries the tracked point P6 only."""
+    doc = yaml.safe_load(FIVE_BAR.read_text(encoding="utf-8"))
+    on_b5 = tuple(tp["marker"] for tp in doc["tracking"]["points"]
+                  if tp["point"].split(".")[0] == "B5")
+    assert on_b5 == B5_MARKERS
+
+
+# ---- bad trial input ----------------------------------------------------------------------
+
+
+def trc_lines(folder: Path, synth: Synth, units: str = "mm") -> list[str]:
+    path = folder / "good.trc"
+    write_trial(path, list(synth.labels), synth.markers, synth.rate, units)
+    lines = path.read_text(encoding="utf-8").split("\n")
+    path.unlink()
+    return lines
+
+
+def edited_trc(name: str, edit: Callable[[list[str]], None]) -> Callable[..., Path]:
+    """A pendulum TRC (mm) with one edit to its lines; data row k (0-based) is line 7 + k."""
+
+    def make(folder: Path, trials: dict[str, Synth]) -> Path:
+        lines = trc_lines(folder, trials["pendulum"])
+        edit(lines)
+        path = folder / name
+        path.write_text("\n".join(lines), encoding="utf-8")
+        return path
+
+    return make
+
+
+def drop_last_field(lines: list[str]) -> None:
+    lines[9] = lines[9].rsplit("\t", 1)[0]  # line 10: 8 marker columns instead of 9
+
+
+def add_field(lines: list[str]) -> None:
+    lines[9] += "\t1.5"  # line 10: 10 marker columns
+
+
+def word_in_field(lines: list[str]) -> None:
+    fields = lines[9].split("\t")
+    fields[4] = "abc"
+    lines[9] = "\t".join(fields)
+
+
+def more_num_markers(lines: list[str]) -> None:
+    values = lines[2].split("\t")
+    assert values[3] == "3"  # NumMarkers
+    values[3] = "4"
+    lines[2] = "\t".join(values)
+
+
+def written(name: str, which: str, labels: Callable[[Synth], list[str]] | None = None,
+            markers: Callable[[Synth], np.ndarray] | None = None,
+            units: str = "mm") -> Callable[..., Path]:
+    """A trial written by ``write_trial`` from a synthesized one, with other labels/markers."""
+
+    def make(folder: Path, trials: dict[str, Synth]) -> Path:
+        synth = trials[which]
+        path = folder / name
+        write_trial(path, labels(synth) if labels else list(synth.labels),
+                    markers(synth) if markers else synth.markers, synth.rate, units)
+        return path
+
+    return make
+
+
+def raw(name: str, content: bytes) -> Callable[..., Path]:
+    def make(folder: Path, trials: dict[str, Synth]) -> Path:
+        path = folder / name
+        path.write_bytes(content)
+        return path
+
+    return make
+
+
+def absent(folder: Path, trials: dict[str, Synth]) -> Path:
+    return folder / "absent.c3d"
+
+
+def a_folder(folder: Path, trials: dict[str, Synth]) -> Path:
+    path = folder / "folder.c3d"
+    path.mkdir()
+    return path
+
+
+def c3d_as_txt(folder: Path, trials: dict[str, Synth]) -> Path:
+    path = folder / "pendulum.txt"
+    shutil.copyfile(trials["pendulum"].path, path)
+    return path
+
+
+@dataclass(frozen=True)
+class Case:
+    id: str
+    model: Path
+    make: Callable[[Path, dict[str, Synth]], Path]
+    fragments: tuple[str, ...]
+    names_file: bool = True
+
+
+CASES = [
+    Case("missing-file", PENDULUM, absent, ("trial file not found",)),
+    Case("folder", PENDULUM, a_folder, ("expected a trial file, got a folder",)),
+    Case("c3d-that-is-text", PENDULUM, raw("garbage.c3d", b"this is not a C3D file\n" * 40),
+         ("not a readable C3D file",)),
+    Case("c3d-that-is-noise", PENDULUM,
+         raw("noise.c3d", np.random.default_rng(7).bytes(4096)), ("not a readable C3D file",)),
+    Case("c3d-empty", PENDULUM, raw("empty.c3d", b""), ("not a readable C3D file",)),
+    Case("unknown-ending", PENDULUM, c3d_as_txt, ("expected a .c3d or .trc trial file",)),
+    Case("c3d-other-labels", PENDULUM,
+         written("other.c3d", "pendulum", labels=lambda s: ["A", "B", "C"]),
+         ("expected the labels P1, P2, P3", "the file has: A, B, C", "--map")),
+    Case("trc-other-labels", PENDULUM,
+         written("other.trc", "pendulum", labels=lambda s: ["P1", "X2", "P3"]),
+         ("expected the labels P2 ", "the file has: P1, X2, P3")),
+    Case("c3d-body-B5-missing", FIVE_BAR, written("b5.c3d", "five_bar", markers=with_b5_gap),
+         (f"frame index {GAP_FRAME} ", "t = 0.500 s", "cannot determine", "missing: P6)"),
+         names_file=False),
+    Case("trc-body-B5-missing", FIVE_BAR,
+         written("b5.trc", "five_bar", markers=with_b5_gap, units="m"),
+         (f"frame index {GAP_FRAME} ", "t = 0.500 s", "cannot determine", "missing: P6)"),
+         names_file=False),
+    Case("trc-row-too-few-columns", PENDULUM, edited_trc("short.trc", drop_last_field),
+         ("line 10:", "expected 9 marker columns", "got 8")),
+    Case("trc-row-too-many-columns", PENDULUM, edited_trc("long.trc", add_field),
+         ("line 10:", "expected 9 marker columns", "got 10")),
+    Case("trc-row-with-a-word", PENDULUM, edited_trc("word.trc", word_in_field),
+         ("line 10:", "expected numbers")),
+    Case("trc-num-markers-disagrees", PENDULUM, edited_trc("nummarkers.trc", more_num_markers),
+         ("line 4:", "expected 4 marker labels (NumMarkers)", "got 3")),
+    Case("trc-that-is-text", PENDULUM, raw("text.trc", b"x,y,z\n1,2,3\n" * 5),
+         ("line 1:", "PathFileType")),
+    Case("trc-not-utf8", PENDULUM, raw("latin.trc", b"PathFileType\t4\n\xff\xfe\n\n\n\n\n"),
+         ("cannot read the TRC file",)),
+]
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
+def test_bad_trial_is_one_line_and_status_2(case: Case, trials: dict[str, Synth],
+                                            tmp_path: Path) -> None:
+    trial = case.make(tmp_path, trials)
+    before, names = digest(trial), listing(tmp_path)
+    out = tmp_path / "out.h5"
+    result = run_cli("solve", case.model, trial, "-o", out)
+    one_error_line(result, *case.fragments, *((str(trial),) if case.names_file else ()))
+    assert result.stdout == ""
+    assert not out.exists()
+    assert listing(tmp_path) == names  # nothing left behind, temporary files included
+    assert digest(trial) == before
+
+
+def test_body_missing_message_names_the_file(trials: dict[str, Synth], tmp_path: Path) -> None:
+    trial = tmp_path / "b5.c3d"
+    write_trial(trial, list(trials["five_bar"].labels), with_b5_gap(trials["five_bar"]), 100.0)
+    one_error_line(run_cli("solve", FIVE_BAR, trial, "-o", tmp_path / "out.h5"), str(trial))
+
+
+@pytest.mark.skipif(FCCGRB is None, reason="the fccgrb command is not on PATH")
+@pytest.mark.parametrize("case", [c for c in CASES if c.id in
+                                  ("missing-file", "c3d-that-is-noise", "c3d-body-B5-missing",
+                                   "trc-row-too-few-columns")],
+                         ids=lambda c: c.id)
+def test_real_process_bad_trial(case: Case, trials: dict[str, Synth], tmp_path: Path) -> None:
+    """The same through a real process: genuine stream separation and exit status."""
+    trial = case.make(tmp_path, trials)
+    before, names = digest(trial), listing(tmp_path)
+    proc = subprocess.run([FCCGRB, "solve", str(case.model), str(trial), "-o",
+                           str(tmp_path / "out.h5")], capture_output=True, text=True,
+                          timeout=120, check=False)
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr
+    lines = proc.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("fccgrb: error: "), proc.stderr
+    assert all(fragment in lines[0] for fragment in case.fragments), lines[0]
+    assert proc.stdout == ""
+    assert listing(tmp_path) == names
+    assert digest(trial) == before
+
+
+def test_map_with_an_unknown_model_name_is_one_line(trials: dict[str, Synth],
+                                                    tmp_path: Path) -> None:
+    synth = trials["pendulum"]
+    trial = tmp_path / "renamed.trc"
+    write_trial(trial, ["M1", "M2", "M3"], synth.markers, synth.rate)
+    names = listing(tmp_path)
+    result = run_cli("solve", PENDULUM, trial, "-o", tmp_path / "out.h5",
+                     "--map", "P1=M1,P2=M2,P3=M3,Q7=M4")
+    one_error_line(result, "--map", "Q7", "P1, P2, P3")
+    result = run_cli("solve", PENDULUM, trial, "-o", tmp_path / "out.h5", "--map", "P1")
+    one_error_line(result, "--map", "MODEL_NAME=FILE_LABEL", "'P1'")
+    assert listing(tmp_path) == names
+
+
+# ---- --skip-unsolvable --------------------------------------------------------------------
+
+
+def test_skip_unsolvable_turns_the_frame_into_a_warning(trials: dict[str, Synth],
+                                                        tmp_path: Path) -> None:
+    """Regression: at commit 1ba84f0 this raised LinAlgError('Singular matrix') from
+    consistent_rates (q of the unsolved frame passed through np.nan_to_num → 0)."""
+    trial = tmp_path / "b5.c3d"
+    write_trial(trial, list(trials["five_bar"].labels), with_b5_gap(trials["five_bar"]), 100.0)
+    before = digest(trial)
+    out = tmp_path / "out.h5"
+    result = run_cli("solve", FIVE_BAR, trial, "-o", out, "--skip-unsolvable")
+    assert digest(trial) == before
+    if result.exception is not None and not isinstance(result.exception, SystemExit):
+        raise result.exception
+    solved(result)
+    warnings = [line for line in result.stderr.splitlines() if f"frame index {GAP_FRAME} " in line]
+    assert len(warnings) == 1, result.stderr
+    assert warnings[0].startswith("fccgrb: warning: ")
+    assert "missing: P6)" in warnings[0] and "unsolved" in warnings[0]
+    assert "fccgrb: error:" not in result.stderr
+    run = runs(out)["nrm-wls"]
+    assert not run["converged"][GAP_FRAME] or np.isnan(run["q"][GAP_FRAME]).all()
+    others = np.delete(np.arange(100), GAP_FRAME)
+    assert run["converged"][others].all()
+
+
+# ---- TRC ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("units", ["mm", "m"])
+def test_trc_round_trip(tmp_path: Path, units: str) -> None:
+    rng = np.random.default_rng(11)
+    labels = ["P1", "r asis", "Subj:HEEL", "last"]
+    markers = rng.uniform(-2.0, 2.0, (25, 4, 3)) * rng.choice([1.0, 1e-3], (25, 4, 3))
+    markers[0, 0] = 0.0
+    markers[3, 1] = np.nan  # a gap in the middle of a row
+    markers[4, 3] = np.nan  # a gap at the end of a row: trailing empty fields
+    markers[5, 0] = np.nan  # a gap at the start of a row
+    path = tmp_path / "x.trc"
+    write_trial(path, labels, markers, 120.0, units)
+    text = path.read_text(encoding="utf-8").split("\n")
+    assert text[2].split("\t")[4] == units
+    assert "\t\t\t\t" in text[6 + 3]  # frame 4: three empty fields between two tabs each
+    assert text[6 + 4].endswith("\t\t\t")
+    trial = read_trial(path)
+    assert trial.labels == tuple(labels)
+    assert trial.rate == 120.0
+    assert trial.markers.shape == markers.shape
+    gaps = np.isnan(markers)
+    np.testing.assert_array_equal(np.isnan(trial.markers), gaps)
+    # 9 significant digits in the file's units: relative error ≤ 5e-9 (plus the unit scaling)
+    np.testing.assert_allclose(trial.markers[~gaps], markers[~gaps], rtol=6e-9, atol=1e-300)
+    assert listing(tmp_path) == ["x.trc"]
+
+
+def test_trc_in_metres_solves_to_the_c3d_angles(trials: dict[str, Synth],
+                                                tmp_path: Path) -> None:
+    synth = trials["five_bar"]
+    source = tmp_path / "f.c3d"
+    shutil.copyfile(synth.path, source)
+    trc = tmp_path / "metres" / "f_m.trc"
+    trc.parent.mkdir()
+    result = run_cli("perturb", source, trc, "--level", "0", "--units", "m")
+    solved(result)
+    assert read_trial(trc).labels == synth.labels
+    np.testing.assert_allclose(read_trial(trc).markers, synth.markers, rtol=6e-9, atol=1e-300)
+    for trial, out in ((source, tmp_path / "c3d.h5"), (trc, tmp_path / "trc.h5")):
+        solved(run_cli("solve", FIVE_BAR, trial, "-o", out))
+    theta_c3d = runs(tmp_path / "c3d.h5")["nrm-wls"]["theta"]
+    theta_trc = runs(tmp_path / "trc.h5")["nrm-wls"]["theta"]
+    assert theta_c3d.shape == (100, 9)
+    assert np.abs(theta_trc - theta_c3d).max() < 1e-6
+
+
+# ---- C3D gaps -----------------------------------------------------------------------------
+
+
+def c3d_with_gap(source: Path, target: Path, marker: int, frame: int, how: str) -> None:
+    c3d = ezc3d.c3d(str(source))
+    if how == "residual":
+        residuals = np.array(c3d["data"]["meta_points"]["residuals"])
+        residuals[0, marker, frame] = -1.0
+        c3d["data"]["meta_points"]["residuals"] = residuals
+    else:
+        points = np.array(c3d["data"]["points"])
+        points[:3, marker, frame] = np.nan
+        c3d["data"]["points"] = points
+    c3d.write(str(target))
+
+
+@pytest.mark.parametrize("how", ["residual", "nan-point"])
+def test_c3d_gap_reads_as_nan_and_still_solves(trials: dict[str, Synth], tmp_path: Path,
+                                               how: str) -> None:
+    synth = trials["five_bar"]
+    k, frame = synth.labels.index("P9"), 30
+    trial = tmp_path / "gap.c3d"
+    c3d_with_gap(synth.path, trial, k, frame, how)
+    if how == "residual":
+        assert ezc3d.c3d(str(trial))["data"]["meta_points"]["residuals"][0, k, frame] < 0
+    before = digest(trial)
+    read = read_trial(trial)
+    expected = np.zeros(read.markers.shape, dtype=bool)
+    expected[frame, k] = True
+    np.testing.assert_array_equal(np.isnan(read.markers), expected)
+    np.testing.assert_array_equal(read.markers[~expected], synth.markers[~expected])
+    out = tmp_path / "out.h5"
+    result = run_cli("solve", FIVE_BAR, trial, "-o", out)
+    solved(result)
+    assert "fccgrb: error" not in result.stderr
+    run = runs(out)["nrm-wls"]
+    assert run["converged"].all()
+    assert np.isfinite(run["q"]).all()
+    assert np.isnan(run["markers_input"][frame, k]).all()
+    # P2 and P3 still place B2: the gap frame's model points stay on the other markers
+    others = [j for j in range(9) if j != k]
+    assert np.nanmax(run["ed_input"][frame, others]) < 1e-6
+    assert digest(trial) == before
+    assert sorted(listing(tmp_path)) == ["gap.c3d", "out.h5"]
+
+
+# ---- labels: prefixes and --map -----------------------------------------------------------
+
+
+def test_prefixed_labels_solve_without_mapping(trials: dict[str, Synth], tmp_path: Path) -> None:
+    synth = trials["pendulum"]
+    trial = tmp_path / "subject.c3d"
+    write_trial(trial, [f"Subj:{label}" for label in synth.labels], synth.markers, synth.rate)
+    out = tmp_path / "out.h5"
+    solved(run_cli("solve", PENDULUM, trial, "-o", out))
+    run = runs(out)["nrm-wls"]
+    assert run["converged"].all()
+    np.testing.assert_allclose(run["markers_input"], synth.markers, atol=1e-12)
+
+
+def test_renamed_labels_solve_with_map(trials: dict[str, Synth], tmp_path: Path) -> None:
+    synth = trials["pendulum"]
+    trial = tmp_path / "renamed.trc"
+    # reversed file order: the mapping, not the position, decides
+    write_trial(trial, ["M3", "M2", "M1"], synth.markers[:, ::-1], synth.rate)
+    out = tmp_path / "out.h5"
+    solved(run_cli("solve", PENDULUM, trial, "-o", out, "--map", "P1=M1,P2=M2", "--map",
+                   "P3=M3"))
+    run = runs(out)["nrm-wls"]
+    assert run["converged"].all()
+    np.testing.assert_allclose(run["markers_input"], synth.markers, atol=1e-9)
+    assert np.nanmax(run["ed_input"]) < 1e-6
+
+
+# ---- fccgrb perturb -----------------------------------------------------------------------
+
+
+@pytest.fixture
+def pendulum_copy(trials: dict[str, Synth], tmp_path: Path) -> Path:
+    """The pendulum C3D and its truth sidecar, copied into the test's folder."""
+    source = tmp_path / "p.c3d"
+    shutil.copyfile(trials["pendulum"].path, source)
+    shutil.copyfile(trials["pendulum"].path.with_name("p.truth.h5"), tmp_path / "p.truth.h5")
+    return source
+
+
+def test_perturb_level_seed_and_truth(pendulum_copy: Path, tmp_path: Path) -> None:
+    source = pendulum_copy
+    before = digest(source)
+    truth_before = digest(tmp_path / "p.truth.h5")
+    a, b, c = tmp_path / "a.c3d", tmp_path / "b.c3d", tmp_path / "c.c3d"
+    for target, seed in ((a, 3), (b, 3), (c, 4)):
+        solved(run_cli("perturb", source, target, "--level", "30", "--seed", seed))
+    assert digest(source) == before
+    assert digest(tmp_path / "p.truth.h5") == truth_before
+    base = read_trial(source).markers
+    out_a, out_b, out_c = (read_trial(p).markers for p in (a, b, c))
+    peak = np.abs(out_a - base).max(axis=0)  # markers × axes, metres
+    assert np.abs(peak - 0.030).max() < 2e-7, peak  # exactly 30 mm, to float32 precision
+    np.testing.assert_array_equal(out_a, out_b)  # same seed, same markers
+    assert np.abs(out_c - out_a).max() > 1e-3  # another seed, another artefact
+    for target in (a, b, c):  # the truth sidecar is copied beside each output
+        assert digest(target.with_name(target.stem + ".truth.h5")) == truth_before
+
+
+def test_perturb_only_some_markers(pendulum_copy: Path, tmp_path: Path) -> None:
+    target = tmp_path / "some.trc"
+    solved(run_cli("perturb", pendulum_copy, target, "--level", "30", "--seed", "3",
+                   "--markers", "P2"))
+    base, out = read_trial(pendulum_copy).markers, read_trial(target).markers
+    diff = np.abs(out - base).max(axis=0)
+    assert np.abs(diff[1] - 0.030).max() < 1e-8
+    assert diff[[0, 2]].max() < 1e-9
+
+
+def test_perturb_refuses_its_input_as_output(pendulum_copy: Path, tmp_path: Path) -> None:
+    before = digest(pendulum_copy)
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "link.c3d").symlink_to(pendulum_copy)
+    names = listing(tmp_path)
+    for target in (pendulum_copy, tmp_path / "sub" / ".." / "p.c3d", tmp_path / "link.c3d"):
+        result = run_cli("perturb", pendulum_copy, target, "--level", "30", "--seed", "3")
+        one_error_line(result, str(target), "expected an output other than the input")
+    assert digest(pendulum_copy) == before
+    assert listing(tmp_path) == names
+
+
+def test_perturb_to_trc_beside_the_c3d(pendulum_copy: Path, tmp_path: Path) -> None:
+    target = tmp_path / "p.trc"
+    result = run_cli("perturb", pendulum_copy, target, "--level", "0", "--units", "m")
+    assert result.exception is None or isinstance(result.exception, SystemExit), \
+        repr(result.exception)
+    assert result.exit_code == 0
+
+
+# ---- the solve summary and the results file -----------------------------------------------
+
+
+def test_summary_and_a_second_run(trials: dict[str, Synth], tmp_path: Path) -> None:
+    synth = trials["pendulum"]
+    out = tmp_path / "out.h5"
+    first = run_cli("solve", PENDULUM, synth.path, "-o", out)
+    solved(first)
+    header, values = first.stdout.splitlines()[:2]
+    positions = [header.find(column) for column in SUMMARY_COLUMNS]
+    assert -1 not in positions and positions == sorted(positions), header
+    cells = dict(zip(("run", *SUMMARY_COLUMNS), values.split(), strict=False))
+    assert cells["run"] == cells["method"] == "nrm-wls"
+    assert cells["failed"] == "0"
+    assert float(cells["max ED mm"]) < 1e-3  # the truth markers are the reference
+    assert "wrote run 'nrm-wls' (100 frames)" in first.stdout
+    kept = runs(out)["nrm-wls"]
+
+    second = run_cli("solve", PENDULUM, synth.path, "-o", out, "--method", "nrm-ls")
+    solved(second)
+    assert second.stdout.splitlines()[1].split()[:2] == ["nrm-ls", "nrm-ls"]
+    both = runs(out)
+    assert sorted(both) == ["nrm-ls", "nrm-wls"]
+    for key, value in kept.items():
+        np.testing.assert_array_equal(both["nrm-wls"][key], value)
+    assert np.abs(both["nrm-ls"]["theta"] - kept["theta"]).max() < 1e-6
+    assert sorted(listing(tmp_path)) == ["out.h5"]
+
+
+@pytest.mark.parametrize("content", [b"not an HDF5 file\n", b""], ids=["text", "empty"])
+def test_results_path_that_is_not_hdf5_is_refused(trials: dict[str, Synth], tmp_path: Path,
+                                                  content: bytes) -> None:
+    out = tmp_path / "out.h5"
+    out.write_bytes(content)
+    names = listing(tmp_path)
+    result = run_cli("solve", PENDULUM, trials["pendulum"].path, "-o", out)
+    one_error_line(result, str(out), "not an HDF5 results file")
+    assert out.read_bytes() == content
+    assert listing(tmp_path) == names
+
+
+def test_results_path_equal_to_the_trial_is_refused(pendulum_copy: Path, tmp_path: Path) -> None:
+    before, names = digest(pendulum_copy), listing(tmp_path)
+    result = run_cli("solve", PENDULUM, pendulum_copy, "-o", pendulum_copy)
+    one_error_line(result, str(pendulum_copy))
+    assert digest(pendulum_copy) == before
+    assert listing(tmp_path) == names
+
+
+def test_results_path_equal_to_the_truth_sidecar_is_refused(pendulum_copy: Path,
+                                                            tmp_path: Path) -> None:
+    sidecar = tmp_path / "p.truth.h5"
+    before = digest(sidecar)
+    result = run_cli("solve", PENDULUM, pendulum_copy, "-o", sidecar)
+    assert digest(sidecar) == before
+    one_error_line(result, str(sidecar))
+
+
+# ---- C3D files from commercial systems (shared/data, read in place) ------------------------
+
+
+def shared_c3d(name: str) -> Path:
+    path = SHARED_C3D / name
+    if not path.is_file():
+        pytest.skip(f"{path} is not present")
+    return path
+
+
+def test_qualisys_c3d() -> None:
+    path = shared_c3d("Qualisys.c3d")
+    before = digest(path)
+    trial = read_trial(path)
+    assert trial.n_frames == 340
+    assert len(trial.labels) == 55
+    assert trial.rate == 200.0
+    assert trial.markers.shape == (340, 55, 3)
+    # POINT:UNITS is mm: read in metres, so marker distances from the origin are ~0.1–2.5 m
+    norms = np.linalg.norm(trial.markers, axis=2)
+    assert 0.1 < np.nanmedian(norms) < 2.5
+    assert np.nanmax(norms) < 5.0
+    assert digest(path) == before
+
+
+def test_fp_type1_c3d() -> None:
+    path = shared_c3d("FP_Type1.c3d")
+    before = digest(path)
+    trial = read_trial(path)
+    assert trial.n_frames == 634
+    assert trial.rate == 100.0
+    assert len(trial.labels) == trial.markers.shape[1] > 0
+    norms = np.linalg.norm(trial.markers, axis=2)  # POINT:UNITS is m already
+    assert 0.1 < np.nanmedian(norms) < 2.5
+    assert np.nanmax(norms) < 5.0
+    assert digest(path) == before
