@@ -149,14 +149,31 @@ def format_summary(row: dict) -> str:
 @click.argument("trial")
 @click.option("--method", type=click.Choice(["ad", "nrm-ls", "nrm-wls"]), default="nrm-wls",
               show_default=True,
-              help="ad: kinematic analysis driven by the true angles of a synthesized trial; "
+              help="ad: the classical kinematic analysis with angular drivers computed from the "
+                   "markers (segment frames fitted, then the angles; see --filter-cutoff); "
                    "nrm-ls / nrm-wls: mixed coordinates by Newton–Raphson on least squares / "
                    "weighted least squares.")
+@click.option("--ad-drivers", type=click.Choice(["markers", "truth"]), default="markers",
+              show_default=True,
+              help="With --method ad: angles from the markers, or the true angles of a trial "
+                   "made by 'fccgrb synth' (its TRIAL.truth.h5).")
+@click.option("--filter-cutoff", type=click.FloatRange(min=0, min_open=True), default=None,
+              metavar="HZ",
+              help="Low-pass the angles (zero-lag Butterworth, forward and backward) before they "
+                   "drive the classical model: the AD baseline's drivers, and the solved angles "
+                   "converted for inverse dynamics. Off by default; 6 Hz is the gait standard.")
+@click.option("--filter-order", type=click.IntRange(min=1, max=8), default=2, show_default=True,
+              help="Order of that Butterworth filter (each pass).")
+@click.option("--dynamics/--no-dynamics", default=None,
+              help="Inverse dynamics (joint moments in N·m, multipliers, energies) on the "
+                   "classical model driven by the solved angles [default: on when every body "
+                   "has mass and inertia].")
 @click.option("-o", "--output", default="results.h5", show_default=True,
               type=click.Path(dir_okay=False),
               help="HDF5 results file; an existing one gains (or replaces) this run.")
 @click.option("--name", default=None,
-              help="Run name inside the results file [default: METHOD, plus -P<mm> if perturbed].")
+              help="Run name inside the results file [default: the method, then -truth, -f<cutoff>Hz "
+                   "and -P<mm> where they apply, e.g. ad-f6Hz-P30].")
 @click.option("--tol", type=click.FloatRange(min=0, min_open=True), default=1e-10,
               show_default=True, help="Newton–Raphson tolerance on ‖Δq‖∞ (m and rad).")
 @click.option("--tracking-weight", type=click.FloatRange(min=0, min_open=True), default=1e-3,
@@ -189,7 +206,8 @@ def format_summary(row: dict) -> str:
               help="Report frames whose remaining markers cannot determine the model as "
                    "unsolved and go on, instead of stopping with an error.")
 @reports_input_errors
-def solve(model: str, trial: str, method: str, output: str, name: str | None, tol: float,
+def solve(model: str, trial: str, method: str, ad_drivers: str, filter_cutoff: float | None,
+          filter_order: int, dynamics: bool | None, output: str, name: str | None, tol: float,
           tracking_weight: float, form: str, track: str | None, maps: tuple[str, ...],
           perturb_mm: float, perturb_markers: str | None, seed: int, warm_start: str,
           hessian: str, skip_unsolvable: bool) -> None:
@@ -221,9 +239,11 @@ def solve(model: str, trial: str, method: str, output: str, name: str | None, to
                       perturb_level_m=perturb_mm * 1e-3, perturb_markers=_split(perturb_markers),
                       seed=seed, tracking_weight=tracking_weight, warm_start=warm_start,
                       hessian=hessian, skip_unsolvable=skip_unsolvable, name=name,
+                      ad_drivers=ad_drivers, filter_cutoff=filter_cutoff,
+                      filter_order=filter_order, dynamics=dynamics,
                       progress=Progress(f"solve {method}"))
     write_run(output, run, " ".join(["fccgrb", *sys.argv[1:]]))
-    for message in run.result.messages:
+    for message in (*run.result.messages, *run.warnings):
         click.echo(f"fccgrb: warning: {message}", err=True)
     click.echo(format_summary(summary(run)))
     click.echo(f"wrote run {run.name!r} ({run.result.n_frames} frames) to {output}")

@@ -8,12 +8,15 @@ from pathlib import Path
 
 import numpy as np
 
+from fccgrb_cli.dynamics.convert import Dynamics, classical_dynamics
+from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.io.truth import Truth, read_truth, truth_path
 from fccgrb_cli.model import Model
 from fccgrb_cli.perturb import perturb
 from fccgrb_cli.solvers import KinematicResult, solve_ad
+from fccgrb_cli.solvers.baseline import solve_baseline
 from fccgrb_cli.solvers.nrm import solve_nrm
 from fccgrb_cli.system import System, compile_system
 
@@ -43,6 +46,10 @@ class Run:
     form: str
     model_text: str
     trial_path: str
+    ad_drivers: str = ""
+    filter_cutoff: float | None = None
+    dynamics: Dynamics | None = None
+    warnings: tuple[str, ...] = ()
 
 
 def match_labels(model: Model, trial: Trial, mapping: dict[str, str]) -> list[str]:
@@ -89,8 +96,11 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
                 perturb_markers: tuple[str, ...] = (), seed: int = 0,
                 tracking_weight: float = 1e-3, warm_start: str = "extrapolate",
                 hessian: str = "auto", skip_unsolvable: bool = False, name: str | None = None,
+                ad_drivers: str = "markers", filter_cutoff: float | None = None,
+                filter_order: int = 2, dynamics: bool | None = None,
                 progress: Callable[[int, int], None] | None = None) -> Run:
-    """Solve a trial with one method and gather the per-frame statistics."""
+    """Solve a trial with one method, then (when the model has inertia, or ``dynamics``) its
+    inverse dynamics on the classical model driven by the solved angles."""
     if method not in METHODS:
         raise InputError(f"--method: expected one of {', '.join(METHODS)}, got {method!r}")
     labels = match_labels(model, trial, mapping or {})
@@ -107,7 +117,11 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
     time = trial.time
     if method == "ad":
         system = compile_system(model, angles="driver")
-        result = _solve_with_true_angles(system, trial, truth, tol, progress)
+        if ad_drivers == "truth":
+            result = _solve_with_true_angles(system, trial, truth, tol, progress)
+        else:
+            result = solve_baseline(model, time, inputs, cutoff=filter_cutoff,
+                                    order=filter_order, tol=tol, progress=progress)
     else:
         system = compile_system(model, angles="coordinate", track=True)
         by_label = dict(zip(model.marker_labels, np.moveaxis(inputs, 1, 0), strict=True))
@@ -122,9 +136,23 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
                            method=method, source=trial.path, progress=progress)
     which = [(tp.body, tp.point) for tp in model.tracked_points]
     points = np.array([system.point_positions(q, which) for q in result.q])
-    level = f"-P{perturb_level_m * 1e3:g}" if perturb_level_m > 0 else ""
+    warnings: list[str] = []
+    solved_dynamics = None
+    if dynamics is None and not model.has_inertia:
+        warnings.append(f"{model.source}: no mass and inertia on every body; inverse dynamics "
+                        "skipped")
+    elif dynamics is not False:
+        if len(result.failed_frames):
+            first = int(result.failed_frames[0])
+            raise InputError(f"{trial.path}: {len(result.failed_frames)} frames were not solved "
+                             f"(first: frame index {first}); inverse dynamics needs every frame "
+                             "(--no-dynamics keeps the kinematics)")
+        baseline = method == "ad" and ad_drivers == "markers"
+        solved_dynamics = classical_dynamics(
+            model, result, cutoff=None if baseline else filter_cutoff, order=filter_order,
+            loads=plate_loads(model, trial, warnings), tol=tol)
     return Run(
-        name=name or f"{method}{level}", result=result, labels=model.marker_labels,
+        name=name or run_name(method, ad_drivers, filter_cutoff, perturb_level_m), result=result, labels=model.marker_labels,
         rate=trial.rate, reference=reference, markers_input=inputs, model_points=points,
         ed=np.linalg.norm(points - reference, axis=2),
         ed_input=np.linalg.norm(points - inputs, axis=2),
@@ -133,7 +161,50 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
         perturb_seed=seed, tracking_weight=None if method == "nrm-ls" else tracking_weight,
         warm_start=warm_start, hessian=hessian if method != "ad" else "",
         form=",".join(sorted({b.form for b in model.bodies})),
-        model_text=model.text, trial_path=trial.path)
+        model_text=model.text, trial_path=trial.path,
+        ad_drivers=ad_drivers if method == "ad" else "", filter_cutoff=filter_cutoff,
+        dynamics=solved_dynamics, warnings=tuple(warnings))
+
+
+def run_name(method: str, ad_drivers: str, cutoff: float | None, level_m: float) -> str:
+    """The default run name: method, AD drivers, filter and perturbation, e.g. ad-f6Hz-P30."""
+    parts = [method]
+    if method == "ad" and ad_drivers == "truth":
+        parts.append("truth")
+    if cutoff is not None:
+        parts.append(f"f{cutoff:g}Hz")
+    if level_m > 0:
+        parts.append(f"P{level_m * 1e3:g}")
+    return "-".join(parts)
+
+
+def plate_loads(model: Model, trial: Trial, warnings: list[str]) -> list[ExternalLoad]:
+    """The force platforms the model assigns to its bodies, as external loads."""
+    if not model.force_plates:
+        return []
+    if not trial.path.lower().endswith(".c3d"):
+        raise InputError(f"{model.source}: loads.force_plates: expected a C3D trial with force "
+                         f"platforms, got {trial.path}")
+    from fccgrb_cli.io.forceplates import read_force_plates
+
+    plates = {p.number: p for p in read_force_plates(trial.path, trial.n_frames,
+                                                     model.plate_threshold)}
+    loads = []
+    for k, assignment in enumerate(model.force_plates):
+        plate = plates.get(assignment.plate)
+        key = f"loads.force_plates[{k}].plate"
+        if plate is None:
+            raise InputError(f"{model.source}: {key}: expected a plate of {trial.path} "
+                             f"(it has {len(plates)}), got {assignment.plate}")
+        if plate.problem is not None:
+            raise InputError(f"{trial.path}: FORCE_PLATFORM plate {plate.number}: expected "
+                             f"{plate.problem} (assigned by {model.source} {key})")
+        if not np.abs(plate.force).any():
+            warnings.append(f"{trial.path}: force plate {plate.number} carries no load above "
+                            f"{model.plate_threshold:g} N in any frame")
+        loads.append(ExternalLoad(f"plate{plate.number}", assignment.body, plate.force,
+                                  plate.cop, plate.free_moment))
+    return loads
 
 
 def _truth_for(trial: Trial, model: Model) -> Truth | None:
@@ -174,4 +245,6 @@ def summary(run: Run) -> dict[str, float | str | int]:
     if run.truth_theta is not None:
         err = np.abs(r.theta - run.truth_theta)[ok]
         row["max |dθ| deg"] = float(np.degrees(err.max())) if err.size else float("nan")
+    if run.dynamics is not None:
+        row["max |τ| N·m"] = float(np.abs(run.dynamics.inverse.joint_moments).max())
     return row

@@ -26,6 +26,7 @@ class InverseDynamics:
     ‖Φ_qᵀλ − (g − Mq̈)‖ (a least-squares fit that is not exact flags inconsistent data)."""
 
     angle_names: tuple[str, ...]
+    row_labels: tuple[str, ...]
     lam: np.ndarray
     joint_moments: np.ndarray
     kinetic: np.ndarray
@@ -65,6 +66,6 @@ def inverse_dynamics(system: System, q: np.ndarray, qd: np.ndarray, qdd: np.ndar
         kinetic[f] = 0.5 * xd @ M @ xd
         potential[f] = -g @ x
     return InverseDynamics(
-        angle_names=tuple(a.name for a in model.angles), lam=lam,
+        angle_names=tuple(a.name for a in model.angles), row_labels=system.labels, lam=lam,
         joint_moments=lam[:, driver_rows] * np.sin(theta), kinetic=kinetic, potential=potential,
         external_power=power, residual=residual)

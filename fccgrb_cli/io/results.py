@@ -17,6 +17,13 @@ Contract (SI units: m, rad, s):
       iterations, time_s, phi_norm, phi_top_max, converged   per frame
       ed, ed_input               frames × markers: distance of each model point to the
                                  reference marker and to the input marker, m
+    with inverse dynamics (attributes ``filter_cutoff_hz``, NaN when unfiltered):
+      joint_moments              frames × angles, N·m, conjugate to θ (τ_k = λ_k sin θ_k);
+                                 attribute ``names``
+      lambda                     frames × equations of the classical model; attribute ``labels``
+      classical/q, qd, qdd, theta, theta_d, theta_dd   the classical model driven by θ(t)
+      energy/kinetic, potential, external_power        J, J, W (a power-balance check)
+      loads/<name>/force, point, moment, body          external loads used (N, m, N·m)
 """
 
 from __future__ import annotations
@@ -93,3 +100,28 @@ def write_run(path: str | Path, run: Run, command: str) -> None:
                 g[key].attrs["names"] = list(r.angle_names)
             for key in ("model_points", "markers_input", "ed", "ed_input"):
                 g.create_dataset(key, data=getattr(run, key), compression="gzip")
+            if run.dynamics is not None:
+                _write_dynamics(g, run)
+
+
+def _write_dynamics(g, run: Run) -> None:
+    d = run.dynamics
+    inverse, kin = d.inverse, d.kinematics
+    g.attrs["filter_cutoff_hz"] = np.nan if d.cutoff is None else d.cutoff
+    g.create_dataset("joint_moments", data=inverse.joint_moments)
+    g["joint_moments"].attrs["names"] = list(inverse.angle_names)
+    g["joint_moments"].attrs["units"] = "N·m"
+    g.create_dataset("lambda", data=inverse.lam, compression="gzip")
+    g["lambda"].attrs["labels"] = list(inverse.row_labels)
+    classical = g.create_group("classical")
+    for key in ("q", "qd", "qdd", "theta", "theta_d", "theta_dd"):
+        classical.create_dataset(key, data=getattr(kin, key), compression="gzip")
+    energy = g.create_group("energy")
+    energy["kinetic"], energy["potential"] = inverse.kinetic, inverse.potential
+    energy["external_power"] = inverse.external_power
+    loads = g.create_group("loads")
+    for load in d.loads:
+        item = loads.create_group(load.name)
+        item.attrs["body"] = load.body
+        for key in ("force", "point", "moment"):
+            item.create_dataset(key, data=getattr(load, key), compression="gzip")

@@ -153,6 +153,14 @@ class TrackedVector:
 
 
 @dataclass(frozen=True)
+class PlateAssignment:
+    """Force platform ``plate`` (1-based, as numbered in the trial) acts on ``body``."""
+
+    plate: int
+    body: str
+
+
+@dataclass(frozen=True)
 class Model:
     """A validated multibody model. Build it with :func:`fccgrb_cli.model.load_model`."""
 
@@ -164,8 +172,14 @@ class Model:
     angles: tuple[AngularCoordinate, ...]
     tracked_points: tuple[TrackedPoint, ...] = ()
     tracked_vectors: tuple[TrackedVector, ...] = ()
+    force_plates: tuple[PlateAssignment, ...] = ()
+    plate_threshold: float = 20.0
     source: str = "<model>"
     text: str = ""
+
+    @property
+    def has_inertia(self) -> bool:
+        return all(b.inertia is not None for b in self.bodies)
 
     def body(self, name: str) -> Body:
         for body in self.bodies:
@@ -203,6 +217,7 @@ __all__ = [
     "Inertia",
     "Joint",
     "Model",
+    "PlateAssignment",
     "Point",
     "Pose",
     "TrackedPoint",

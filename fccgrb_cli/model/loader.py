@@ -25,6 +25,7 @@ from fccgrb_cli.model.elements import (
     Inertia,
     Joint,
     Model,
+    PlateAssignment,
     Point,
     Pose,
     TrackedPoint,
@@ -37,7 +38,8 @@ from fccgrb_cli.model.motion import Motion
 UNIT_TOL = 1e-6
 BODY_AXES = {"u": (1.0, 0.0, 0.0), "v": (0.0, 1.0, 0.0), "w": (0.0, 0.0, 1.0)}
 GROUND_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
-TOP_KEYS = {"name", "units", "gravity", "form", "ground", "bodies", "joints", "angles", "tracking"}
+TOP_KEYS = {"name", "units", "gravity", "form", "ground", "bodies", "joints", "angles", "tracking",
+            "loads"}
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
@@ -395,6 +397,29 @@ def _tracking(r: _Reader, doc: dict, names: _Names
     return tuple(points), tuple(vectors)
 
 
+def _loads(r: _Reader, doc: dict, names: _Names) -> tuple[tuple[PlateAssignment, ...], float]:
+    spec = r.mapping(doc.get("loads") or {}, "loads", allowed={"force_plates", "threshold"})
+    threshold = r.number(spec.get("threshold", 20.0), "loads.threshold")
+    if threshold < 0:
+        r.fail("loads.threshold", "a non-negative vertical force (N)", threshold)
+    plates, seen = [], set()
+    for k, item in enumerate(r.items(spec.get("force_plates"), "loads.force_plates")):
+        path = f"loads.force_plates[{k}]"
+        item = r.mapping(item, path, required=frozenset({"plate", "body"}),
+                         allowed={"plate", "body"})
+        plate = item["plate"]
+        if isinstance(plate, bool) or not isinstance(plate, int) or plate < 1:
+            r.fail(f"{path}.plate", "a plate number (1, 2, …) as in the trial", plate)
+        if plate in seen:
+            r.fail(f"{path}.plate", "a plate not assigned before", plate)
+        seen.add(plate)
+        body = names.body(r.string(item["body"], f"{path}.body"), f"{path}.body")
+        if body == GROUND:
+            r.fail(f"{path}.body", "a moving body", body)
+        plates.append(PlateAssignment(plate, body))
+    return tuple(plates), threshold
+
+
 def parse_model(text: str, source: str = "<model>") -> Model:
     """Validate a model given as YAML text; ``source`` names it in error messages."""
     try:
@@ -416,6 +441,7 @@ def parse_model(text: str, source: str = "<model>") -> Model:
     bodies = _bodies(r, doc)
     names = _Names(r, ground, bodies)
     tracked_points, tracked_vectors = _tracking(r, doc, names)
+    plates, threshold = _loads(r, doc, names)
     return Model(
         name=r.string(doc.get("name", Path(source).stem), "name"),
         gravity=gravity,
@@ -425,6 +451,8 @@ def parse_model(text: str, source: str = "<model>") -> Model:
         angles=_angles(r, doc, names, scale),
         tracked_points=tracked_points,
         tracked_vectors=tracked_vectors,
+        force_plates=plates,
+        plate_threshold=threshold,
         source=source,
         text=text,
     )
