@@ -172,8 +172,8 @@ def format_summary(row: dict) -> str:
               type=click.Path(dir_okay=False),
               help="HDF5 results file; an existing one gains (or replaces) this run.")
 @click.option("--name", default=None,
-              help="Run name inside the results file [default: the method, then -truth, -f<cutoff>Hz "
-                   "and -P<mm> where they apply, e.g. ad-f6Hz-P30].")
+              help="Run name inside the results file [default: the method, then -truth, "
+                   "-f<cutoff>Hz and -P<mm> where they apply, e.g. ad-f6Hz-P30].")
 @click.option("--tol", type=click.FloatRange(min=0, min_open=True), default=1e-10,
               show_default=True, help="Newton–Raphson tolerance on ‖Δq‖∞ (m and rad).")
 @click.option("--tracking-weight", type=click.FloatRange(min=0, min_open=True), default=1e-3,

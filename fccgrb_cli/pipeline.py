@@ -152,7 +152,8 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
             model, result, cutoff=None if baseline else filter_cutoff, order=filter_order,
             loads=plate_loads(model, trial, warnings), tol=tol)
     return Run(
-        name=name or run_name(method, ad_drivers, filter_cutoff, perturb_level_m), result=result, labels=model.marker_labels,
+        name=name or run_name(method, ad_drivers, filter_cutoff, perturb_level_m),
+        result=result, labels=model.marker_labels,
         rate=trial.rate, reference=reference, markers_input=inputs, model_points=points,
         ed=np.linalg.norm(points - reference, axis=2),
         ed_input=np.linalg.norm(points - inputs, axis=2),
