@@ -138,15 +138,18 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
     points = np.array([system.point_positions(q, which) for q in result.q])
     warnings: list[str] = []
     solved_dynamics = None
+    failed = len(result.failed_frames)
     if dynamics is None and not model.has_inertia:
         warnings.append(f"{model.source}: no mass and inertia on every body; inverse dynamics "
                         "skipped")
+    elif dynamics is None and failed:
+        warnings.append(f"{trial.path}: {failed} frames not solved (first: frame index "
+                        f"{int(result.failed_frames[0])}); inverse dynamics skipped")
     elif dynamics is not False:
-        if len(result.failed_frames):
-            first = int(result.failed_frames[0])
-            raise InputError(f"{trial.path}: {len(result.failed_frames)} frames were not solved "
-                             f"(first: frame index {first}); inverse dynamics needs every frame "
-                             "(--no-dynamics keeps the kinematics)")
+        if failed:
+            raise InputError(f"{trial.path}: {failed} frames were not solved (first: frame "
+                             f"index {int(result.failed_frames[0])}); inverse dynamics needs "
+                             "every frame")
         baseline = method == "ad" and ad_drivers == "markers"
         solved_dynamics = classical_dynamics(
             model, result, cutoff=None if baseline else filter_cutoff, order=filter_order,

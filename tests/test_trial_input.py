@@ -84,9 +84,10 @@ def solved(result: Result) -> None:
 
 
 def runs(path: Path) -> dict[str, dict[str, np.ndarray]]:
-    """Every run of a results file: name → {dataset: array}."""
+    """Every run of a results file: name → {dataset: array} (datasets at the run's top level)."""
     with h5py.File(path, "r") as h5:
-        return {name: {key: g[key][()] for key in g} for name, g in h5["runs"].items()}
+        return {name: {key: g[key][()] for key in g if isinstance(g[key], h5py.Dataset)}
+                for name, g in h5["runs"].items()}
 
 
 @dataclass(frozen=True)
