@@ -147,12 +147,31 @@ def format_summary(row: dict) -> str:
 @main.command()
 @click.argument("model")
 @click.argument("trial")
-@click.option("--method", type=click.Choice(["ad", "nrm-ls", "nrm-wls"]), default="nrm-wls",
-              show_default=True,
+@click.option("--method",
+              type=click.Choice(["ad", "nrm-ls", "nrm-wls", "cno-sqp", "cno-ip", "mo-tc",
+                                 "mo-ed"]), default="nrm-wls", show_default=True,
               help="ad: the classical kinematic analysis with angular drivers computed from the "
                    "markers (segment frames fitted, then the angles; see --filter-cutoff); "
                    "nrm-ls / nrm-wls: mixed coordinates by Newton–Raphson on least squares / "
-                   "weighted least squares.")
+                   "weighted least squares; cno-sqp / cno-ip: min of the tracking objective "
+                   "(--objective) subject to the topological equations, by SQP (SLSQP) or "
+                   "scipy's trust-constr; mo-tc / mo-ed: goal attainment over each tracking "
+                   "component / each point's Euclidean distance.")
+@click.option("--objective", type=click.Choice(["tc", "ed"]), default="tc", show_default=True,
+              help="CNO objective: weighted sum of squared tracking residuals (tc, m²) or of "
+                   "Euclidean distances (ed, m).")
+@click.option("--max-iter", type=click.IntRange(min=1), default=None,
+              help="Iteration cap per frame [default: 50 for NRM, 500 for the optimizers].")
+@click.option("--parallel", is_flag=True,
+              help="Optimizers only: solve frames independently over a process pool, every "
+                   "frame from the same initial guess (the paper's parallel mode).")
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="Processes for --parallel [default: the number of CPUs].")
+@click.option("--parallel-init", type=click.Choice(["same", "chunks", "nrm"]), default="same",
+              show_default=True,
+              help="With --parallel: every frame from the same guess (same), contiguous chunks "
+                   "solved sequentially within each worker (chunks), or NRM-WLS positions as "
+                   "each frame's guess (nrm).")
 @click.option("--ad-drivers", type=click.Choice(["markers", "truth"]), default="markers",
               show_default=True,
               help="With --method ad: angles from the markers, or the true angles of a trial "
@@ -206,7 +225,9 @@ def format_summary(row: dict) -> str:
               help="Report frames whose remaining markers cannot determine the model as "
                    "unsolved and go on, instead of stopping with an error.")
 @reports_input_errors
-def solve(model: str, trial: str, method: str, ad_drivers: str, filter_cutoff: float | None,
+def solve(model: str, trial: str, method: str, objective: str, max_iter: int | None,
+          parallel: bool, workers: int | None, parallel_init: str, ad_drivers: str,
+          filter_cutoff: float | None,
           filter_order: int, dynamics: bool | None, output: str, name: str | None, tol: float,
           tracking_weight: float, form: str, track: str | None, maps: tuple[str, ...],
           perturb_mm: float, perturb_markers: str | None, seed: int, warm_start: str,
@@ -240,7 +261,9 @@ def solve(model: str, trial: str, method: str, ad_drivers: str, filter_cutoff: f
                       seed=seed, tracking_weight=tracking_weight, warm_start=warm_start,
                       hessian=hessian, skip_unsolvable=skip_unsolvable, name=name,
                       ad_drivers=ad_drivers, filter_cutoff=filter_cutoff,
-                      filter_order=filter_order, dynamics=dynamics,
+                      filter_order=filter_order, dynamics=dynamics, objective=objective,
+                      max_iter=max_iter, parallel=parallel, workers=workers,
+                      parallel_init=parallel_init,
                       progress=Progress(f"solve {method}"))
     write_run(output, run, " ".join(["fccgrb", *sys.argv[1:]]))
     for message in (*run.result.messages, *run.warnings):

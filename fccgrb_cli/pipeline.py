@@ -18,9 +18,10 @@ from fccgrb_cli.perturb import perturb
 from fccgrb_cli.solvers import KinematicResult, solve_ad
 from fccgrb_cli.solvers.baseline import solve_baseline
 from fccgrb_cli.solvers.nrm import solve_nrm
+from fccgrb_cli.solvers.optimize import Settings, solve_optimization
 from fccgrb_cli.system import System, compile_system
 
-METHODS = ("ad", "nrm-ls", "nrm-wls")
+METHODS = ("ad", "nrm-ls", "nrm-wls", "cno-sqp", "cno-ip", "mo-tc", "mo-ed")
 
 
 @dataclass(frozen=True)
@@ -97,7 +98,9 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
                 tracking_weight: float = 1e-3, warm_start: str = "extrapolate",
                 hessian: str = "auto", skip_unsolvable: bool = False, name: str | None = None,
                 ad_drivers: str = "markers", filter_cutoff: float | None = None,
-                filter_order: int = 2, dynamics: bool | None = None,
+                filter_order: int = 2, dynamics: bool | None = None, objective: str = "tc",
+                max_iter: int | None = None, parallel: bool = False, workers: int | None = None,
+                parallel_init: str = "same",
                 progress: Callable[[int, int], None] | None = None) -> Run:
     """Solve a trial with one method, then (when the model has inertia, or ``dynamics``) its
     inverse dynamics on the classical model driven by the solved angles."""
@@ -125,15 +128,22 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
     else:
         system = compile_system(model, angles="coordinate", track=True)
         by_label = dict(zip(model.marker_labels, np.moveaxis(inputs, 1, 0), strict=True))
-        vectors = _vector_targets(model, trial, by_label)
-        targets = np.concatenate([inputs, vectors], axis=1)
-        result = solve_nrm(system, time, targets,
-                           tracking_weight=None if method == "nrm-ls" else tracking_weight,
-                           tol=tol, warm_start=warm_start, hessian=hessian,
-                           skip_unsolvable=skip_unsolvable,
-                           target_labels=model.marker_labels + tuple(
-                               tv.marker for tv in model.tracked_vectors),
-                           method=method, source=trial.path, progress=progress)
+        targets = np.concatenate([inputs, _vector_targets(model, trial, by_label)], axis=1)
+        if method.startswith("nrm"):
+            result = solve_nrm(
+                system, time, targets,
+                tracking_weight=None if method == "nrm-ls" else tracking_weight, tol=tol,
+                max_iter=max_iter or 50, warm_start=warm_start, hessian=hessian,
+                skip_unsolvable=skip_unsolvable,
+                target_labels=model.marker_labels + tuple(
+                    tv.marker for tv in model.tracked_vectors),
+                method=method, source=trial.path, progress=progress)
+        else:
+            settings = Settings(method, objective, tol, max_iter or 500)
+            result = solve_optimization(system, time, targets, settings, parallel=parallel,
+                                        workers=workers, init=parallel_init,
+                                        warm_start=warm_start, nrm_weight=tracking_weight,
+                                        progress=progress)
     which = [(tp.body, tp.point) for tp in model.tracked_points]
     points = np.array([system.point_positions(q, which) for q in result.q])
     warnings: list[str] = []
@@ -155,7 +165,7 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
             model, result, cutoff=None if baseline else filter_cutoff, order=filter_order,
             loads=plate_loads(model, trial, warnings), tol=tol)
     return Run(
-        name=name or run_name(method, ad_drivers, filter_cutoff, perturb_level_m),
+        name=name or run_name(result.method, ad_drivers, filter_cutoff, perturb_level_m),
         result=result, labels=model.marker_labels,
         rate=trial.rate, reference=reference, markers_input=inputs, model_points=points,
         ed=np.linalg.norm(points - reference, axis=2),
@@ -171,7 +181,8 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
 
 
 def run_name(method: str, ad_drivers: str, cutoff: float | None, level_m: float) -> str:
-    """The default run name: method, AD drivers, filter and perturbation, e.g. ad-f6Hz-P30."""
+    """The default run name: the method as the solver labels it (e.g. cno-sqp-ed-parallel), AD
+    drivers, filter and perturbation, e.g. ad-f6Hz-P30."""
     parts = [method]
     if method == "ad" and ad_drivers == "truth":
         parts.append("truth")
@@ -233,17 +244,27 @@ def _solve_with_true_angles(system: System, trial: Trial, truth: Truth | None, t
                     system.layout.pose_q(model), tol=tol, progress=progress)
 
 
+def mean_jump(points: np.ndarray) -> float:
+    """Mean frame-to-frame displacement of the model points (m): noise in a trajectory shows
+    as a larger jump than the motion itself needs (compare runs of the same trial)."""
+    if len(points) < 2:
+        return 0.0
+    return float(np.nanmean(np.linalg.norm(np.diff(points, axis=0), axis=2)))
+
+
 def summary(run: Run) -> dict[str, float | str | int]:
     """The one-row summary: method, ms/frame, iterations/frame, ‖Φ‖, topology, ED (mm)."""
     r = run.result
     ok = np.isfinite(run.ed).all(axis=1) & r.converged
+    per_frame = r.wall_s / r.n_frames if np.isfinite(r.wall_s) else float(np.mean(r.time_s))
     row: dict[str, float | str | int] = {
-        "run": run.name, "method": r.method, "ms/frame": 1e3 * float(np.mean(r.time_s)),
+        "run": run.name, "method": r.method, "ms/frame": 1e3 * per_frame,
         "iter/frame": float(np.mean(r.iterations)),
         "mean |Phi|": float(np.nanmean(r.phi_norm)),
         "max |Phi_top|": float(np.nanmax(r.phi_top_max)),
         "mean ED mm": 1e3 * float(np.nanmean(run.ed[ok])) if ok.any() else float("nan"),
         "max ED mm": 1e3 * float(np.nanmax(run.ed[ok])) if ok.any() else float("nan"),
+        "jump mm": 1e3 * mean_jump(run.model_points),
         "failed": int((~r.converged).sum()),
     }
     if run.truth_theta is not None:

@@ -38,16 +38,20 @@ def _blocks(signal: np.ndarray, n_frames: int) -> np.ndarray:
 
 
 def plausibility(corners: np.ndarray, force: np.ndarray) -> str | None:
-    """Why these corners and forces cannot be a force plate, or None."""
+    """What a force plate would have that these corners and forces lack ("expected …, got …"),
+    or None when they look like a plate."""
     if not np.isfinite(corners).all() or np.abs(corners).max() > 50.0:
-        return "corners that are not finite positions within 50 m of the origin"
+        return ("finite corners within 50 m of the origin, got coordinates up to "
+                f"{np.nanmax(np.abs(corners)):.3g} m")
     sides = np.linalg.norm(np.roll(corners, -1, axis=0) - corners, axis=1)
     if sides.min() < 0.1 or sides.max() > 3.0:
         return f"sides of 0.1–3 m, got {', '.join(f'{s:.3g}' for s in sides)} m"
-    if np.linalg.norm(corners[0] + corners[2] - corners[1] - corners[3]) > 0.05:
-        return "four corners forming a rectangle"
+    skew = np.linalg.norm(corners[0] + corners[2] - corners[1] - corners[3])
+    if skew > 0.05:
+        return f"four corners forming a rectangle, got diagonals {skew:.3g} m apart at the middle"
     if not np.isfinite(force).all() or np.abs(force).max() > 2e4:
-        return "finite forces below 20 kN (the calibration looks wrong)"
+        return (f"finite forces below 20 kN, got {np.nanmax(np.abs(force)):.3g} N (the "
+                "calibration looks wrong)")
     return None
 
 

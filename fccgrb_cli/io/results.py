@@ -9,7 +9,9 @@ Contract (SI units: m, rad, s):
   /truth/theta         frames × angles, rad (only for synthesized trials); attribute ``names``
   /runs/<name>/        attributes ``method``, ``tol``, ``perturb_level_m``, ``perturb_markers``,
                        ``perturb_seed``, ``tracking_weight`` (NaN for LS), ``warm_start``,
-                       ``hessian``, ``form``
+                       ``hessian``, ``form``, ``ad_drivers`` (AD runs), ``command``,
+                       ``filter_cutoff_hz`` (the angles' low-pass, NaN when unfiltered: the
+                       AD baseline's drivers, and the angles converted for the dynamics)
       q, qd, qdd                 frames × nq
       theta, theta_d, theta_dd   frames × angles; attribute ``names``
       model_points               frames × markers × 3, same marker order as /reference/markers
@@ -17,7 +19,7 @@ Contract (SI units: m, rad, s):
       iterations, time_s, phi_norm, phi_top_max, converged   per frame
       ed, ed_input               frames × markers: distance of each model point to the
                                  reference marker and to the input marker, m
-    with inverse dynamics (attributes ``filter_cutoff_hz``, NaN when unfiltered):
+    with inverse dynamics:
       joint_moments              frames × angles, N·m, conjugate to θ (τ_k = λ_k sin θ_k);
                                  attribute ``names``
       lambda                     frames × equations of the classical model; attribute ``labels``
@@ -91,6 +93,8 @@ def write_run(path: str | Path, run: Run, command: str) -> None:
                 "perturb_markers": list(run.perturb_markers), "perturb_seed": run.perturb_seed,
                 "tracking_weight": np.nan if run.tracking_weight is None else run.tracking_weight,
                 "warm_start": run.warm_start, "hessian": run.hessian, "form": run.form,
+                "ad_drivers": run.ad_drivers, "command": command,
+                "filter_cutoff_hz": np.nan if run.filter_cutoff is None else run.filter_cutoff,
             })
             for key in ("q", "qd", "qdd", "iterations", "time_s", "phi_norm", "phi_top_max",
                         "converged"):
@@ -107,7 +111,6 @@ def write_run(path: str | Path, run: Run, command: str) -> None:
 def _write_dynamics(g, run: Run) -> None:
     d = run.dynamics
     inverse, kin = d.inverse, d.kinematics
-    g.attrs["filter_cutoff_hz"] = np.nan if d.cutoff is None else d.cutoff
     g.create_dataset("joint_moments", data=inverse.joint_moments)
     g["joint_moments"].attrs["names"] = list(inverse.angle_names)
     g["joint_moments"].attrs["units"] = "N·m"

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field, replace
-from types import MappingProxyType
 from typing import Literal
 
 import numpy as np
@@ -67,8 +67,38 @@ class Inertia:
     tensor: tuple[Vec3, Vec3, Vec3]
 
 
-def _frozen(mapping: dict) -> MappingProxyType:
-    return MappingProxyType(dict(mapping))
+class FrozenMap(Mapping):
+    """A read-only mapping that pickles (a model travels to worker processes once each)."""
+
+    __slots__ = ("_items",)
+
+    def __init__(self, items: Mapping | None = None):
+        object.__setattr__(self, "_items", dict(items or {}))
+
+    def __getitem__(self, key):
+        return self._items[key]
+
+    def __iter__(self) -> Iterator:
+        return iter(self._items)
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def __setattr__(self, name, value):
+        raise AttributeError("FrozenMap is read-only")
+
+    def __getstate__(self) -> dict:
+        return self._items
+
+    def __setstate__(self, state: dict) -> None:
+        object.__setattr__(self, "_items", state)
+
+    def __repr__(self) -> str:
+        return f"FrozenMap({self._items!r})"
+
+
+def _frozen(mapping: Mapping) -> FrozenMap:
+    return FrozenMap(mapping)
 
 
 @dataclass(frozen=True)
@@ -77,8 +107,8 @@ class Body:
 
     name: str
     form: Form
-    points: MappingProxyType
-    vectors: MappingProxyType
+    points: FrozenMap
+    vectors: FrozenMap
     pose: Pose = field(default_factory=Pose)
     inertia: Inertia | None = None
 
@@ -91,8 +121,8 @@ class Body:
 class Ground:
     """The fixed frame: named points (m) and unit vectors in global coordinates."""
 
-    points: MappingProxyType
-    vectors: MappingProxyType
+    points: FrozenMap
+    vectors: FrozenMap
 
 
 @dataclass(frozen=True)
@@ -213,6 +243,7 @@ __all__ = [
     "AngularCoordinate",
     "Body",
     "Form",
+    "FrozenMap",
     "Ground",
     "Inertia",
     "Joint",

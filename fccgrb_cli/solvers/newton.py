@@ -21,9 +21,13 @@ class Iterate:
 
 
 def linear_solve(J: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """J x = rhs: LU for a square J, least squares with minimum norm for a redundant one."""
+    """J x = rhs: LU for a square J, least squares with minimum norm for a redundant (or, at a
+    singular configuration, rank-deficient) one."""
     if J.shape[0] == J.shape[1]:
-        return np.linalg.solve(J, rhs)
+        try:
+            return np.linalg.solve(J, rhs)
+        except np.linalg.LinAlgError:
+            pass
     return np.linalg.lstsq(J, rhs, rcond=None)[0]
 
 

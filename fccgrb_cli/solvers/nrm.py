@@ -59,7 +59,7 @@ def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray, *,
     """Solve every frame; ``targets`` is (frames × n_targets × 3), metres, NaN in gaps."""
     if not system.mixed or not system.n_targets:
         raise ValueError("solve_nrm needs angles='coordinate' and track=True")
-    n, nq, n_body = len(time), system.nq, system.layout.n_body_q
+    n, nq = len(time), system.nq
     base_w = row_weights(system, tracking_weight)
     trk0 = 3 * len(system.lin_a)
     top = system.masks()["topology"]
@@ -114,17 +114,29 @@ def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray, *,
         phi_top[f] = np.abs(phi[top]).max()
         if progress is not None:
             progress(f + 1, n)
+    return mixed_result(system, time, q_all, iterations=iterations, seconds=seconds,
+                        phi_norm=phi_norm, phi_top=phi_top, converged=converged,
+                        messages=messages, tol=tol,
+                        method=method or ("nrm-ls" if tracking_weight is None else "nrm-wls"))
+
+
+def mixed_result(system: System, time: np.ndarray, q_all: np.ndarray, *, iterations: np.ndarray,
+                 seconds: np.ndarray, phi_norm: np.ndarray, phi_top: np.ndarray,
+                 converged: np.ndarray, messages: list[str], tol: float, method: str,
+                 wall_s: float = float("nan")) -> KinematicResult:
+    """The result of any mixed-coordinate method: θ from q, θ̇ and θ̈ by central differences,
+    consistent q̇ and q̈, and warnings for angles near 0 or π."""
+    n_body = system.layout.n_body_q
     theta = q_all[:, n_body:]
-    dt = float(time[1] - time[0]) if n > 1 else 1.0
+    dt = float(time[1] - time[0]) if len(time) > 1 else 1.0
     theta_d, theta_dd = central_derivatives(theta, dt)
     qd, qdd = consistent_rates(system, q_all, theta_d, theta_dd)
-    messages += near_singular(theta, system.layout.angle_names, time)
     return KinematicResult(
-        method=method or ("nrm-ls" if tracking_weight is None else "nrm-wls"), tol=tol,
-        time=np.asarray(time, dtype=float), q=q_all, qd=qd, qdd=qdd, theta=theta,
-        theta_d=theta_d, theta_dd=theta_dd, angle_names=system.layout.angle_names,
+        method=method, tol=tol, time=np.asarray(time, dtype=float), q=q_all, qd=qd, qdd=qdd,
+        theta=theta, theta_d=theta_d, theta_dd=theta_dd, angle_names=system.layout.angle_names,
         iterations=iterations, time_s=seconds, phi_norm=phi_norm, phi_top_max=phi_top,
-        converged=converged, messages=tuple(messages))
+        converged=converged, messages=tuple(messages + near_singular(
+            theta, system.layout.angle_names, time)), wall_s=wall_s)
 
 
 def near_singular(theta: np.ndarray, names: tuple[str, ...], time: np.ndarray) -> list[str]:

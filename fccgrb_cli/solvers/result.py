@@ -13,7 +13,8 @@ class KinematicResult:
 
     q, qd, qdd: (frames × nq) system coordinates and their rates (SI); theta, theta_d, theta_dd:
     (frames × n_angles) the angular coordinates (solved MC coordinates, or the AR drivers);
-    iterations, time_s, phi_norm (‖Φ‖), phi_top_max (max |topological Φ|), converged: per frame.
+    iterations, time_s, phi_norm (‖Φ‖), phi_top_max (max |topological Φ|), converged: per frame;
+    wall_s: the whole solve's wall-clock time when frames ran in parallel (else NaN).
     """
 
     method: str
@@ -32,6 +33,7 @@ class KinematicResult:
     phi_top_max: np.ndarray
     converged: np.ndarray
     messages: tuple[str, ...] = field(default=())
+    wall_s: float = float("nan")
 
     @property
     def n_frames(self) -> int:

@@ -1,0 +1,174 @@
+"""Frames through the optimization methods, sequentially or over a process pool.
+
+Sequential: each frame starts from the previous solution (extrapolated, or as it is), the first
+from the rigid-fit initializer. Parallel (the paper's §4.2): every frame is solved independently
+from the same initial guess, which the paper found noisy; two remedies are offered: contiguous
+chunks solved sequentially within each worker ('chunks'), or NRM-WLS positions as each frame's
+initial guess ('nrm'). The compiled system reaches each worker once, at its start.
+"""
+
+from __future__ import annotations
+
+import os
+import time as clock
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from itertools import pairwise
+
+import numpy as np
+
+from fccgrb_cli.solvers.cno import solve_cno_frame
+from fccgrb_cli.solvers.frame_problem import FrameProblem
+from fccgrb_cli.solvers.goal import solve_goal_frame
+from fccgrb_cli.solvers.initial import initial_guess
+from fccgrb_cli.solvers.nrm import mixed_result, predict, solve_nrm
+from fccgrb_cli.solvers.result import KinematicResult
+from fccgrb_cli.system import System
+
+METHODS = ("cno-sqp", "cno-ip", "mo-tc", "mo-ed")
+PARALLEL_INITS = ("same", "chunks", "nrm")
+
+
+@dataclass(frozen=True)
+class Settings:
+    """An optimization method: ``method`` (one of METHODS), CNO ``objective`` ('tc' or 'ed'),
+    tolerance and iteration cap per frame."""
+
+    method: str
+    objective: str = "tc"
+    tol: float = 1e-10
+    max_iter: int = 500
+
+
+@dataclass(frozen=True)
+class FrameRecord:
+    q: np.ndarray
+    iterations: int
+    converged: bool
+    message: str
+    seconds: float
+    phi_norm: float
+    phi_top: float
+
+
+def solve_frame(system: System, settings: Settings, q0: np.ndarray, y: np.ndarray) -> FrameRecord:
+    """One frame with the chosen optimizer, timed, with its statistics."""
+    started = clock.perf_counter()
+    problem = FrameProblem(system, y)
+    if settings.method.startswith("cno"):
+        out = solve_cno_frame(problem, q0, algorithm=settings.method[4:],
+                              objective=settings.objective, tol=settings.tol,
+                              max_iter=settings.max_iter)
+    else:
+        out = solve_goal_frame(problem, q0, objective=settings.method[3:], tol=settings.tol,
+                               max_iter=settings.max_iter)
+    seconds = clock.perf_counter() - started
+    phi_norm, phi_top = problem.statistics(out.q)
+    return FrameRecord(out.q, out.iterations, out.converged, out.message, seconds, phi_norm,
+                       phi_top)
+
+
+def _run_frames(system: System, settings: Settings, targets: np.ndarray, frames: list[int],
+                guesses: list[np.ndarray], chained: bool, warm_start: str) -> list[FrameRecord]:
+    """Frames in order; ``chained``: each starts from the previous solution (the first from its
+    own guess), else each from its own guess."""
+    out: list[FrameRecord] = []
+    history: list[np.ndarray] = []
+    for f, guess in zip(frames, guesses, strict=True):
+        q0 = predict(history, warm_start) if (chained and history) else guess
+        record = solve_frame(system, settings, q0, targets[f])
+        out.append(record)
+        history = [*history[-2:], record.q] if record.converged else []
+    return out
+
+
+_WORKER: dict = {}
+
+
+def _install(system: System, targets: np.ndarray, settings: Settings, warm_start: str) -> None:
+    _WORKER.update(system=system, targets=targets, settings=settings, warm_start=warm_start)
+
+
+def _work(frames: list[int], guesses: list[np.ndarray], chained: bool) -> list[FrameRecord]:
+    w = _WORKER
+    return _run_frames(w["system"], w["settings"], w["targets"], frames, guesses, chained,
+                       w["warm_start"])
+
+
+def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
+                       settings: Settings, *, parallel: bool = False, workers: int | None = None,
+                       init: str = "same", warm_start: str = "extrapolate",
+                       nrm_weight: float = 1e-3,
+                       progress: Callable[[int, int], None] | None = None) -> KinematicResult:
+    """Every frame (targets: frames × n_targets × 3, m, NaN in gaps) with one optimizer."""
+    if settings.method not in METHODS:
+        raise ValueError(f"unknown optimization method {settings.method!r}")
+    n = len(time)
+    started = clock.perf_counter()
+    first = initial_guess(system, targets[0])
+    label = settings.method + ("-ed" if settings.method.startswith("cno")
+                               and settings.objective == "ed" else "")
+    if not parallel:
+        records: list[FrameRecord] = []
+        history: list[np.ndarray] = []
+        for f in range(n):
+            q0 = predict(history, warm_start) if history else (
+                first if f == 0 else initial_guess(system, targets[f]))
+            record = solve_frame(system, settings, q0, targets[f])
+            records.append(record)
+            history = [*history[-2:], record.q] if record.converged else []
+            if progress is not None:
+                progress(f + 1, n)
+        wall = float("nan")
+    else:
+        records = _parallel(system, time, targets, settings, workers or os.cpu_count() or 1,
+                            init, warm_start, nrm_weight, first, progress)
+        wall = clock.perf_counter() - started
+        label += "-parallel" + ("" if init == "same" else f"-{init}")
+    messages = [f"frame index {f} (t = {time[f]:.3f} s): {r.message}"
+                for f, r in enumerate(records) if not r.converged]
+    return mixed_result(
+        system, time, np.array([r.q for r in records]),
+        iterations=np.array([r.iterations for r in records]),
+        seconds=np.array([r.seconds for r in records]),
+        phi_norm=np.array([r.phi_norm for r in records]),
+        phi_top=np.array([r.phi_top for r in records]),
+        converged=np.array([r.converged for r in records]), messages=messages,
+        tol=settings.tol, method=label, wall_s=wall)
+
+
+def _parallel(system: System, time: np.ndarray, targets: np.ndarray, settings: Settings,
+              workers: int, init: str, warm_start: str, nrm_weight: float, first: np.ndarray,
+              progress: Callable[[int, int], None] | None) -> list[FrameRecord]:
+    if init not in PARALLEL_INITS:
+        raise ValueError(f"unknown parallel initialization {init!r}")
+    n = len(time)
+    if init == "nrm":
+        guesses = list(solve_nrm(system, time, targets, tracking_weight=nrm_weight,
+                                 tol=settings.tol).q)
+    else:
+        guesses = [first] * n
+    pieces = workers if init == "chunks" else max(1, min(n, 4 * workers))
+    bounds = np.linspace(0, n, pieces + 1).round().astype(int)
+    tasks = []
+    for a, b in pairwise(bounds):
+        frames = list(range(a, b))
+        if not frames:
+            continue
+        chunk_guesses = [guesses[f] for f in frames]
+        if init == "chunks":
+            chunk_guesses[0] = initial_guess(system, targets[a])
+        tasks.append((frames, chunk_guesses, init == "chunks"))
+    records: list[FrameRecord | None] = [None] * n
+    done = 0
+    with ProcessPoolExecutor(max_workers=workers, initializer=_install,
+                             initargs=(system, targets, settings, warm_start)) as pool:
+        futures = [(task[0], pool.submit(_work, *task)) for task in tasks]
+        for frames, future in futures:
+            for f, record in zip(frames, future.result(), strict=True):
+                records[f] = record
+            done += len(frames)
+            if progress is not None:
+                progress(done, n)
+    return records
