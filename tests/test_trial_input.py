@@ -42,7 +42,7 @@ FCCGRB = shutil.which("fccgrb")
 GAP_FRAME = 50  # 0-based frame index, t = 0.500 s at 100 Hz
 B5_MARKERS = ("P6",)  # the tracked marker on five-bar body B5 (P5 is tracked on B4)
 SUMMARY_COLUMNS = ("method", "ms/frame", "iter/frame", "mean |Phi|", "max |Phi_top|",
-                   "mean ED mm", "max ED mm", "failed")
+                   "mean ED mm", "max ED mm", "jump mm", "failed")
 
 
 # ---- helpers ------------------------------------------------------------------------------
