@@ -13,6 +13,7 @@ import numpy as np
 from fccgrb_cli.system import Drive, System
 
 ED_SMOOTHING = 1e-6
+ANGLE_MARGIN = np.radians(2.0)
 
 
 class FrameProblem:
@@ -96,12 +97,14 @@ class FrameProblem:
         return float(np.linalg.norm(phi[keep])), float(np.abs(phi[self.top]).max())
 
     def bounds(self) -> list[tuple[float | None, float | None]]:
-        """Unit-vector components in [−1.1, 1.1], angles in [0, π], positions free. The 0.1
+        """Unit-vector components in [−1.1, 1.1], angles in [2°, 178°], positions free. The 0.1
         margin keeps a frame aligned with the axes (a component of exactly ±1) off the bound,
-        where SLSQP would treat it as active and take several times more iterations."""
+        where SLSQP would treat it as active and take several times more iterations; the angles
+        stay where s1·s2 = cos θ is invertible (at 0 and π the MCR rows are singular, and
+        goal attainment, whose optimum is flat, wandered there on noisy frames)."""
         layout = self.system.layout
         out: list[tuple[float | None, float | None]] = []
         for form in layout.forms:
             out += [(None, None)] * 3 + [(-1.1, 1.1)] * (9 if form == "full" else 6)
-        out += [(0.0, np.pi)] * len(layout.angle_names)
+        out += [(ANGLE_MARGIN, np.pi - ANGLE_MARGIN)] * len(layout.angle_names)
         return out

@@ -20,9 +20,10 @@ import numpy as np
 
 from fccgrb_cli.solvers.cno import solve_cno_frame
 from fccgrb_cli.solvers.frame_problem import FrameProblem
-from fccgrb_cli.solvers.goal import solve_goal_frame
+from fccgrb_cli.solvers.goal import FrameOutcome, solve_goal_frame
 from fccgrb_cli.solvers.initial import initial_guess
-from fccgrb_cli.solvers.nrm import mixed_result, predict, solve_nrm
+from fccgrb_cli.solvers.newton import gauss_newton
+from fccgrb_cli.solvers.nrm import mixed_result, predict, row_weights, solve_nrm
 from fccgrb_cli.solvers.result import KinematicResult
 from fccgrb_cli.system import System
 
@@ -52,17 +53,30 @@ class FrameRecord:
     phi_top: float
 
 
+def _optimize(problem: FrameProblem, settings: Settings, q0: np.ndarray) -> FrameOutcome:
+    if settings.method.startswith("cno"):
+        return solve_cno_frame(problem, q0, algorithm=settings.method[4:],
+                               objective=settings.objective, tol=settings.tol,
+                               max_iter=settings.max_iter)
+    return solve_goal_frame(problem, q0, objective=settings.method[3:], tol=settings.tol,
+                            max_iter=settings.max_iter)
+
+
 def solve_frame(system: System, settings: Settings, q0: np.ndarray, y: np.ndarray) -> FrameRecord:
-    """One frame with the chosen optimizer, timed, with its statistics."""
+    """One frame with the chosen optimizer, timed, with its statistics. A frame the optimizer
+    fails from q0 is retried once from that frame's NRM-WLS solution (goal attainment's optimum
+    is flat where markers are noisy, and SLSQP can wander off it); both tries are counted."""
     started = clock.perf_counter()
     problem = FrameProblem(system, y)
-    if settings.method.startswith("cno"):
-        out = solve_cno_frame(problem, q0, algorithm=settings.method[4:],
-                              objective=settings.objective, tol=settings.tol,
-                              max_iter=settings.max_iter)
-    else:
-        out = solve_goal_frame(problem, q0, objective=settings.method[3:], tol=settings.tol,
-                               max_iter=settings.max_iter)
+    out = _optimize(problem, settings, q0)
+    if not out.converged:
+        weights = row_weights(system, 1e-3)
+        weights[np.flatnonzero(system.masks()["tracking"])] *= problem.active
+        start = gauss_newton(system, q0, problem.drive, weights, settings.tol, 50, "auto")
+        retry = _optimize(problem, settings, start.q)
+        out = FrameOutcome(retry.q, out.iterations + start.iterations + retry.iterations,
+                           retry.converged,
+                           f"{out.message}; retried from the NRM-WLS solution: {retry.message}")
     seconds = clock.perf_counter() - started
     phi_norm, phi_top = problem.statistics(out.q)
     return FrameRecord(out.q, out.iterations, out.converged, out.message, seconds, phi_norm,
