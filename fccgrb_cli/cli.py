@@ -313,3 +313,109 @@ def perturb_command(source: str, target: str, level_mm: float, markers: str | No
         shutil.copyfile(sidecar, truth_path(target))
     click.echo(f"wrote {target}: {len(only) or len(data.labels)} of {len(data.labels)} markers "
                f"perturbed at {level_mm:g} mm (seed {seed})")
+
+
+@main.command()
+@click.argument("config")
+@click.option("-o", "--output", default=None, type=click.Path(dir_okay=False),
+              help="Sweep results (HDF5) [default: the config's name + .h5 in the current "
+                   "folder]. Finished cells are kept in OUTPUT.cells/ so a rerun does only "
+                   "the missing ones.")
+@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Processes running cells at once (cells in parallel mode run alone).")
+@click.option("--scheduler", default=None, metavar="ADDRESS",
+              help="Run the cells on an existing Dask cluster (e.g. tcp://host:8786) through "
+                   "dask.distributed's executor; needs the 'cluster' extra.")
+@click.option("--fresh", is_flag=True, help="Forget finished cells and run every cell again.")
+@click.option("--format", "fmt", type=click.Choice(["text", "csv", "markdown"]), default="text",
+              show_default=True, help="Format of the tables printed at the end.")
+@reports_input_errors
+def sweep(config: str, output: str | None, workers: int, scheduler: str | None, fresh: bool,
+          fmt: str) -> None:
+    """Run a grid of solves (models, trials, methods, tolerances, perturbation levels, seeds,
+    tracked-point variants, sequential/parallel) from CONFIG (YAML; see configs/sweeps/), and
+    print tables laid out like the paper's Tables 1 and 2 with the paper's figures beside ours."""
+    import time
+
+    from fccgrb_cli.report import collect, render
+    from fccgrb_cli.sweep import load_sweep, remove_cells, run_sweep
+
+    spec = load_sweep(config)
+    out = Path(output or f"{spec.name}.h5")
+    if fresh:
+        remove_cells(out)
+    started = time.perf_counter()
+
+    def progress(text: str) -> None:
+        click.echo(f"sweep: {text}", err=True)
+
+    if scheduler is not None:
+        try:
+            from dask.distributed import Client
+        except ImportError:
+            raise InputError("--scheduler: expected dask.distributed; install the 'cluster' "
+                             "extra (pip install 'fccgrb-cli[cluster]')") from None
+        try:
+            client = Client(scheduler, timeout=10)
+        except OSError as exc:
+            raise InputError(f"--scheduler: cannot reach {scheduler} ({exc})") from None
+        with client:
+            ran, kept = run_sweep(spec, out, executor=client.get_executor(), progress=progress)
+    else:
+        ran, kept = run_sweep(spec, out, workers=workers, progress=progress)
+    click.echo(render(*collect(out), fmt=fmt))
+    click.echo(f"wrote {out}: {ran} cells run, {kept} already done "
+               f"({time.perf_counter() - started:.0f} s)")
+
+
+@main.command()
+@click.argument("results")
+@click.option("--format", "fmt", type=click.Choice(["text", "csv", "markdown"]), default="text",
+              show_default=True, help="text (aligned columns), csv (one value per line) or "
+                                      "markdown (pipe tables).")
+@click.option("--table", default=None,
+              help="Compare with this table of the paper (table1, table2) [default: the "
+                   "sweep's own, none for a solve's results].")
+@reports_input_errors
+def report(results: str, fmt: str, table: str | None) -> None:
+    """Print the tables of a results or sweep file: per method / variant / tracked points /
+    tolerance, the ms/frame, iterations, mean ‖Φ‖, max topological Φ, ED (mm), jump (mm) and
+    failed frames at P0, P7.5 and P30, the paper's figures in brackets where they match."""
+    from fccgrb_cli.report import collect, render
+
+    own, rows = collect(results)
+    click.echo(render(table if table is not None else own, rows, fmt=fmt), nl=False)
+
+
+@main.command()
+@click.argument("results")
+@click.option("--kind", type=click.Choice(["point", "ed", "angle", "velocity"]), default="point",
+              show_default=True,
+              help="point: x, y, z of a marker's model point against the reference (m); ed: its "
+                   "Euclidean distance to the reference over time (mm); angle: a joint angle "
+                   "against the truth (deg); velocity: a component of the point's velocity "
+                   "(m/s, central differences).")
+@click.option("--marker", default=None, help="Model marker name [default: the last tracked].")
+@click.option("--angle", default=None, help="Angle name for --kind angle [default: the first].")
+@click.option("--axis", type=click.Choice(["x", "y", "z"]), default="x", show_default=True,
+              help="Velocity component for --kind velocity.")
+@click.option("--runs", default=None, metavar="NAMES",
+              help="Comma-separated run names (results file) or cell-key prefixes (sweep file) "
+                   "[default: all].")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="Figure file, .png or .pdf.")
+@reports_input_errors
+def plot(results: str, kind: str, marker: str | None, angle: str | None, axis: str,
+         runs: str | None, output: str) -> None:
+    """Draw one of the paper's figure kinds from a results or sweep file (needs the 'plots'
+    extra: pip install 'fccgrb-cli[plots]')."""
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        raise InputError("plot: expected matplotlib; install the 'plots' extra "
+                         "(pip install 'fccgrb-cli[plots]')") from None
+    from fccgrb_cli.plot import draw, load_series, save
+
+    series = load_series(Path(results), _split(runs))
+    save(draw(series, kind, marker, angle, axis), output)
+    click.echo(f"wrote {output}: {kind} for {len(series)} runs")

@@ -100,7 +100,7 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
                 ad_drivers: str = "markers", filter_cutoff: float | None = None,
                 filter_order: int = 2, dynamics: bool | None = None, objective: str = "tc",
                 max_iter: int | None = None, parallel: bool = False, workers: int | None = None,
-                parallel_init: str = "same",
+                parallel_init: str = "same", truth: Truth | None = None,
                 progress: Callable[[int, int], None] | None = None) -> Run:
     """Solve a trial with one method, then (when the model has inertia, or ``dynamics``) its
     inverse dynamics on the classical model driven by the solved angles."""
@@ -112,9 +112,12 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
         raise InputError(f"--perturb-markers: expected marker names of the model "
                          f"({', '.join(model.marker_labels)}), got {', '.join(unknown)}")
     measured = trial.select(labels)
-    truth = _truth_for(trial, model)
-    reference = truth.markers if truth is not None and truth.markers.shape == measured.shape \
-        else measured
+    truth = _truth_for(trial, model) if truth is None else truth
+    reference = measured
+    if truth is not None:
+        index = {label: k for k, label in enumerate(truth.labels)}
+        if all(label in index for label in labels) and len(truth.time) == trial.n_frames:
+            reference = truth.markers[:, [index[label] for label in labels]]
     inputs = perturb(measured, model.marker_labels, trial.rate, perturb_level_m, seed,
                      only=perturb_markers or None)
     time = trial.time
@@ -165,7 +168,8 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
             model, result, cutoff=None if baseline else filter_cutoff, order=filter_order,
             loads=plate_loads(model, trial, warnings), tol=tol)
     return Run(
-        name=name or run_name(result.method, ad_drivers, filter_cutoff, perturb_level_m),
+        name=name or run_name(result.method, ad_drivers, filter_cutoff, perturb_level_m,
+                              perturb_markers),
         result=result, labels=model.marker_labels,
         rate=trial.rate, reference=reference, markers_input=inputs, model_points=points,
         ed=np.linalg.norm(points - reference, axis=2),
@@ -180,9 +184,10 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
         dynamics=solved_dynamics, warnings=tuple(warnings))
 
 
-def run_name(method: str, ad_drivers: str, cutoff: float | None, level_m: float) -> str:
+def run_name(method: str, ad_drivers: str, cutoff: float | None, level_m: float,
+             subset: tuple[str, ...] = ()) -> str:
     """The default run name: the method as the solver labels it (e.g. cno-sqp-ed-parallel), AD
-    drivers, filter and perturbation, e.g. ad-f6Hz-P30."""
+    drivers, filter, perturbation and the perturbed subset, e.g. ad-f6Hz-P30-P4+P9."""
     parts = [method]
     if method == "ad" and ad_drivers == "truth":
         parts.append("truth")
@@ -190,6 +195,8 @@ def run_name(method: str, ad_drivers: str, cutoff: float | None, level_m: float)
         parts.append(f"f{cutoff:g}Hz")
     if level_m > 0:
         parts.append(f"P{level_m * 1e3:g}")
+        if subset:
+            parts.append("+".join(subset))
     return "-".join(parts)
 
 

@@ -256,8 +256,8 @@ def test_cli_perturbation_attributes(tmp_path):
     invoke(["solve", model_file, str(c3d), "--perturb", "7.5", "--perturb-markers", "P3",
             "--seed", "4", "-o", str(h5)])
     with h5py.File(h5, "r") as f:
-        assert set(f["runs"]) == {"nrm-ls", "nrm-wls-P7.5"}
-        g = f["runs/nrm-wls-P7.5"]
+        assert set(f["runs"]) == {"nrm-ls", "nrm-wls-P7.5-P3"}
+        g = f["runs/nrm-wls-P7.5-P3"]
         assert float(g.attrs["perturb_level_m"]) == 0.0075
         assert [str(x) for x in g.attrs["perturb_markers"]] == ["P3"]
         assert int(g.attrs["perturb_seed"]) == 4

@@ -10,6 +10,7 @@ Contract (SI units: m, rad, s):
   /runs/<name>/        attributes ``method``, ``tol``, ``perturb_level_m``, ``perturb_markers``,
                        ``perturb_seed``, ``tracking_weight`` (NaN for LS), ``warm_start``,
                        ``hessian``, ``form``, ``ad_drivers`` (AD runs), ``command``,
+                       ``wall_s`` (the solve's wall-clock time in parallel mode, else NaN),
                        ``filter_cutoff_hz`` (the angles' low-pass, NaN when unfiltered: the
                        AD baseline's drivers, and the angles converted for the dynamics)
       q, qd, qdd                 frames × nq
@@ -53,8 +54,9 @@ def _versions() -> dict[str, str]:
     return out
 
 
-def write_run(path: str | Path, run: Run, command: str) -> None:
-    """Add (or replace) one run in the results file, creating it when absent."""
+def write_run(path: str | Path, run: Run, command: str, cell: dict | None = None) -> None:
+    """Add (or replace) one run in the results file, creating it when absent; ``cell`` (a sweep
+    cell's parameters) is kept as the root attribute ``cell`` (JSON)."""
     import h5py
 
     path = Path(path)
@@ -72,6 +74,8 @@ def write_run(path: str | Path, run: Run, command: str) -> None:
             h5.attrs["command"] = command
             h5.attrs["versions"] = json.dumps(_versions())
             h5.attrs["trial"] = run.trial_path
+            if cell is not None:
+                h5.attrs["cell"] = json.dumps(cell, sort_keys=True, default=str)
             if "reference" in h5:
                 del h5["reference"]
             ref = h5.create_group("reference")
@@ -93,7 +97,7 @@ def write_run(path: str | Path, run: Run, command: str) -> None:
                 "perturb_markers": list(run.perturb_markers), "perturb_seed": run.perturb_seed,
                 "tracking_weight": np.nan if run.tracking_weight is None else run.tracking_weight,
                 "warm_start": run.warm_start, "hessian": run.hessian, "form": run.form,
-                "ad_drivers": run.ad_drivers, "command": command,
+                "ad_drivers": run.ad_drivers, "command": command, "wall_s": r.wall_s,
                 "filter_cutoff_hz": np.nan if run.filter_cutoff is None else run.filter_cutoff,
             })
             for key in ("q", "qd", "qdd", "iterations", "time_s", "phi_norm", "phi_top_max",

@@ -1,0 +1,262 @@
+"""Batch sweeps: a grid of solves over models, trials, methods, tolerances, perturbation levels
+and seeds, tracked-point variants and sequential/parallel — resumable and safe.
+
+A sweep config (YAML) names a model, a trial (synthesized or a file) and ``cells``: a list of
+grids, each expanding to every combination of its list-valued keys. Each finished cell is
+written atomically to its own file in ``OUTPUT.cells/`` (a killed sweep leaves the finished
+cells intact; a rerun skips them), then all cells are merged into OUTPUT, also atomically.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import shutil
+import time as clock
+from collections.abc import Callable, Iterator
+from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from fccgrb_cli.errors import InputError
+from fccgrb_cli.io.atomic import atomic_path
+
+CELL_KEYS = {"method", "tol", "level", "perturb_markers", "seed", "points", "parallel",
+             "parallel_init", "workers", "objective", "form", "ad_drivers", "filter_cutoff",
+             "tracking_weight", "warm_start", "hessian", "dynamics"}
+TOP_KEYS = {"name", "table", "model", "trial", "seed", "variants", "cells"}
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One solve of the sweep: every parameter fixed."""
+
+    params: tuple[tuple[str, Any], ...]
+
+    def get(self, key: str, default: Any = None) -> Any:
+        return dict(self.params).get(key, default)
+
+    @property
+    def key(self) -> str:
+        """A stable identifier: method, variant, points, tolerance, level, seed, hash."""
+        p = dict(self.params)
+        text = json.dumps(p, sort_keys=True, default=str)
+        digest = hashlib.sha1(text.encode()).hexdigest()[:8]
+        mode = "par" + ("" if p.get("parallel_init", "same") == "same" else
+                        f"-{p['parallel_init']}") if p.get("parallel") else "seq"
+        return (f"{p['method']}_{p.get('objective', 'tc')}_pts{p.get('points', 'all')}_"
+                f"tol{p['tol']:g}_P{p.get('level', 0):g}_{mode}_s{p.get('seed', 0)}_{digest}")
+
+
+@dataclass(frozen=True)
+class Sweep:
+    name: str
+    table: str
+    source: Path
+    model: Path
+    trial: dict
+    variants: dict
+    cells: tuple[Cell, ...]
+
+
+def _fail(source: Path, path: str, expected: str, got: Any = None) -> None:
+    raise InputError(f"{source}: {path}: expected {expected}" +
+                     ("" if got is None else f", got {got!r}"))
+
+
+def _expand(grid: dict) -> Iterator[dict]:
+    keys = list(grid)
+    values = [v if isinstance(v, list) else [v] for v in grid.values()]
+    for combo in itertools.product(*values):
+        yield dict(zip(keys, combo, strict=True))
+
+
+def load_sweep(path: str | Path) -> Sweep:
+    """Read and validate a sweep config; paths inside it are relative to the config."""
+    from fccgrb_cli.pipeline import METHODS
+
+    path = Path(path)
+    try:
+        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(f"{path}: sweep config not found") from None
+    except yaml.YAMLError as exc:
+        raise InputError(f"{path}: invalid YAML ({str(exc).splitlines()[0]})") from None
+    if not isinstance(doc, dict):
+        _fail(path, "(top level)", "a mapping", doc)
+    unknown = set(doc) - TOP_KEYS
+    if unknown:
+        _fail(path, sorted(unknown)[0], f"one of the keys {sorted(TOP_KEYS)}")
+    for key in ("model", "cells"):
+        if key not in doc:
+            _fail(path, key, "this key to be present")
+    model = (path.parent / str(doc["model"])).resolve()
+    if not model.is_file():
+        _fail(path, "model", "an existing model file", str(doc["model"]))
+    trial = doc.get("trial", {"synth": {"duration": 3.0, "rate": 100.0}})
+    if not isinstance(trial, dict) or not ({"synth"} == set(trial) or {"file"} == set(trial)):
+        _fail(path, "trial", "{synth: {duration, rate}} or {file: PATH}", trial)
+    if "file" in trial:
+        trial = {"file": str((path.parent / str(trial["file"])).resolve())}
+    variants = doc.get("variants") or {}
+    cells: list[Cell] = []
+    if not isinstance(doc["cells"], list) or not doc["cells"]:
+        _fail(path, "cells", "a non-empty list of grids", doc["cells"])
+    for k, grid in enumerate(doc["cells"]):
+        where = f"cells[{k}]"
+        if not isinstance(grid, dict):
+            _fail(path, where, "a mapping of cell parameters", grid)
+        bad = set(grid) - CELL_KEYS
+        if bad:
+            _fail(path, f"{where}.{sorted(bad)[0]}", f"one of {sorted(CELL_KEYS)}")
+        for combo in _expand(grid):
+            combo.setdefault("seed", doc.get("seed", 0))
+            combo.setdefault("tol", 1e-10)
+            combo.setdefault("level", 0.0)
+            if combo.get("method") not in METHODS:
+                _fail(path, f"{where}.method", f"one of {', '.join(METHODS)}",
+                      combo.get("method"))
+            points = combo.get("points")
+            if points is not None and str(points) not in {str(v) for v in variants}:
+                _fail(path, f"{where}.points", f"a variant named under variants.points "
+                      f"({', '.join(map(str, variants.get('points', {})))})", points)
+            for key in ("tol", "level"):
+                try:
+                    combo[key] = float(combo[key])
+                except (TypeError, ValueError):
+                    _fail(path, f"{where}.{key}", "a number", combo[key])
+            cells.append(Cell(tuple(sorted(combo.items()))))
+    unique = list(dict.fromkeys(cells))
+    return Sweep(str(doc.get("name", path.stem)), str(doc.get("table", "")), path, model, trial,
+                 variants, tuple(unique))
+
+
+@lru_cache(maxsize=4)
+def _synthesized(model_path: str, duration: float, rate: float, tol: float):
+    """The synthesized trial of a model, once per process (cells reuse it)."""
+    from fccgrb_cli.io.trial import Trial
+    from fccgrb_cli.io.truth import Truth
+    from fccgrb_cli.model import load_model
+    from fccgrb_cli.synth import synthesize
+
+    model = load_model(model_path)
+    s = synthesize(model, duration, rate, tol)
+    r = s.result
+    truth = Truth(r.time, r.theta, r.theta_d, r.theta_dd, r.angle_names, r.q, "full",
+                  s.markers, s.labels, rate, model.text)
+    return Trial(f"<synth {Path(model_path).name}>", s.labels, s.markers, rate), truth
+
+
+def run_cell(sweep: Sweep, cell: Cell, store: Path) -> Path:
+    """Solve one cell and write it atomically to the store; returns the cell's file."""
+    from fccgrb_cli.io.results import write_run
+    from fccgrb_cli.io.trial import read_trial
+    from fccgrb_cli.model import load_model
+    from fccgrb_cli.pipeline import solve_trial
+
+    target = store / f"{cell.key}.h5"
+    p = dict(cell.params)
+    model = load_model(sweep.model)
+    if p.get("form"):
+        model = model.with_form(p["form"])
+    if p.get("points") is not None:
+        model = model.with_tracked(tuple(sweep.variants["points"][p["points"]]))
+    truth = None
+    if "synth" in sweep.trial:
+        spec = sweep.trial["synth"]
+        trial, truth = _synthesized(str(sweep.model), float(spec.get("duration", 3.0)),
+                                    float(spec.get("rate", 100.0)), 1e-12)
+    else:
+        trial = read_trial(sweep.trial["file"])
+    run = solve_trial(
+        model, trial, method=p["method"], tol=p["tol"], perturb_level_m=p["level"] * 1e-3,
+        perturb_markers=tuple(p.get("perturb_markers") or ()), seed=int(p.get("seed", 0)),
+        tracking_weight=float(p.get("tracking_weight", 1e-3)),
+        warm_start=p.get("warm_start", "extrapolate"), hessian=p.get("hessian", "auto"),
+        ad_drivers=p.get("ad_drivers", "markers"), filter_cutoff=p.get("filter_cutoff"),
+        dynamics=p.get("dynamics", False), objective=p.get("objective", "tc"),
+        parallel=bool(p.get("parallel", False)), workers=p.get("workers"),
+        parallel_init=p.get("parallel_init", "same"), name="run", truth=truth)
+    write_run(target, run, f"fccgrb sweep {sweep.source} (cell {cell.key})",
+              cell=dict(cell.params) | {"sweep": sweep.name, "table": sweep.table})
+    return target
+
+
+def run_sweep(sweep: Sweep, output: Path, *, workers: int = 1, executor: Executor | None = None,
+              progress: Callable[[str], None] | None = None) -> tuple[int, int]:
+    """Run the missing cells (sequential-mode cells over the executor or a local process pool,
+    then the parallel-mode ones alone, one at a time, so that their timing is not shared), and
+    merge every cell into ``output``. Returns (cells run now, cells already done)."""
+    store = cells_folder(output)
+    store.mkdir(parents=True, exist_ok=True)
+    todo = [c for c in sweep.cells if not (store / f"{c.key}.h5").exists()]
+    done_before = len(sweep.cells) - len(todo)
+    alone = [c for c in todo if c.get("parallel")]
+    pooled = [c for c in todo if not c.get("parallel")]
+    finished = 0
+    started = clock.perf_counter()
+
+    def report(cell: Cell) -> None:
+        nonlocal finished
+        finished += 1
+        if progress is not None:
+            progress(f"{finished}/{len(todo)} cells ({clock.perf_counter() - started:.0f} s): "
+                     f"{cell.key}")
+
+    if pooled:
+        own = executor is None and workers > 1
+        pool = ProcessPoolExecutor(max_workers=workers) if own else executor
+        if pool is None:
+            for cell in pooled:
+                run_cell(sweep, cell, store)
+                report(cell)
+        else:
+            try:
+                futures = {pool.submit(run_cell, sweep, cell, store): cell for cell in pooled}
+                for future in as_completed(futures):
+                    future.result()
+                    report(futures[future])
+            finally:
+                if own:
+                    pool.shutdown(cancel_futures=True)
+    for cell in alone:
+        run_cell(sweep, cell, store)
+        report(cell)
+    merge(sweep, store, output)
+    return len(todo), done_before
+
+
+def cells_folder(output: Path) -> Path:
+    """Where the finished cells of a sweep writing ``output`` are kept."""
+    return output.with_name(output.name + ".cells")
+
+
+def merge(sweep: Sweep, store: Path, output: Path) -> None:
+    """Copy every cell's file into one HDF5 (``/cells/<key>/``), atomically."""
+    import h5py
+
+    with atomic_path(output) as tmp, h5py.File(tmp, "w") as out:
+        out.attrs["sweep"] = sweep.name
+        out.attrs["table"] = sweep.table
+        out.attrs["config"] = sweep.source.read_text(encoding="utf-8")
+        group = out.create_group("cells")
+        for cell in sweep.cells:
+            path = store / f"{cell.key}.h5"
+            if not path.exists():
+                continue
+            with h5py.File(path, "r") as src:
+                target = group.create_group(cell.key)
+                for key, value in src.attrs.items():
+                    target.attrs[key] = value
+                for name in src:
+                    src.copy(src[name], target, name=name)
+
+
+def remove_cells(output: Path) -> None:
+    """Forget the finished cells of ``output`` (for a clean rerun)."""
+    shutil.rmtree(cells_folder(output), ignore_errors=True)
