@@ -104,6 +104,9 @@ def load_sweep(path: str | Path) -> Sweep:
     if "file" in trial:
         trial = {"file": str((path.parent / str(trial["file"])).resolve())}
     variants = doc.get("variants") or {}
+    if not isinstance(variants, dict) or not isinstance(variants.get("points", {}), dict):
+        _fail(path, "variants", "{points: {NAME: [marker names]}}", variants)
+    variants = {"points": {str(k): list(v) for k, v in variants.get("points", {}).items()}}
     cells: list[Cell] = []
     if not isinstance(doc["cells"], list) or not doc["cells"]:
         _fail(path, "cells", "a non-empty list of grids", doc["cells"])
@@ -121,10 +124,11 @@ def load_sweep(path: str | Path) -> Sweep:
             if combo.get("method") not in METHODS:
                 _fail(path, f"{where}.method", f"one of {', '.join(METHODS)}",
                       combo.get("method"))
-            points = combo.get("points")
-            if points is not None and str(points) not in {str(v) for v in variants}:
-                _fail(path, f"{where}.points", f"a variant named under variants.points "
-                      f"({', '.join(map(str, variants.get('points', {})))})", points)
+            if combo.get("points") is not None:
+                combo["points"] = str(combo["points"])
+                if combo["points"] not in variants["points"]:
+                    _fail(path, f"{where}.points", "a variant named under variants.points "
+                          f"({', '.join(variants['points']) or 'none'})", combo["points"])
             for key in ("tol", "level"):
                 try:
                     combo[key] = float(combo[key])
