@@ -13,6 +13,7 @@ from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.atomic import atomic_path
 
 KINDS = ("point", "ed", "angle", "velocity")
+STYLES = ("-", "--", ":", "-.")  # runs that overlap (methods that agree) stay visible
 
 
 @dataclass(frozen=True)
@@ -85,26 +86,28 @@ def draw(series: list[Series], kind: str, marker: str | None, angle: str | None,
     if kind == "point":
         fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 7))
         for c, ax in enumerate(axes):
-            ax.plot(first.time, first.reference[:, k, c], "k--", lw=2, label="reference")
-            for s in series:
-                ax.plot(s.time, s.points[:, k, c], lw=1, label=s.name)
+            ax.plot(first.time, first.reference[:, k, c], color="k", lw=2.5, alpha=0.35,
+                    label="reference")
+            for i, s in enumerate(series):
+                ax.plot(s.time, s.points[:, k, c], STYLES[i % 4], lw=1.2, label=s.name)
             ax.set_ylabel(f"{'xyz'[c]} of {label} (m)")
         axes[0].set_title(f"Point {label}: model against the reference")
     elif kind == "ed":
         fig, ax = plt.subplots(figsize=(8, 4))
-        for s in series:
+        for i, s in enumerate(series):
             ax.plot(s.time, 1e3 * np.linalg.norm(s.points[:, k] - s.reference[:, k], axis=1),
-                    lw=1, label=s.name)
+                    STYLES[i % 4], lw=1.2, label=s.name)
         ax.set_ylabel(f"Euclidean distance at {label} (mm)")
         ax.set_title(f"Distance of {label} to the reference")
         axes = [ax]
     elif kind == "velocity":
         c = "xyz".index(axis)
         fig, ax = plt.subplots(figsize=(8, 4))
-        ax.plot(first.time, _velocity(first.reference[:, k, c], first.time), "k--", lw=2,
-                label="reference")
-        for s in series:
-            ax.plot(s.time, _velocity(s.points[:, k, c], s.time), lw=1, label=s.name)
+        ax.plot(first.time, _velocity(first.reference[:, k, c], first.time), color="k", lw=2.5,
+                alpha=0.35, label="reference")
+        for i, s in enumerate(series):
+            ax.plot(s.time, _velocity(s.points[:, k, c], s.time), STYLES[i % 4], lw=1.2,
+                    label=s.name)
         ax.set_ylabel(f"{axis} velocity of {label} (m/s)")
         ax.set_title(f"Velocity of {label} (central differences)")
         axes = [ax]
@@ -116,9 +119,10 @@ def draw(series: list[Series], kind: str, marker: str | None, angle: str | None,
         j = first.angle_names.index(name)
         fig, ax = plt.subplots(figsize=(8, 4))
         if first.truth is not None:
-            ax.plot(first.time, np.degrees(first.truth[:, j]), "k--", lw=2, label="truth")
-        for s in series:
-            ax.plot(s.time, np.degrees(s.theta[:, j]), lw=1, label=s.name)
+            ax.plot(first.time, np.degrees(first.truth[:, j]), color="k", lw=2.5, alpha=0.35,
+                    label="truth")
+        for i, s in enumerate(series):
+            ax.plot(s.time, np.degrees(s.theta[:, j]), STYLES[i % 4], lw=1.2, label=s.name)
         ax.set_ylabel(f"angle {name} (deg)")
         ax.set_title(f"Joint angle {name}")
         axes = [ax]

@@ -84,3 +84,20 @@ def test_five_bar_synth_writes_300_frames_at_100_hz(tmp_path: Path, units: str,
     assert np.abs(xyz - exact).max() < 1e-6
     # P1 sits on the ground revolute's axis: it never moves
     assert np.abs(xyz[:, 0] - xyz[0, 0]).max() < 1e-6
+
+
+@pytest.mark.parametrize("name", ["pendulum", "five_bar"])
+def test_bundled_sample_trials_match_their_models(name: str) -> None:
+    """sample_data/ must be regenerated whenever a model changes: the truth file carries the
+    model text it was made from, and the C3D's markers are the model's (to 32-bit precision)."""
+    import h5py
+
+    from fccgrb_cli.io.trial import read_trial
+
+    model_path = ROOT / "configs" / "models" / f"{name}.yaml"
+    trial = ROOT / "sample_data" / f"{name}.c3d"
+    with h5py.File(trial.with_name(f"{name}.truth.h5"), "r") as h5:
+        assert h5.attrs["model"] == model_path.read_text(), \
+            f"regenerate: fccgrb synth {model_path.relative_to(ROOT)} -o sample_data/{name}.c3d"
+    exact = synthesize(load_model(model_path)).markers
+    assert np.abs(read_trial(trial).markers - exact).max() < 1e-6
