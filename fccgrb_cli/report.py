@@ -142,11 +142,24 @@ def _paper_value(paper: dict, row: Row, level: str, metric: str) -> float | None
     return None
 
 
+FAMILY_ORDER = {"KA": 0, "NRM": 1, "CNO": 2, "MO": 3}
+VARIANT_ORDER = {"AD": 0, "LS": 1, "WLS": 2, "IP": 3, "SQP": 4, "TC": 5, "ED": 6}
+
+
+def _order(key: tuple[str, str, str, float]) -> tuple:
+    """The paper's row order: KA, NRM, CNO, MO; LS before WLS, IP before SQP, TC before ED;
+    sequential before parallel; points; the looser tolerance first."""
+    family, variant, points, tol = key
+    base = variant.split("-")[0].split(" ")[0]
+    return (FAMILY_ORDER.get(family, 9), VARIANT_ORDER.get(base, 9), variant != base, variant,
+            points, -tol)
+
+
 def render(table: str, rows: list[Row], fmt: str = "text",
            paper: dict[tuple, dict[str, float]] | None = None) -> str:
     """The tables as text (aligned), markdown or csv (long format, one line per value)."""
     paper = paper_figures(table) if paper is None else paper
-    keys = list(dict.fromkeys((r.family, r.variant, r.points, r.tol) for r in rows))
+    keys = sorted(dict.fromkeys((r.family, r.variant, r.points, r.tol) for r in rows), key=_order)
     by_key = {(r.family, r.variant, r.points, r.tol, r.level): r for r in rows}
     if fmt == "csv":
         buffer = io.StringIO()
