@@ -65,7 +65,25 @@ def level_name(level_m: float) -> str:
     return f"P{level_m * 1e3:g}"
 
 
-def _row(run, points: str) -> Row:
+# Cell parameters that change a run without changing its table row, with their defaults: when a
+# cell sets one otherwise, it is named in the variant so that rows do not overwrite each other.
+DISTINGUISHING = {"seed": 0, "hessian": "auto", "tracking_weight": 1e-3,
+                  "warm_start": "extrapolate", "filter_cutoff": None, "perturb_markers": None,
+                  "form": None, "dynamics": None, "workers": None}
+
+
+def _extra(params: dict) -> str:
+    parts = []
+    for key, default in DISTINGUISHING.items():
+        value = params.get(key, default)
+        if key == "workers" or value in (default, (), []):
+            continue
+        shown = "+".join(value) if isinstance(value, (list, tuple)) else value
+        parts.append(f"{key}={shown}")
+    return f" [{', '.join(parts)}]" if parts else ""
+
+
+def _row(run, points: str, extra: str = "") -> Row:
     converged = run["converged"][()]
     ed = run["ed"][()]
     ok = converged & np.isfinite(ed).all(axis=1)
@@ -86,7 +104,7 @@ def _row(run, points: str) -> Row:
         "failed frames": float((~converged).sum()),
     }
     family, variant = describe(str(attrs["method"]))
-    return Row(family, variant, points, float(attrs["tol"]),
+    return Row(family, variant + extra, points, float(attrs["tol"]),
                level_name(float(attrs["perturb_level_m"])), values)
 
 
@@ -110,7 +128,7 @@ def collect(path: str | Path) -> tuple[str, list[Row]]:
                 params = json.loads(cell.attrs.get("cell", "{}"))
                 points = "" if params.get("points") is None else str(params["points"])
                 for run in cell["runs"].values():
-                    rows.append(_row(run, points))
+                    rows.append(_row(run, points, _extra(params)))
         elif "runs" in h5:
             for run in h5["runs"].values():
                 rows.append(_row(run, ""))

@@ -69,9 +69,19 @@ def _fail(source: Path, path: str, expected: str, got: Any = None) -> None:
                      ("" if got is None else f", got {got!r}"))
 
 
+def _axis(key: str, value: Any) -> list:
+    """The values a grid key takes. ``perturb_markers`` names one subset (a list of names) or
+    several (a list of lists); every other key is one value or a list of values."""
+    if key == "perturb_markers":
+        if isinstance(value, list) and value and all(isinstance(v, list) for v in value):
+            return [tuple(str(m) for m in v) for v in value]
+        return [tuple(str(m) for m in (value if isinstance(value, list) else [value]))]
+    return value if isinstance(value, list) else [value]
+
+
 def _expand(grid: dict) -> Iterator[dict]:
     keys = list(grid)
-    values = [v if isinstance(v, list) else [v] for v in grid.values()]
+    values = [_axis(key, value) for key, value in grid.items()]
     for combo in itertools.product(*values):
         yield dict(zip(keys, combo, strict=True))
 
@@ -81,10 +91,15 @@ def load_sweep(path: str | Path) -> Sweep:
     from fccgrb_cli.pipeline import METHODS
 
     path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{path}: expected a sweep config file, got a folder")
     try:
         doc = yaml.safe_load(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise InputError(f"{path}: sweep config not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: cannot read the sweep config ({exc.__class__.__name__})") \
+            from None
     except yaml.YAMLError as exc:
         raise InputError(f"{path}: invalid YAML ({str(exc).splitlines()[0]})") from None
     if not isinstance(doc, dict):
@@ -117,6 +132,9 @@ def load_sweep(path: str | Path) -> Sweep:
         bad = set(grid) - CELL_KEYS
         if bad:
             _fail(path, f"{where}.{sorted(bad)[0]}", f"one of {sorted(CELL_KEYS)}")
+        for key, value in grid.items():
+            if isinstance(value, list) and not value:
+                _fail(path, f"{where}.{key}", "a value or a non-empty list", value)
         for combo in _expand(grid):
             combo.setdefault("seed", doc.get("seed", 0))
             combo.setdefault("tol", 1e-10)
@@ -198,6 +216,12 @@ def run_sweep(sweep: Sweep, output: Path, *, workers: int = 1, executor: Executo
     merge every cell into ``output``. Returns (cells run now, cells already done)."""
     store = cells_folder(output)
     store.mkdir(parents=True, exist_ok=True)
+    for cell in sweep.cells:
+        path = store / f"{cell.key}.h5"
+        if path.exists() and not _readable(path):
+            if progress is not None:
+                progress(f"{path.name} is unreadable; running that cell again")
+            path.unlink()
     todo = [c for c in sweep.cells if not (store / f"{c.key}.h5").exists()]
     done_before = len(sweep.cells) - len(todo)
     alone = [c for c in todo if c.get("parallel")]
@@ -233,6 +257,18 @@ def run_sweep(sweep: Sweep, output: Path, *, workers: int = 1, executor: Executo
         report(cell)
     merge(sweep, store, output)
     return len(todo), done_before
+
+
+def _readable(path: Path) -> bool:
+    """A cell file that opens and holds its run (files are renamed into place whole, so only
+    something outside the sweep can break one)."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as h5:
+            return "runs/run" in h5
+    except OSError:
+        return False
 
 
 def cells_folder(output: Path) -> Path:
