@@ -11,6 +11,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from fccgrb_cli.blas import single_threaded
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.solvers.newton import linear_solve, newton_raphson
 from fccgrb_cli.solvers.result import KinematicResult
@@ -38,6 +39,7 @@ def assemble(system: System, q_guess: np.ndarray, theta: np.ndarray, tol: float,
     return q
 
 
+@single_threaded
 def solve_ad(system: System, time: np.ndarray, theta: np.ndarray, theta_d: np.ndarray,
              theta_dd: np.ndarray, q_guess: np.ndarray, *, tol: float = 1e-10,
              max_iter: int = 50, progress: Callable[[int, int], None] | None = None

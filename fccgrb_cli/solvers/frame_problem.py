@@ -77,8 +77,9 @@ class FrameProblem:
     def distances(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Euclidean distance of each tracked point to its marker, smoothed at zero:
         √(‖d‖² + ε²) − ε with ε = 1 µm (differentiable where a point sits on its marker, as in
-        unperturbed data; above a millimetre it differs from ‖d‖ by ε²/2‖d‖ < 1e-9 m), and its
-        gradient (n × nq)."""
+        unperturbed data), and its gradient (n × nq). Above a millimetre it is ‖d‖ − ε to within
+        ε²/2‖d‖ < 1e-9 m: a uniform 1 µm shift, which moves neither the minimax's nor the sum's
+        minimizer by more than that. Reported distances (ED) come from the points, unshifted."""
         d, Jd = self.residuals(q)
         smooth = np.sqrt((d * d).sum(axis=1) + ED_SMOOTHING**2)
         return smooth - ED_SMOOTHING, np.einsum("pk,pkq->pq", d / smooth[:, None], Jd)

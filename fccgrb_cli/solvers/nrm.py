@@ -13,6 +13,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from fccgrb_cli.blas import single_threaded
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.solvers.initial import initial_guess
 from fccgrb_cli.solvers.newton import gauss_newton
@@ -49,6 +50,7 @@ def _rank(J: np.ndarray, w: np.ndarray) -> int:
     return int((s > s[0] * max(J.shape) * 1e-10).sum())
 
 
+@single_threaded
 def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray, *,
               tracking_weight: float | None = 1e-3, tol: float = 1e-10, max_iter: int = 50,
               warm_start: str = "extrapolate", skip_unsolvable: bool = False,

@@ -18,6 +18,7 @@ from itertools import pairwise
 
 import numpy as np
 
+from fccgrb_cli.blas import limit_this_process, single_threaded
 from fccgrb_cli.solvers.cno import solve_cno_frame
 from fccgrb_cli.solvers.frame_problem import FrameProblem
 from fccgrb_cli.solvers.goal import FrameOutcome, solve_goal_frame
@@ -101,6 +102,7 @@ _WORKER: dict = {}
 
 
 def _install(system: System, targets: np.ndarray, settings: Settings, warm_start: str) -> None:
+    limit_this_process()
     _WORKER.update(system=system, targets=targets, settings=settings, warm_start=warm_start)
 
 
@@ -110,6 +112,7 @@ def _work(frames: list[int], guesses: list[np.ndarray], chained: bool) -> list[F
                        w["warm_start"])
 
 
+@single_threaded
 def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
                        settings: Settings, *, parallel: bool = False, workers: int | None = None,
                        init: str = "same", warm_start: str = "extrapolate",
