@@ -3,7 +3,7 @@ on the five-bar's synthesized 300-frame trial at P0, P7.5 and P30 (every point p
 
     python benchmarks/optimization.py [--frames 300] [--ip-frames 30] [--methods ...]
 
-CNO-IP (scipy's trust-constr) takes about half a second a frame, so it runs on the first
+CNO-IP (scipy's trust-constr) takes 0.12–0.16 s a frame, so it runs on the first
 ``--ip-frames`` frames only. ms/frame is the per-frame solve; max|Φtop| the largest topological
 violation over all frames; 'max err' the largest distance of a model point to the exact marker
 (meaningful at P0).
