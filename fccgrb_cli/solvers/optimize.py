@@ -91,7 +91,7 @@ def _run_frames(system: System, settings: Settings, targets: np.ndarray, frames:
     out: list[FrameRecord] = []
     history: list[np.ndarray] = []
     for f, guess in zip(frames, guesses, strict=True):
-        q0 = predict(history, warm_start) if (chained and history) else guess
+        q0 = predict(history, warm_start, points=3) if (chained and history) else guess
         record = solve_frame(system, settings, q0, targets[f])
         out.append(record)
         history = [*history[-2:], record.q] if record.converged else []
@@ -130,7 +130,7 @@ def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
         records: list[FrameRecord] = []
         history: list[np.ndarray] = []
         for f in range(n):
-            q0 = predict(history, warm_start) if history else (
+            q0 = predict(history, warm_start, points=3) if history else (
                 first if f == 0 else initial_guess(system, targets[f]))
             record = solve_frame(system, settings, q0, targets[f])
             records.append(record)
