@@ -40,14 +40,9 @@ def _series(h5, name: str, run, top) -> Series:
 
 def load_series(path: Path, wanted: tuple[str, ...]) -> list[Series]:
     """Runs of a results file (by run name) or cells of a sweep file (by key prefix)."""
-    import h5py
+    from fccgrb_cli.io.results import open_results
 
-    if not path.exists():
-        raise InputError(f"{path}: results file not found")
-    try:
-        h5 = h5py.File(path, "r")
-    except OSError:
-        raise InputError(f"{path}: not an HDF5 results file") from None
+    h5 = open_results(path)
     out = []
     with h5:
         if "cells" in h5:

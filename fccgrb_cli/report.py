@@ -111,15 +111,9 @@ def _row(run, points: str, extra: str = "") -> Row:
 def collect(path: str | Path) -> tuple[str, list[Row]]:
     """The table name (a sweep's 'table', else '') and one Row per run in a results or sweep
     file."""
-    import h5py
+    from fccgrb_cli.io.results import open_results
 
-    path = Path(path)
-    if not path.exists():
-        raise InputError(f"{path}: results file not found")
-    try:
-        h5 = h5py.File(path, "r")
-    except OSError:
-        raise InputError(f"{path}: not an HDF5 results file") from None
+    h5 = open_results(path)
     rows: list[Row] = []
     with h5:
         table = str(h5.attrs.get("table", ""))

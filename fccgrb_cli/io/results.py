@@ -42,6 +42,19 @@ from fccgrb_cli.io.atomic import atomic_path
 from fccgrb_cli.pipeline import Run
 
 
+def open_results(path: str | Path):
+    """An existing results or sweep file, read-only (h5py.File); one-line errors otherwise."""
+    import h5py
+
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: results file not found")
+    try:
+        return h5py.File(path, "r")
+    except OSError:
+        raise InputError(f"{path}: not an HDF5 results file") from None
+
+
 def _versions() -> dict[str, str]:
     from importlib.metadata import PackageNotFoundError, version
 
