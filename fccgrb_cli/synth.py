@@ -34,15 +34,19 @@ def prescribed(model: Model, time: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
 
 def synthesize(model: Model, duration: float = 3.0, rate: float = 100.0, tol: float = 1e-10,
                progress: Callable[[int, int], None] | None = None) -> Synthesis:
-    """Run the prescribed motion for ``duration`` s at ``rate`` Hz and read the tracked points."""
+    """Run the prescribed motion for ``duration`` s at ``rate`` Hz and read the tracked points.
+    A floating base is held at its stated pose."""
     n_frames = round(duration * rate)
     if n_frames < 1:
         raise InputError(f"duration {duration} s at {rate} Hz gives no frame")
     time = np.arange(n_frames) / rate
     theta, theta_d, theta_dd = prescribed(model, time)
     system = compile_system(model, angles="driver")
-    result = solve_ad(system, time, theta, theta_d, theta_dd, system.layout.pose_q(model),
-                      tol=tol, progress=progress)
+    pose = system.layout.pose_q(model)
+    held = np.broadcast_to(system.base_reference(pose), (n_frames, system.n_base_slots, 3))
+    still = np.zeros_like(held)
+    result = solve_ad(system, time, theta, theta_d, theta_dd, pose, tol=tol,
+                      base=(np.array(held), still, still), progress=progress)
     if len(result.failed_frames):
         f = int(result.failed_frames[0])
         raise InputError(f"{model.source}: frame {f} (t = {time[f]:.3f} s): the kinematic "

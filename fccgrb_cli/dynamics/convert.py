@@ -7,6 +7,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
 from fccgrb_cli.dynamics.inverse import InverseDynamics, inverse_dynamics
 from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.model import Model
@@ -31,8 +33,9 @@ def classical_dynamics(model: Model, result: KinematicResult, *, cutoff: float |
     """Drive the classical model with the run's angles and solve its inverse dynamics."""
     system = compile_system(model, angles="driver")
     n_body = system.layout.n_body_q
+    base = np.array([system.base_reference(q[:n_body]) for q in result.q])
     kinematics = driven_by(system, result.time, result.theta, result.q[0, :n_body].copy(),
-                           cutoff=cutoff, order=order, tol=tol, method=result.method)
+                           cutoff=cutoff, order=order, tol=tol, method=result.method, base=base)
     inverse = inverse_dynamics(system, kinematics.q, kinematics.qd, kinematics.qdd,
                                kinematics.theta, loads)
     return Dynamics(kinematics, inverse, tuple(loads), cutoff)

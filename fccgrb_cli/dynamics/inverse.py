@@ -3,7 +3,10 @@
 Written on the fully-defined equivalent x: Φ_qᵀ λ = X_qᵀ (g_x − M_x ẍ), ẍ = X_q q̈ + V̇ q̇, which
 also covers reduced bodies (their mass matrix then depends on q). λ by least squares, minimum norm
 where constraints are redundant. The moment of angular driver k, conjugate to θ_k and positive in
-the direction that increases it, is τ_k = λ_k sin θ_k.
+the direction that increases it, is τ_k = λ_k sin θ_k. A floating base's drivers r − r*, u − u*,
+v − v* (, w − w*) apply the residual wrench F = −λ_r, M = −(u × λ_u + v × λ_v + w × λ_w) about its
+origin: their virtual power over a rigid motion of the base (the rigid-body rows do no work
+there, so this holds whatever share of λ the redundant rows take).
 """
 
 from __future__ import annotations
@@ -33,6 +36,9 @@ class InverseDynamics:
     potential: np.ndarray
     external_power: np.ndarray
     residual: np.ndarray
+    base_names: tuple[str, ...] = ()
+    residual_force: np.ndarray | None = None
+    residual_moment: np.ndarray | None = None
 
 
 def inverse_dynamics(system: System, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
@@ -65,7 +71,33 @@ def inverse_dynamics(system: System, q: np.ndarray, qd: np.ndarray, qdd: np.ndar
         residual[f] = np.linalg.norm(J.T @ lam[f] - rhs)
         kinetic[f] = 0.5 * xd @ M @ xd
         potential[f] = -g @ x
+    bases, force, moment = _base_wrenches(system, q, lam)
     return InverseDynamics(
         angle_names=tuple(a.name for a in model.angles), row_labels=system.labels, lam=lam,
         joint_moments=lam[:, driver_rows] * np.sin(theta), kinetic=kinetic, potential=potential,
-        external_power=power, residual=residual)
+        external_power=power, residual=residual, base_names=bases, residual_force=force,
+        residual_moment=moment)
+
+
+def _base_wrenches(system: System, q: np.ndarray, lam: np.ndarray
+                   ) -> tuple[tuple[str, ...], np.ndarray | None, np.ndarray | None]:
+    """Residual force and moment (frames × bases × 3) of every floating base's drivers."""
+    rows: dict[str, dict[str, np.ndarray]] = {}
+    for k, label in enumerate(system.labels):
+        if label.startswith("base ") and label.endswith(": x"):
+            name, what = label[5:-3].split(": ")
+            rows.setdefault(name, {})[what] = np.arange(k, k + 3)
+    if not rows:
+        return (), None, None
+    names = tuple(rows)
+    n = len(q)
+    force = np.zeros((n, len(names), 3))
+    moment = np.zeros((n, len(names), 3))
+    for b, name in enumerate(names):
+        start = system.layout.x_offset(name)
+        x = np.array([system.layout.expand(qf)[start:start + 12] for qf in q]).reshape(n, 4, 3)
+        force[:, b] = -lam[:, rows[name]["r"]]
+        for axis, column in (("u", 1), ("v", 2), ("w", 3)):
+            if axis in rows[name]:
+                moment[:, b] -= np.cross(x[:, column], lam[:, rows[name][axis]])
+    return names, force, moment

@@ -26,6 +26,9 @@ Contract (SI units: m, rad, s):
       lambda                     frames × equations of the classical model; attribute ``labels``
       classical/q, qd, qdd, theta, theta_d, theta_dd   the classical model driven by θ(t)
       energy/kinetic, potential, external_power        J, J, W (a power-balance check)
+      residual_force, residual_moment                  frames × floating bases × 3: what the
+                                 base drivers apply (N; N·m about the base origin); attribute
+                                 ``bases``
       loads/<name>/force, point, moment, body          external loads used (N, m, N·m)
 """
 
@@ -136,6 +139,12 @@ def _write_dynamics(g, run: Run) -> None:
     classical = g.create_group("classical")
     for key in ("q", "qd", "qdd", "theta", "theta_d", "theta_dd"):
         classical.create_dataset(key, data=getattr(kin, key), compression="gzip")
+    if inverse.base_names:
+        for key in ("residual_force", "residual_moment"):
+            g.create_dataset(key, data=getattr(inverse, key))
+            g[key].attrs["bases"] = list(inverse.base_names)
+        g["residual_force"].attrs["units"] = "N"
+        g["residual_moment"].attrs["units"] = "N·m, about the base's origin"
     energy = g.create_group("energy")
     energy["kinetic"], energy["potential"] = inverse.kinetic, inverse.potential
     energy["external_power"] = inverse.external_power

@@ -21,7 +21,7 @@ ASSEMBLY_STEP = np.radians(5.0)
 
 
 def assemble(system: System, q_guess: np.ndarray, theta: np.ndarray, tol: float,
-             max_iter: int) -> np.ndarray:
+             max_iter: int, base: np.ndarray | None = None) -> np.ndarray:
     """Bring a guess (e.g. the model's stated pose) to the configuration with angles θ, moving
     the drivers from the guess's own angles to θ in steps of at most 5° (a homotopy)."""
     start = system.angles_at(q_guess)
@@ -30,7 +30,8 @@ def assemble(system: System, q_guess: np.ndarray, theta: np.ndarray, tol: float,
     q = q_guess
     for k in range(1, n_steps + 1):
         target = start + (theta - start) * k / n_steps
-        it = newton_raphson(system, q, Drive(target, zeros, zeros), tol, max_iter)
+        ref = np.zeros((0, 3)) if base is None else base
+        it = newton_raphson(system, q, Drive(target, zeros, zeros, ref), tol, max_iter)
         if not it.converged:
             raise InputError(
                 f"{system.model.source}: could not assemble the model from its initial pose to "
@@ -42,9 +43,16 @@ def assemble(system: System, q_guess: np.ndarray, theta: np.ndarray, tol: float,
 @single_threaded
 def solve_ad(system: System, time: np.ndarray, theta: np.ndarray, theta_d: np.ndarray,
              theta_dd: np.ndarray, q_guess: np.ndarray, *, tol: float = 1e-10,
-             max_iter: int = 50, progress: Callable[[int, int], None] | None = None
-             ) -> KinematicResult:
-    """AD analysis over all frames; θ, θ̇, θ̈ are (frames × n_angles) in rad, rad/s, rad/s²."""
+             max_iter: int = 50, base: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+             progress: Callable[[int, int], None] | None = None) -> KinematicResult:
+    """AD analysis over all frames; θ, θ̇, θ̈ are (frames × n_angles) in rad, rad/s, rad/s²;
+    ``base``: the floating bases' driven features and their rates (frames × slots × 3 each,
+    see ``System.base_reference``), required when the model has floating bases."""
+    if system.n_base_slots and base is None:
+        raise ValueError("a model with a floating base needs its base trajectory")
+    n_slots = system.n_base_slots
+    empty = np.zeros((len(time), n_slots, 3))
+    base_ref, base_d, base_dd = base if base is not None else (empty, empty, empty)
     if system.mixed:
         raise ValueError("solve_ad needs a system compiled with angles='driver'")
     n, nq = len(time), system.nq
@@ -55,10 +63,10 @@ def solve_ad(system: System, time: np.ndarray, theta: np.ndarray, theta_d: np.nd
     phi_top = np.zeros(n)
     converged = np.zeros(n, dtype=bool)
     topology = system.masks()["topology"]
-    q = assemble(system, q_guess, theta[0], tol, max_iter)
+    q = assemble(system, q_guess, theta[0], tol, max_iter, base_ref[0])
     qd = qdd = np.zeros(nq)
     for f in range(n):
-        drive = Drive(theta[f], theta_d[f], theta_dd[f])
+        drive = Drive(theta[f], theta_d[f], theta_dd[f], base_ref[f], base_d[f], base_dd[f])
         started = clock.perf_counter()
         if f > 0:
             dt = time[f] - time[f - 1]

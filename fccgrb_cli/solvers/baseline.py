@@ -36,14 +36,23 @@ def marker_angles(system: System, targets: np.ndarray) -> np.ndarray:
 
 def driven_by(model_system: System, time: np.ndarray, theta: np.ndarray, q_guess: np.ndarray, *,
               cutoff: float | None, order: int, tol: float, method: str,
+              base: np.ndarray | None = None,
               progress: Callable[[int, int], None] | None = None) -> KinematicResult:
-    """AD analysis with drivers θ(t) (optionally low-passed), θ̇ and θ̈ by central differences."""
+    """AD analysis with drivers θ(t) (optionally low-passed), θ̇ and θ̈ by central differences;
+    a floating base follows ``base`` (frames × slots × 3), filtered and differentiated alike."""
     rate = 1.0 / float(time[1] - time[0]) if len(time) > 1 else 1.0
     if cutoff is not None:
         theta = lowpass(theta, rate, cutoff, order)
     theta_d, theta_dd = central_derivatives(theta, 1.0 / rate)
+    base_rates = None
+    if model_system.n_base_slots:
+        flat = base.reshape(len(time), -1)
+        if cutoff is not None:
+            flat = lowpass(flat, rate, cutoff, order)
+        d1, d2 = central_derivatives(flat, 1.0 / rate)
+        base_rates = tuple(a.reshape(base.shape) for a in (flat, d1, d2))
     result = solve_ad(model_system, time, theta, theta_d, theta_dd, q_guess, tol=tol,
-                      progress=progress)
+                      base=base_rates, progress=progress)
     return KinematicResult(**{**result.__dict__, "method": method})
 
 
@@ -52,8 +61,10 @@ def solve_baseline(model, time: np.ndarray, targets: np.ndarray, *, cutoff: floa
                    progress: Callable[[int, int], None] | None = None) -> KinematicResult:
     """The baseline AD run on marker targets (frames × n_targets × 3)."""
     fit_system = compile_system(model, angles="coordinate", track=True)
+    fits = [initial_guess(fit_system, y) for y in targets]
     theta = marker_angles(fit_system, targets)
     ad = compile_system(model, angles="driver")
-    guess = initial_guess(fit_system, targets[0])[: ad.layout.n_body_q]
-    return driven_by(ad, time, theta, guess, cutoff=cutoff, order=order, tol=tol, method="ad",
-                     progress=progress)
+    n_body = ad.layout.n_body_q
+    base = np.array([ad.base_reference(q[:n_body]) for q in fits])
+    return driven_by(ad, time, theta, fits[0][:n_body], cutoff=cutoff, order=order, tol=tol,
+                     method="ad", base=base, progress=progress)

@@ -73,6 +73,7 @@ class System:
     angle_rows: np.ndarray
     labels: tuple[str, ...]
     kinds: np.ndarray
+    n_base_slots: int = 0
 
     # --- sizes -------------------------------------------------------------------------------
     @property
@@ -233,6 +234,13 @@ class System:
         cos = np.einsum("ij,ij->i", F[self.dot_a[self.angle_rows]], F[self.dot_b[self.angle_rows]])
         return np.arccos(np.clip(cos, -1.0, 1.0))
 
+    def base_reference(self, q: np.ndarray) -> np.ndarray:
+        """The floating bases' driven features at q (n_base_slots × 3: origin, u, v[, w])."""
+        if not self.n_base_slots:
+            return np.zeros((0, 3))
+        F = self.features(self.layout.expand(q))
+        return F[self.trk_a[-self.n_base_slots:]]
+
     def masks(self) -> dict[str, np.ndarray]:
         """Boolean row masks by kind."""
         return {"topology": self.kinds == TOPOLOGY, "driver": self.kinds == DRIVER,
@@ -241,13 +249,15 @@ class System:
 
 def compile_system(model: Model, *, angles: str = "driver", track: bool = False) -> System:
     """Compile the model once: angles as AR drivers ('driver', kinematic analysis with AD) or as
-    mixed coordinates ('coordinate', MCR); ``track`` adds TC/TOC for the tracked points/vectors."""
+    mixed coordinates ('coordinate', MCR); ``track`` adds TC/TOC for the tracked points/vectors.
+    With drivers, floating bases get base drivers too (targets after the markers' in
+    ``Drive.ref``); with mixed coordinates the markers determine them."""
     if angles not in ("driver", "coordinate"):
         raise ValueError(f"angles must be 'driver' or 'coordinate', got {angles!r}")
     names = tuple(a.name for a in model.angles) if angles == "coordinate" else ()
     layout = build_layout(model, names)
     table = FeatureTable(model, layout)
-    cl = collect(model, table, angles=angles, track=track)
+    cl = collect(model, table, angles=angles, track=track, base=angles == "driver")
     A, f0 = table.arrays()
     nx = layout.nx
 
@@ -266,9 +276,10 @@ def compile_system(model: Model, *, angles: str = "driver", track: bool = False)
     for _, _, label in cl.linear:
         labels += [f"{label}: {ax}" for ax in AXES]
         kinds += [TOPOLOGY] * 3
-    for _, _, label, _ in cl.tracking:
+    first_base = len(cl.tracking) - cl.n_base
+    for k, (_, _, label, _) in enumerate(cl.tracking):
         labels += [f"{label}: {ax}" for ax in AXES]
-        kinds += [TRACKING] * 3
+        kinds += [DRIVER if k >= first_base else TRACKING] * 3
     angle_set = set(cl.angle_dots)
     for k, (_, _, _, label) in enumerate(cl.dots):
         labels.append(label)
@@ -310,6 +321,7 @@ def compile_system(model: Model, *, angles: str = "driver", track: bool = False)
         angle_rows=idx(cl.angle_dots),
         labels=tuple(labels),
         kinds=np.array(kinds, dtype=int),
+        n_base_slots=cl.n_base,
     )
 
 

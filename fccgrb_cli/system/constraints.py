@@ -24,6 +24,7 @@ class ConstraintList:
     tracking: list[tuple[int, int, str, float | None]] = field(default_factory=list)
     dots: list[tuple[int, int, float, str]] = field(default_factory=list)
     angle_dots: list[int] = field(default_factory=list)
+    n_base: int = 0
 
     def dot(self, a: int, b: int, const: float, label: str) -> int:
         self.dots.append((a, b, const, label))
@@ -101,8 +102,54 @@ def tracking(features: FeatureTable, out: ConstraintList, model: Model) -> None:
         slot += 1
 
 
-def collect(model: Model, features: FeatureTable, *, angles: str, track: bool) -> ConstraintList:
-    """All constraint equations of the model for the given use of its angles."""
+def floating_bases(model: Model) -> tuple[str, ...]:
+    """The first body of every group of bodies that no chain of joints ties to the ground: a
+    floating base, whose 6 degrees of freedom the markers (MC) or base drivers (AD) determine."""
+    neighbours: dict[str, set[str]] = {GROUND: set(), **{b.name: set() for b in model.bodies}}
+    for j in model.joints:
+        a, b = j.bodies
+        neighbours[a].add(b)
+        neighbours[b].add(a)
+    seen = {GROUND}
+    stack = [GROUND]
+    while stack:
+        for other in neighbours[stack.pop()] - seen:
+            seen.add(other)
+            stack.append(other)
+    bases = []
+    for body in model.bodies:
+        if body.name in seen:
+            continue
+        bases.append(body.name)
+        stack = [body.name]
+        seen.add(body.name)
+        while stack:
+            for other in neighbours[stack.pop()] - seen:
+                seen.add(other)
+                stack.append(other)
+    return tuple(bases)
+
+
+def base_drivers(features: FeatureTable, out: ConstraintList, model: Model) -> None:
+    """Drivers of each floating base's coordinates, r − r*(t), u − u*(t), v − v*(t) (and w for
+    a fully-defined body): the classical model's base, driven by its solved trajectory
+    (FORMULATION §4). Written as tracking rows with targets after the markers'."""
+    slot = len(out.tracking)
+    for name in floating_bases(model):
+        body = model.body(name)
+        items = [("r", features._fixed(name, (0.0, 0.0, 0.0), True, ("origin", name)))]
+        items += [(axis, features.vector(name, axis))
+                  for axis in ("u", "v", "w")[: 3 if body.form == "full" else 2]]
+        for what, feature in items:
+            out.tracking.append((feature, slot, f"base {name}: {what}", None))
+            slot += 1
+            out.n_base += 1
+
+
+def collect(model: Model, features: FeatureTable, *, angles: str, track: bool,
+            base: bool = False) -> ConstraintList:
+    """All constraint equations of the model for the given use of its angles; ``base`` adds
+    the drivers of floating bases."""
     out = ConstraintList()
     rigid_body(features, out, model)
     for j in model.joints:
@@ -110,6 +157,8 @@ def collect(model: Model, features: FeatureTable, *, angles: str, track: bool) -
     angular(features, out, model, angles)
     if track:
         tracking(features, out, model)
+    if base:
+        base_drivers(features, out, model)
     return out
 
 

@@ -15,6 +15,7 @@ import scipy.linalg
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.model import Model
 from fccgrb_cli.system.compiled import System, compile_system
+from fccgrb_cli.system.constraints import floating_bases
 
 
 @dataclass(frozen=True)
@@ -32,12 +33,15 @@ class StructureReport:
     n_tracking_rows: int
     mc_rank: int
     nq_mixed: int
+    floating: tuple[str, ...] = ()
 
     def lines(self) -> list[str]:
         out = [
             f"bodies {self.n_bodies}, coordinates {self.nq} (+{self.n_angles} mixed)",
             f"topological equations {self.n_topology_rows}, rank {self.topology_rank}: "
-            f"{self.dof} degrees of freedom",
+            f"{self.dof} degrees of freedom"
+            + (f" (6 each for the floating bases {', '.join(self.floating)})"
+               if self.floating else ""),
             f"angular coordinates {self.n_angles}; AD Jacobian rank {self.ad_rank} of {self.nq}",
             f"tracking equations {self.n_tracking_rows}; MC Jacobian rank {self.mc_rank} "
             f"of {self.nq_mixed}",
@@ -82,12 +86,17 @@ def analyse(model: Model) -> StructureReport:
     top_rank = _rank(J[top])
     dof = ad.nq - top_rank
     n_angles = len(model.angles)
-    if n_angles != dof:
-        detail = ("add angular coordinates for the free motions" if n_angles < dof
+    bases = floating_bases(model)
+    joint_dof = dof - 6 * len(bases)
+    if n_angles != joint_dof:
+        detail = ("add angular coordinates for the free motions" if n_angles < joint_dof
                   else "remove angular coordinates that repeat a joint's motion")
+        floating = (f" besides the 6 of each floating base ({', '.join(bases)})" if bases
+                    else "")
         raise InputError(
-            f"{model.source}: angles: expected {dof} angular coordinates for the {dof} degrees "
-            f"of freedom the joints leave, got {n_angles} ({detail})")
+            f"{model.source}: angles: expected {joint_dof} angular coordinates for the "
+            f"{joint_dof} degrees of freedom the joints leave{floating}, got {n_angles} "
+            f"({detail})")
     ad_rank = _rank(J)
     if ad_rank < ad.nq:
         order = np.concatenate([np.flatnonzero(top), np.flatnonzero(~top)])
@@ -104,4 +113,5 @@ def analyse(model: Model) -> StructureReport:
         n_bodies=len(model.bodies), nq=ad.nq, n_topology_rows=int(top.sum()),
         topology_rank=top_rank, dof=dof, n_angles=n_angles, ad_rank=ad_rank,
         redundant=dependent_rows(J, ad.labels),
-        n_tracking_rows=int(mc.masks()["tracking"].sum()), mc_rank=_rank(Jm), nq_mixed=mc.nq)
+        n_tracking_rows=int(mc.masks()["tracking"].sum()), mc_rank=_rank(Jm), nq_mixed=mc.nq,
+        floating=bases)
