@@ -48,7 +48,6 @@ class System:
     model: Model
     layout: Layout
     angle_mode: str
-    A: np.ndarray
     A_flat: np.ndarray
     f0: np.ndarray
     lin_a: np.ndarray
@@ -295,7 +294,6 @@ def compile_system(model: Model, *, angles: str = "driver", track: bool = False)
         model=model,
         layout=layout,
         angle_mode=angles,
-        A=A,
         A_flat=A.reshape(-1, nx),
         f0=f0,
         lin_a=lin_a,
