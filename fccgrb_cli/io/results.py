@@ -18,6 +18,7 @@ Contract (SI units: m, rad, s):
       model_points               frames × markers × 3, same marker order as /reference/markers
       markers_input              frames × markers × 3, the (perturbed) markers the solver saw
       iterations, time_s, phi_norm, phi_top_max, converged   per frame
+      status                     per frame, the optimizer's own message (optimizers only)
       ed, ed_input               frames × markers: distance of each model point to the
                                  reference marker and to the input marker, m
     with inverse dynamics:
@@ -124,6 +125,9 @@ def write_run(path: str | Path, run: Run, command: str, cell: dict | None = None
                 g[key].attrs["names"] = list(r.angle_names)
             for key in ("model_points", "markers_input", "ed", "ed_input"):
                 g.create_dataset(key, data=getattr(run, key), compression="gzip")
+            if r.status:
+                g.create_dataset("status", data=list(r.status),
+                                 dtype=h5py.string_dtype(encoding="utf-8"))
             if run.dynamics is not None:
                 _write_dynamics(g, run)
 

@@ -144,7 +144,7 @@ def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray, *,
 def mixed_result(system: System, time: np.ndarray, q_all: np.ndarray, *, iterations: np.ndarray,
                  seconds: np.ndarray, phi_norm: np.ndarray, phi_top: np.ndarray,
                  converged: np.ndarray, messages: list[str], tol: float, method: str,
-                 wall_s: float = float("nan")) -> KinematicResult:
+                 wall_s: float = float("nan"), status: tuple[str, ...] = ()) -> KinematicResult:
     """The result of any mixed-coordinate method: θ from q, θ̇ and θ̈ by central differences,
     consistent q̇ and q̈, and warnings for angles near 0 or π."""
     n_body = system.layout.n_body_q
@@ -157,7 +157,7 @@ def mixed_result(system: System, time: np.ndarray, q_all: np.ndarray, *, iterati
         theta=theta, theta_d=theta_d, theta_dd=theta_dd, angle_names=system.layout.angle_names,
         iterations=iterations, time_s=seconds, phi_norm=phi_norm, phi_top_max=phi_top,
         converged=converged, messages=tuple(messages + near_singular(
-            theta, system.layout.angle_names, time)), wall_s=wall_s)
+            theta, system.layout.angle_names, time)), wall_s=wall_s, status=status)
 
 
 def near_singular(theta: np.ndarray, names: tuple[str, ...], time: np.ndarray) -> list[str]:

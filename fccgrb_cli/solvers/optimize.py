@@ -152,7 +152,8 @@ def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
         phi_norm=np.array([r.phi_norm for r in records]),
         phi_top=np.array([r.phi_top for r in records]),
         converged=np.array([r.converged for r in records]), messages=messages,
-        tol=settings.tol, method=label, wall_s=wall)
+        tol=settings.tol, method=label, wall_s=wall,
+        status=tuple(r.message for r in records))
 
 
 def _parallel(system: System, time: np.ndarray, targets: np.ndarray, settings: Settings,

@@ -14,7 +14,8 @@ class KinematicResult:
     q, qd, qdd: (frames × nq) system coordinates and their rates (SI); theta, theta_d, theta_dd:
     (frames × n_angles) the angular coordinates (solved MC coordinates, or the AR drivers);
     iterations, time_s, phi_norm (‖Φ‖), phi_top_max (max |topological Φ|), converged: per frame;
-    wall_s: the whole solve's wall-clock time when frames ran in parallel (else NaN).
+    wall_s: the whole solve's wall-clock time when frames ran in parallel (else NaN);
+    status: the optimizer's own message for every frame (optimization methods only).
     """
 
     method: str
@@ -34,6 +35,7 @@ class KinematicResult:
     converged: np.ndarray
     messages: tuple[str, ...] = field(default=())
     wall_s: float = float("nan")
+    status: tuple[str, ...] = field(default=())
 
     @property
     def n_frames(self) -> int:
