@@ -101,3 +101,21 @@ def test_bundled_sample_trials_match_their_models(name: str) -> None:
             f"regenerate: fccgrb synth {model_path.relative_to(ROOT)} -o sample_data/{name}.c3d"
     exact = synthesize(load_model(model_path)).markers
     assert np.abs(read_trial(trial).markers - exact).max() < 1e-6
+
+
+def test_optimizer_runs_keep_every_frame_status(tmp_path: Path) -> None:
+    """/runs/<name>/status: the optimizer's own message for every frame (none for NRM)."""
+    import h5py
+
+    trial, out = tmp_path / "x.c3d", tmp_path / "r.h5"
+    runner = CliRunner()
+    assert runner.invoke(main, ["synth", str(FIVE_BAR), "-o", str(trial),
+                                "--duration", "0.1"]).exit_code == 0
+    for method in ("cno-sqp", "nrm-wls"):
+        result = runner.invoke(main, ["solve", str(FIVE_BAR), str(trial), "--method", method,
+                                      "-o", str(out), "--no-dynamics"])
+        assert result.exit_code == 0, result.output
+    with h5py.File(out, "r") as h5:
+        status = [s.decode() for s in h5["runs/cno-sqp/status"][()]]
+        assert len(status) == 10 and all("success" in s for s in status)
+        assert "status" not in h5["runs/nrm-wls"]
