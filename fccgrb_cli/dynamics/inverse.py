@@ -54,8 +54,9 @@ def inverse_dynamics(system: System, q: np.ndarray, qd: np.ndarray, qdd: np.ndar
     lam = np.zeros((n, system.n_rows))
     kinetic, potential, power, residual = (np.zeros(n) for _ in range(4))
     offsets = {name: layout.x_offset(name) for name in layout.body_names}
+    xs = np.empty((n, layout.nx))
     for f in range(n):
-        x = layout.expand(q[f])
+        x = xs[f] = layout.expand(q[f])
         xd = layout.expand_rate(q[f], qd[f])
         xq = layout.expand_jacobian(q[f])
         xdd = (qdd[f] if xq is None else xq @ qdd[f]) + layout.expand_bias(qd[f])
@@ -71,7 +72,7 @@ def inverse_dynamics(system: System, q: np.ndarray, qd: np.ndarray, qdd: np.ndar
         residual[f] = np.linalg.norm(J.T @ lam[f] - rhs)
         kinetic[f] = 0.5 * xd @ M @ xd
         potential[f] = -g @ x
-    bases, force, moment = _base_wrenches(system, q, lam)
+    bases, force, moment = _base_wrenches(system, xs, lam)
     return InverseDynamics(
         angle_names=tuple(a.name for a in model.angles), row_labels=system.labels, lam=lam,
         joint_moments=lam[:, driver_rows] * np.sin(theta), kinetic=kinetic, potential=potential,
@@ -79,7 +80,7 @@ def inverse_dynamics(system: System, q: np.ndarray, qd: np.ndarray, qdd: np.ndar
         residual_moment=moment)
 
 
-def _base_wrenches(system: System, q: np.ndarray, lam: np.ndarray
+def _base_wrenches(system: System, xs: np.ndarray, lam: np.ndarray
                    ) -> tuple[tuple[str, ...], np.ndarray | None, np.ndarray | None]:
     """Residual force and moment (frames × bases × 3) of every floating base's drivers."""
     rows: dict[str, dict[str, np.ndarray]] = {}
@@ -90,12 +91,12 @@ def _base_wrenches(system: System, q: np.ndarray, lam: np.ndarray
     if not rows:
         return (), None, None
     names = tuple(rows)
-    n = len(q)
+    n = len(xs)
     force = np.zeros((n, len(names), 3))
     moment = np.zeros((n, len(names), 3))
     for b, name in enumerate(names):
         start = system.layout.x_offset(name)
-        x = np.array([system.layout.expand(qf)[start:start + 12] for qf in q]).reshape(n, 4, 3)
+        x = xs[:, start:start + 12].reshape(n, 4, 3)
         force[:, b] = -lam[:, rows[name]["r"]]
         for axis, column in (("u", 1), ("v", 2), ("w", 3)):
             if axis in rows[name]:

@@ -20,9 +20,10 @@ from fccgrb_cli.solvers.result import KinematicResult
 from fccgrb_cli.system import System, compile_system
 
 
-def marker_angles(system: System, targets: np.ndarray) -> np.ndarray:
-    """θ (frames × angles) from fitted segment frames (targets: frames × n_targets × 3)."""
-    out = np.empty((len(targets), len(system.model.angles)))
+def marker_fits(system: System, targets: np.ndarray) -> list[np.ndarray]:
+    """Each frame's q from segment frames fitted to its markers (targets: frames × n_targets
+    × 3); the angles follow as ``system.angles_at(q)``."""
+    fits = []
     for f, y in enumerate(targets):
         if not np.all(np.isfinite(y)):
             missing = [system.model.marker_labels[k]
@@ -30,8 +31,8 @@ def marker_angles(system: System, targets: np.ndarray) -> np.ndarray:
                        if k < len(system.model.marker_labels)]
             raise InputError(f"frame {f}: the angular-driver pre-analysis needs every marker; "
                              f"missing {', '.join(missing)}")
-        out[f] = system.angles_at(initial_guess(system, y))
-    return out
+        fits.append(initial_guess(system, y))
+    return fits
 
 
 def driven_by(model_system: System, time: np.ndarray, theta: np.ndarray, q_guess: np.ndarray, *,
@@ -61,8 +62,8 @@ def solve_baseline(model, time: np.ndarray, targets: np.ndarray, *, cutoff: floa
                    progress: Callable[[int, int], None] | None = None) -> KinematicResult:
     """The baseline AD run on marker targets (frames × n_targets × 3)."""
     fit_system = compile_system(model, angles="coordinate", track=True)
-    fits = [initial_guess(fit_system, y) for y in targets]
-    theta = marker_angles(fit_system, targets)
+    fits = marker_fits(fit_system, targets)
+    theta = np.array([fit_system.angles_at(q) for q in fits])
     ad = compile_system(model, angles="driver")
     n_body = ad.layout.n_body_q
     base = np.array([ad.base_reference(q[:n_body]) for q in fits])

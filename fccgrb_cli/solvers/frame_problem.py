@@ -25,6 +25,7 @@ class FrameProblem:
         self.top = np.flatnonzero(masks["topology"])
         self.trk = np.flatnonzero(masks["tracking"])
         missing = ~np.all(np.isfinite(targets), axis=1)
+        self.missing = missing
         self.active = np.repeat(~missing, 3)
         weights = np.array([1.0 if w is None else w for w in system.trk_weight])
         self.point_weights = np.where(missing, 0.0, weights)

@@ -41,6 +41,18 @@ _EXTRAPOLATION = {1: (1.0,), 2: (2.0, -1.0), 3: (3.0, -3.0, 1.0), 4: (4.0, -6.0,
 HISTORY = 5
 
 
+def without_gaps(weights: np.ndarray, system: System, missing: np.ndarray) -> np.ndarray:
+    """``weights`` with the tracking rows of the missing targets (n_targets booleans) at zero:
+    a marker absent in a frame drops its equations for that frame only."""
+    if not missing.any():
+        return weights
+    out = weights.copy()
+    start = 3 * len(system.lin_a)
+    for k in np.flatnonzero(missing):
+        out[start + 3 * k:start + 3 * k + 3] = 0.0
+    return out
+
+
 def predict(history: list[np.ndarray], warm_start: str, points: int = HISTORY) -> np.ndarray:
     """The next frame's starting point: the previous solution ('previous'), or a polynomial
     extrapolation through the last ``points`` solutions ('extrapolate', fewer while the trial
@@ -72,7 +84,6 @@ def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray, *,
         raise ValueError("solve_nrm needs angles='coordinate' and track=True")
     n, nq = len(time), system.nq
     base_w = row_weights(system, tracking_weight)
-    trk0 = 3 * len(system.lin_a)
     top = system.masks()["topology"]
     q_all = np.zeros((n, nq))
     iterations = np.zeros(n, dtype=int)
@@ -89,11 +100,8 @@ def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray, *,
         started = clock.perf_counter()
         y = targets[f]
         missing = ~np.all(np.isfinite(y), axis=1)
-        w = base_w
+        w = without_gaps(base_w, system, missing)
         if missing.any():
-            w = base_w.copy()
-            for k in np.flatnonzero(missing):
-                w[trk0 + 3 * k:trk0 + 3 * k + 3] = 0.0
             y = np.where(missing[:, None], 0.0, y)
         drive = Drive(ref=y)
         # high-order extrapolation only while the motion is smooth (the last frame converged

@@ -24,7 +24,7 @@ from fccgrb_cli.solvers.frame_problem import FrameProblem
 from fccgrb_cli.solvers.goal import FrameOutcome, solve_goal_frame
 from fccgrb_cli.solvers.initial import initial_guess
 from fccgrb_cli.solvers.newton import gauss_newton
-from fccgrb_cli.solvers.nrm import mixed_result, predict, row_weights, solve_nrm
+from fccgrb_cli.solvers.nrm import mixed_result, predict, row_weights, solve_nrm, without_gaps
 from fccgrb_cli.solvers.result import KinematicResult
 from fccgrb_cli.system import System
 
@@ -71,8 +71,7 @@ def solve_frame(system: System, settings: Settings, q0: np.ndarray, y: np.ndarra
     problem = FrameProblem(system, y)
     out = _optimize(problem, settings, q0)
     if not out.converged:
-        weights = row_weights(system, 1e-3)
-        weights[np.flatnonzero(system.masks()["tracking"])] *= problem.active
+        weights = without_gaps(row_weights(system, 1e-3), system, problem.missing)
         start = gauss_newton(system, q0, problem.drive, weights, settings.tol, 50, "auto")
         retry = _optimize(problem, settings, start.q)
         out = FrameOutcome(retry.q, out.iterations + start.iterations + retry.iterations,
@@ -85,16 +84,19 @@ def solve_frame(system: System, settings: Settings, q0: np.ndarray, y: np.ndarra
 
 
 def _run_frames(system: System, settings: Settings, targets: np.ndarray, frames: list[int],
-                guesses: list[np.ndarray], chained: bool, warm_start: str) -> list[FrameRecord]:
-    """Frames in order; ``chained``: each starts from the previous solution (the first from its
-    own guess), else each from its own guess."""
+                guess: Callable[[int], np.ndarray], chained: bool, warm_start: str,
+                progress: Callable[[int, int], None] | None = None) -> list[FrameRecord]:
+    """Frames in order; ``chained``: each starts from the previous solution (the first, and any
+    after a failure, from ``guess(frame)``), else each from ``guess(frame)``."""
     out: list[FrameRecord] = []
     history: list[np.ndarray] = []
-    for f, guess in zip(frames, guesses, strict=True):
-        q0 = predict(history, warm_start, points=3) if (chained and history) else guess
+    for f in frames:
+        q0 = predict(history, warm_start, points=3) if (chained and history) else guess(f)
         record = solve_frame(system, settings, q0, targets[f])
         out.append(record)
         history = [*history[-2:], record.q] if record.converged else []
+        if progress is not None:
+            progress(len(out), len(frames))
     return out
 
 
@@ -108,8 +110,9 @@ def _install(system: System, targets: np.ndarray, settings: Settings, warm_start
 
 def _work(frames: list[int], guesses: list[np.ndarray], chained: bool) -> list[FrameRecord]:
     w = _WORKER
-    return _run_frames(w["system"], w["settings"], w["targets"], frames, guesses, chained,
-                       w["warm_start"])
+    by_frame = dict(zip(frames, guesses, strict=True))
+    return _run_frames(w["system"], w["settings"], w["targets"], frames, by_frame.__getitem__,
+                       chained, w["warm_start"])
 
 
 @single_threaded
@@ -127,16 +130,10 @@ def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
     label = settings.method + ("-ed" if settings.method.startswith("cno")
                                and settings.objective == "ed" else "")
     if not parallel:
-        records: list[FrameRecord] = []
-        history: list[np.ndarray] = []
-        for f in range(n):
-            q0 = predict(history, warm_start, points=3) if history else (
-                first if f == 0 else initial_guess(system, targets[f]))
-            record = solve_frame(system, settings, q0, targets[f])
-            records.append(record)
-            history = [*history[-2:], record.q] if record.converged else []
-            if progress is not None:
-                progress(f + 1, n)
+        records = _run_frames(
+            system, settings, targets, list(range(n)),
+            lambda f: first if f == 0 else initial_guess(system, targets[f]), True, warm_start,
+            progress)
         wall = float("nan")
     else:
         records = _parallel(system, time, targets, settings, workers or os.cpu_count() or 1,
