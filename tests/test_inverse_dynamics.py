@@ -29,7 +29,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from click.testing import CliRunner
+from cli_helpers import runner
 
 from fccgrb_cli.cli import main
 from fccgrb_cli.dynamics import ExternalLoad, inverse_dynamics
@@ -84,13 +84,6 @@ def mc_solution(name: str, form: str = "full", rate: float = RATE):
 def relative(a: np.ndarray, b: np.ndarray) -> float:
     """max |a − b| / max |b|."""
     return float(np.abs(a - b).max() / np.abs(b).max())
-
-
-def runner() -> CliRunner:
-    try:  # click < 8.2 mixes stderr into stdout unless told not to
-        return CliRunner(mix_stderr=False)  # type: ignore[call-arg]
-    except TypeError:  # click >= 8.2: stdout and stderr are always separate
-        return CliRunner()
 
 
 def fccgrb(*args: object):

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from click.testing import CliRunner
+from cli_helpers import runner
 
 from fccgrb_cli.cli import main
 
@@ -235,13 +235,6 @@ def arguments(command: str, model: Path, tmp_path: Path) -> list[str]:
     if command == "synth":
         return ["synth", str(model), "-o", str(tmp_path / "out.c3d"), *SYNTH_OPTIONS]
     return ["check", str(model)]
-
-
-def runner() -> CliRunner:
-    try:  # click < 8.2 mixes stderr into stdout unless told not to
-        return CliRunner(mix_stderr=False)  # type: ignore[call-arg]
-    except TypeError:  # click >= 8.2: stdout and stderr are always separate
-        return CliRunner()
 
 
 def the_error_line(stderr: str, model: Path, case: Case) -> str:

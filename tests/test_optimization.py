@@ -57,7 +57,7 @@ from typing import ClassVar
 import h5py
 import numpy as np
 import pytest
-from click.testing import CliRunner
+from cli_helpers import runner
 from scipy.linalg import null_space
 
 import fccgrb_cli.solvers.optimize as optimize
@@ -560,13 +560,6 @@ def test_system_pickles_and_solves_in_spawned_workers(monkeypatch):
 
 
 # --- the CLI and the HDF5 contract -------------------------------------------------------------
-def runner() -> CliRunner:
-    try:  # click < 8.2 mixes stderr into stdout unless told not to
-        return CliRunner(mix_stderr=False)  # type: ignore[call-arg]
-    except TypeError:  # click >= 8.2: stdout and stderr are always separate
-        return CliRunner()
-
-
 def fccgrb(*args: object):
     out = runner().invoke(main, [str(a) for a in args])
     assert out.exit_code == 0, (out.output, out.stderr, out.exception)

@@ -35,9 +35,9 @@ import h5py
 import numpy as np
 import pytest
 import yaml
-from click.testing import CliRunner, Result
+from cli_helpers import one_error_line, run_cli
+from click.testing import Result
 
-from fccgrb_cli.cli import main
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.report import collect
 from fccgrb_cli.sweep import Cell, cells_folder, load_sweep
@@ -65,29 +65,10 @@ BASE_COUNT = 6
 # ---- helpers ------------------------------------------------------------------------------
 
 
-def run_cli(*args: object) -> Result:
-    return CliRunner().invoke(main, [str(a) for a in args])
-
-
 def ok(result: Result) -> Result:
     assert result.exit_code == 0, (result.exit_code, result.output, result.exception)
     assert result.exception is None, repr(result.exception)
     return result
-
-
-def one_error_line(result: Result, *fragments: str) -> str:
-    """Exit status 2, one stderr line ``fccgrb: error: …`` holding every fragment, no traceback."""
-    assert result.exit_code == 2, (result.exit_code, result.output, result.exception)
-    assert result.exception is None or isinstance(result.exception, SystemExit), \
-        repr(result.exception)
-    assert "Traceback" not in result.output
-    lines = result.stderr.splitlines()
-    assert len(lines) == 1, result.stderr
-    line = lines[0]
-    assert line.startswith("fccgrb: error: "), line
-    for fragment in fragments:
-        assert fragment in line, (fragment, line)
-    return line
 
 
 def final_counts(result: Result) -> tuple[int, int]:

@@ -28,9 +28,9 @@ import h5py
 import numpy as np
 import pytest
 import yaml
-from click.testing import CliRunner, Result
+from cli_helpers import one_error_line, run_cli
+from click.testing import Result
 
-from fccgrb_cli.cli import main
 from fccgrb_cli.io.trial import read_trial, write_trial
 
 MODELS = Path(__file__).resolve().parents[1] / "configs" / "models"
@@ -48,10 +48,6 @@ SUMMARY_COLUMNS = ("method", "ms/frame", "iter/frame", "mean |Phi|", "max |Phi_t
 # ---- helpers ------------------------------------------------------------------------------
 
 
-def run_cli(*args: object) -> Result:
-    return CliRunner().invoke(main, [str(a) for a in args])
-
-
 def digest(path: Path) -> str | None:
     """SHA-256 of a file's bytes (None when it is absent or not a file)."""
     return hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file() else None
@@ -60,22 +56,6 @@ def digest(path: Path) -> str | None:
 def listing(folder: Path) -> list[str]:
     """Every name in the folder, hidden ones (temporary files) included."""
     return sorted(os.listdir(folder))
-
-
-def one_error_line(result: Result, *fragments: str) -> str:
-    """Exit status 2, one stderr line ``fccgrb: error: …`` holding every fragment, no traceback."""
-    assert result.exit_code == 2, (result.exit_code, result.output, result.exception)
-    assert result.exception is None or isinstance(result.exception, SystemExit), \
-        repr(result.exception)
-    assert "Traceback" not in result.output
-    lines = result.stderr.splitlines()
-    assert len(lines) == 1, result.stderr
-    line = lines[0]
-    assert line.startswith("fccgrb: error: "), line
-    for fragment in fragments:
-        assert fragment in line, (fragment, line)
-    assert "fccgrb: error:" not in result.stdout
-    return line
 
 
 def solved(result: Result) -> None:
