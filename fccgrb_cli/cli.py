@@ -33,11 +33,15 @@ def reports_input_errors(command: Callable) -> Callable:
     return wrapper
 
 
+def load_with_form(path: str, form: str = "model") -> Model:
+    """Load a model and apply a body-form override ('model' keeps the file's forms)."""
+    model = load_model(path)
+    return model if form == "model" else model.with_form(form)
+
+
 def load_checked(path: str, form: str = "model") -> Model:
     """Load a model, apply a body-form override, and check that it determines its coordinates."""
-    model = load_model(path)
-    if form != "model":
-        model = model.with_form(form)
+    model = load_with_form(path, form)
     analyse(model)
     return model
 
@@ -61,9 +65,7 @@ def main() -> None:
 @reports_input_errors
 def check(model: str, form: str) -> None:
     """Validate MODEL and report its coordinates, rank and redundant constraints."""
-    loaded = load_model(model)
-    if form != "model":
-        loaded = loaded.with_form(form)
+    loaded = load_with_form(model, form)
     report = analyse(loaded)
     click.echo(f"{model}: model {loaded.name!r} is valid")
     for line in report.lines():
