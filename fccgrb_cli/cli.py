@@ -274,6 +274,57 @@ def solve(model: str, trial: str, method: str, objective: str, max_iter: int | N
     click.echo(f"wrote run {run.name!r} ({run.result.n_frames} frames) to {output}")
 
 
+def _frame_range(text: str | None) -> tuple[int, int] | None:
+    if text is None:
+        return None
+    parts = text.split(":")
+    if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
+        raise InputError(f"--frames: expected A:B, frame indices from 0 with B excluded "
+                         f"(e.g. 0:100), got {text!r}")
+    return int(parts[0]), int(parts[1])
+
+
+@main.command()
+@click.argument("model")
+@click.argument("trial")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="The personalized model to write (YAML).")
+@click.option("--frames", default=None, metavar="A:B",
+              help="Frame indices used (from 0, B excluded), e.g. a static trial's quiet "
+                   "part or a stretch of a walking trial.  [default: every frame]")
+@click.option("--mass", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Body mass in kg: scales segment inertia (de Leva 1996) and gives moments "
+                   "in N·m/kg. Without it the model has no inertia (kinematics only).")
+@reports_input_errors
+def calibrate(model: str, trial: str, output: str, frames: str | None,
+              mass: float | None) -> None:
+    """Personalize MODEL (a lower-limb template such as configs/models/lower_limb.yaml) from
+    TRIAL's markers: ISB segment frames from the landmarks named in its `calibration` section,
+    hip centres by Harrington et al. (2007), knee and ankle centres between the epicondyles and
+    the malleoli, each marker's local coordinates (mean over the frames), segment lengths and
+    inertia. Writes a model ready for `fccgrb solve`."""
+    from fccgrb_cli.anatomy.calibrate import calibrate as personalize
+    from fccgrb_cli.io.atomic import atomic_path
+    from fccgrb_cli.io.trial import read_trial
+    from fccgrb_cli.model import parse_model
+
+    template = load_model(model)
+    data = read_trial(trial)
+    result = personalize(template, data, _frame_range(frames), mass)
+    personal = parse_model(result.text, output)
+    analyse(personal)
+    with atomic_path(output) as tmp:
+        tmp.write_text(result.text, encoding="utf-8")
+    start, stop = result.frames
+    click.echo(f"wrote {output}: {personal.name} from frame indices {start}:{stop} of {trial}")
+    click.echo(f"pelvis width {1e3 * result.pelvis_width:.0f} mm, depth "
+               f"{1e3 * result.pelvis_depth:.0f} mm; segment lengths (mm): " + ", ".join(
+                   f"{k} {1e3 * v:.0f}" for k, v in result.lengths.items()))
+    if mass is None:
+        click.echo("fccgrb: warning: no --mass: the model has no inertia (inverse dynamics "
+                   "skipped)", err=True)
+
+
 @main.command("perturb")
 @click.argument("source")
 @click.argument("target")

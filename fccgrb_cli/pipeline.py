@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fccgrb_cli.dynamics.contact import MAX_DISTANCE, assign
 from fccgrb_cli.dynamics.convert import Dynamics, classical_dynamics
 from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.errors import InputError
@@ -56,8 +57,6 @@ class Run:
 def match_labels(model: Model, trial: Trial, mapping: dict[str, str]) -> list[str]:
     """The file label each tracked marker follows: the CLI mapping, else the YAML's marker name;
     a file label 'Subject:NAME' matches NAME when NAME itself is absent."""
-    have = set(trial.labels)
-    stripped = {label.split(":")[-1]: label for label in trial.labels}
     unknown = sorted(set(mapping) - set(model.marker_labels))
     if unknown:
         raise InputError(f"--map: expected marker names of the model "
@@ -65,7 +64,7 @@ def match_labels(model: Model, trial: Trial, mapping: dict[str, str]) -> list[st
     out, missing = [], []
     for name in model.marker_labels:
         wanted = mapping.get(name, name)
-        label = wanted if wanted in have else stripped.get(wanted)
+        label = trial.find(wanted)
         if label is None:
             missing.append(wanted)
         out.append(label)
@@ -164,9 +163,11 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
                              f"index {int(result.failed_frames[0])}); inverse dynamics needs "
                              "every frame")
         baseline = method == "ad" and ad_drivers == "markers"
+        contact_points = {body: _body_points(system, result.q, body)
+                          for body in model.contact_bodies}
         solved_dynamics = classical_dynamics(
             model, result, cutoff=None if baseline else filter_cutoff, order=filter_order,
-            loads=plate_loads(model, trial, warnings), tol=tol)
+            loads=plate_loads(model, trial, warnings, contact_points), tol=tol)
     return Run(
         name=name or run_name(result.method, ad_drivers, filter_cutoff, perturb_level_m,
                               perturb_markers),
@@ -200,11 +201,22 @@ def run_name(method: str, ad_drivers: str, cutoff: float | None, level_m: float,
     return "-".join(parts)
 
 
-def plate_loads(model: Model, trial: Trial, warnings: list[str]) -> list[ExternalLoad]:
-    """The force platforms the model assigns to its bodies, as external loads."""
-    if not model.force_plates:
+def _body_points(system: System, q: np.ndarray, body: str) -> np.ndarray:
+    """Positions (frames × points × 3) of every named point of a body along a solution."""
+    which = [(body, name) for name in system.model.body(body).points]
+    return np.array([system.point_positions(qf, which) for qf in q])
+
+
+def plate_loads(model: Model, trial: Trial, warnings: list[str],
+                contact_points: dict[str, np.ndarray] | None = None) -> list[ExternalLoad]:
+    """The trial's force platforms as external loads: those ``loads.force_plates`` assigns to a
+    body, and every other plate's contacts to the nearest of ``loads.contact``'s bodies (whose
+    point positions, frames × points × 3, are ``contact_points``)."""
+    if not model.force_plates and not model.contact_bodies:
         return []
     if not trial.path.lower().endswith(".c3d"):
+        if not model.force_plates:
+            return []
         raise InputError(f"{model.source}: loads.force_plates: expected a C3D trial with force "
                          f"platforms, got {trial.path}")
     from fccgrb_cli.io.forceplates import read_force_plates
@@ -226,7 +238,38 @@ def plate_loads(model: Model, trial: Trial, warnings: list[str]) -> list[Externa
                             f"{model.plate_threshold:g} N in any frame")
         loads.append(ExternalLoad(f"plate{plate.number}", assignment.body, plate.force,
                                   plate.cop, plate.free_moment))
+    assigned = {a.plate for a in model.force_plates}
+    for number, plate in plates.items():
+        if number in assigned or not model.contact_bodies:
+            continue
+        if plate.problem is not None:
+            warnings.append(f"{trial.path}: FORCE_PLATFORM plate {number} ignored: expected "
+                            f"{plate.problem}")
+            continue
+        loads.extend(_contact_loads(plate, contact_points or {}, trial.path, warnings))
     return loads
+
+
+def _contact_loads(plate, contact_points: dict[str, np.ndarray], path: str,
+                   warnings: list[str]) -> list[ExternalLoad]:
+    """One plate's loads, each contact given to the nearest contact body."""
+    loaded = np.abs(plate.force).any(axis=1)
+    mask: dict[str, np.ndarray] = {}
+    for c in assign(loaded, plate.cop, contact_points):
+        if c.body is None:
+            warnings.append(f"{path}: force plate {plate.number}, frame indices {c.start}:"
+                            f"{c.stop}: no contact body within {1e3 * MAX_DISTANCE:.0f} mm of "
+                            f"the centre of pressure (nearest {1e3 * c.distance:.0f} mm); load "
+                            "ignored")
+            continue
+        mask.setdefault(c.body, np.zeros(len(loaded), dtype=bool))[c.start:c.stop] = True
+    out = []
+    for body, frames in mask.items():
+        keep = frames[:, None]
+        name = f"plate{plate.number}" if len(mask) == 1 else f"plate{plate.number}_{body}"
+        out.append(ExternalLoad(name, body, np.where(keep, plate.force, 0.0), plate.cop,
+                                np.where(keep, plate.free_moment, 0.0)))
+    return out
 
 
 def _truth_for(trial: Trial, model: Model) -> Truth | None:

@@ -32,6 +32,12 @@ class Trial:
     def time(self) -> np.ndarray:
         return np.arange(self.n_frames) / self.rate
 
+    def find(self, name: str) -> str | None:
+        """The file label for a marker name: the name itself, else a label 'Subject:NAME'."""
+        if name in self.labels:
+            return name
+        return next((label for label in self.labels if label.split(":")[-1] == name), None)
+
     def select(self, labels: list[str]) -> np.ndarray:
         """The markers with these file labels, in that order (frames × len(labels) × 3)."""
         index = {label: k for k, label in enumerate(self.labels)}

@@ -155,6 +155,13 @@ class AngularCoordinate:
     body2: str
     vector2: str
     motion: Motion | None = None
+    clinical_sign: int | None = None
+
+    def clinical(self, theta: np.ndarray) -> np.ndarray | None:
+        """The clinical angle in degrees, sign·(θ − 90°), or None when none is declared."""
+        if self.clinical_sign is None:
+            return None
+        return self.clinical_sign * (np.degrees(theta) - 90.0)
 
 
 @dataclass(frozen=True)
@@ -204,6 +211,9 @@ class Model:
     tracked_vectors: tuple[TrackedVector, ...] = ()
     force_plates: tuple[PlateAssignment, ...] = ()
     plate_threshold: float = 20.0
+    contact_bodies: tuple[str, ...] = ()
+    subject_mass: float | None = None
+    landmarks: FrozenMap = field(default_factory=FrozenMap)
     source: str = "<model>"
     text: str = ""
 

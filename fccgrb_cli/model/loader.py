@@ -21,6 +21,7 @@ from fccgrb_cli.model.elements import (
     JOINTS_WITH_POINTS,
     AngularCoordinate,
     Body,
+    FrozenMap,
     Ground,
     Inertia,
     Joint,
@@ -39,7 +40,7 @@ UNIT_TOL = 1e-6
 BODY_AXES = {"u": (1.0, 0.0, 0.0), "v": (0.0, 1.0, 0.0), "w": (0.0, 0.0, 1.0)}
 GROUND_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 TOP_KEYS = {"name", "units", "gravity", "form", "ground", "bodies", "joints", "angles", "tracking",
-            "loads"}
+            "loads", "subject", "calibration"}
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
@@ -345,7 +346,7 @@ def _angles(r: _Reader, doc: dict, names: _Names, scale: float) -> tuple[Angular
     for k, spec in enumerate(r.items(doc.get("angles"), "angles")):
         path = f"angles[{k}]"
         spec = r.mapping(spec, path, required=frozenset({"name", "vectors"}),
-                         allowed={"name", "vectors", "motion"})
+                         allowed={"name", "vectors", "motion", "clinical"})
         name = r.string(spec["name"], f"{path}.name")
         if name in seen:
             r.fail(f"{path}.name", "an angle name not used before", name)
@@ -356,8 +357,20 @@ def _angles(r: _Reader, doc: dict, names: _Names, scale: float) -> tuple[Angular
         if body1 == body2:
             r.fail(f"{path}.vectors", "vectors of two different bodies", list(pair))
         motion = _motion(r, spec["motion"], f"{path}.motion", scale) if "motion" in spec else None
-        angles.append(AngularCoordinate(name, body1, vec1, body2, vec2, motion))
+        angles.append(AngularCoordinate(name, body1, vec1, body2, vec2, motion,
+                                        _clinical_sign(r, spec, path)))
     return tuple(angles)
+
+
+def _clinical_sign(r: _Reader, spec: dict, path: str) -> int | None:
+    if "clinical" not in spec:
+        return None
+    clinical = r.mapping(spec["clinical"], f"{path}.clinical", required=frozenset({"sign"}),
+                         allowed={"sign"})
+    sign = clinical["sign"]
+    if isinstance(sign, bool) or sign not in (1, -1):
+        r.fail(f"{path}.clinical.sign", "1 or -1 (clinical angle = sign·(θ − 90 deg))", sign)
+    return int(sign)
 
 
 def _weight(r: _Reader, spec: dict, path: str) -> float | None:
@@ -397,8 +410,10 @@ def _tracking(r: _Reader, doc: dict, names: _Names
     return tuple(points), tuple(vectors)
 
 
-def _loads(r: _Reader, doc: dict, names: _Names) -> tuple[tuple[PlateAssignment, ...], float]:
-    spec = r.mapping(doc.get("loads") or {}, "loads", allowed={"force_plates", "threshold"})
+def _loads(r: _Reader, doc: dict, names: _Names
+           ) -> tuple[tuple[PlateAssignment, ...], float, tuple[str, ...]]:
+    spec = r.mapping(doc.get("loads") or {}, "loads",
+                     allowed={"force_plates", "threshold", "contact"})
     threshold = r.number(spec.get("threshold", 20.0), "loads.threshold")
     if threshold < 0:
         r.fail("loads.threshold", "a non-negative vertical force (N)", threshold)
@@ -417,7 +432,31 @@ def _loads(r: _Reader, doc: dict, names: _Names) -> tuple[tuple[PlateAssignment,
         if body == GROUND:
             r.fail(f"{path}.body", "a moving body", body)
         plates.append(PlateAssignment(plate, body))
-    return tuple(plates), threshold
+    contact = []
+    for k, item in enumerate(r.items(spec.get("contact"), "loads.contact")):
+        path = f"loads.contact[{k}]"
+        body = names.body(r.string(item, path), path)
+        if body == GROUND or body in contact:
+            r.fail(path, "a moving body not listed before", body)
+        contact.append(body)
+    return tuple(plates), threshold, tuple(contact)
+
+
+def _subject_mass(r: _Reader, doc: dict) -> float | None:
+    spec = r.mapping(doc.get("subject") or {}, "subject", allowed={"mass"})
+    if "mass" not in spec:
+        return None
+    mass = r.number(spec["mass"], "subject.mass")
+    if mass <= 0:
+        r.fail("subject.mass", "a positive body mass (kg)", mass)
+    return mass
+
+
+def _calibration(r: _Reader, doc: dict) -> FrozenMap:
+    spec = r.mapping(doc.get("calibration") or {}, "calibration", allowed={"landmarks"})
+    landmarks = r.mapping(spec.get("landmarks") or {}, "calibration.landmarks")
+    return _frozen({r.string(k, "calibration.landmarks"):
+                    r.string(v, f"calibration.landmarks.{k}") for k, v in landmarks.items()})
 
 
 def parse_model(text: str, source: str = "<model>") -> Model:
@@ -441,7 +480,7 @@ def parse_model(text: str, source: str = "<model>") -> Model:
     bodies = _bodies(r, doc)
     names = _Names(r, ground, bodies)
     tracked_points, tracked_vectors = _tracking(r, doc, names)
-    plates, threshold = _loads(r, doc, names)
+    plates, threshold, contact = _loads(r, doc, names)
     return Model(
         name=r.string(doc.get("name", Path(source).stem), "name"),
         gravity=gravity,
@@ -453,6 +492,9 @@ def parse_model(text: str, source: str = "<model>") -> Model:
         tracked_vectors=tracked_vectors,
         force_plates=plates,
         plate_threshold=threshold,
+        contact_bodies=contact,
+        subject_mass=_subject_mass(r, doc),
+        landmarks=_calibration(r, doc),
         source=source,
         text=text,
     )

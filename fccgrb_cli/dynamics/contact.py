@@ -1,0 +1,45 @@
+"""Which foot stands on a force plate: each contact (a run of loaded frames) goes to the contact
+body whose points come closest to the centre of pressure over that contact."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+MAX_DISTANCE = 0.25  # m: a contact farther than this from every contact body is left unassigned
+
+
+@dataclass(frozen=True)
+class Contact:
+    """Frames [start, stop) of one contact, the body it went to (None: no body close enough)
+    and the mean distance (m) from its centre of pressure to that body's nearest point."""
+
+    start: int
+    stop: int
+    body: str | None
+    distance: float
+
+
+def contacts(loaded: np.ndarray) -> list[tuple[int, int]]:
+    """The runs [start, stop) of True in a per-frame boolean array."""
+    edges = np.diff(np.concatenate([[0], loaded.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist(),
+                    strict=True))
+
+
+def assign(loaded: np.ndarray, cop: np.ndarray, bodies: dict[str, np.ndarray],
+           max_distance: float = MAX_DISTANCE) -> list[Contact]:
+    """Assign each contact of a plate (``loaded`` per frame, ``cop`` frames × 3) to the body
+    (``bodies``: name → frames × points × 3) with the smallest mean distance from the centre of
+    pressure to its nearest point."""
+    out = []
+    for start, stop in contacts(loaded):
+        c = cop[start:stop, None, :]
+        distance = {name: float(np.mean(np.min(np.linalg.norm(p[start:stop] - c, axis=2),
+                                               axis=1)))
+                    for name, p in bodies.items()}
+        best = min(distance, key=distance.get)
+        near = distance[best] <= max_distance
+        out.append(Contact(start, stop, best if near else None, distance[best]))
+    return out
