@@ -240,6 +240,7 @@ def solve(model: str, trial: str, method: str, objective: str, max_iter: int | N
     equations, max |topological Φ|, mean and max Euclidean distance (mm) between each tracked
     model point and its reference marker, and the number of frames that did not converge.
     """
+    from fccgrb_cli.clinical import clinical_table
     from fccgrb_cli.io.results import write_run
     from fccgrb_cli.io.trial import read_trial
     from fccgrb_cli.io.truth import truth_path
@@ -270,7 +271,11 @@ def solve(model: str, trial: str, method: str, objective: str, max_iter: int | N
     write_run(output, run, " ".join(["fccgrb", *sys.argv[1:]]))
     for message in (*run.result.messages, *run.warnings):
         click.echo(f"fccgrb: warning: {message}", err=True)
+    for message in run.notes:
+        click.echo(f"fccgrb: {message}", err=True)
     click.echo(format_summary(summary(run)))
+    if run.clinical is not None:
+        click.echo(clinical_table(run.clinical))
     click.echo(f"wrote run {run.name!r} ({run.result.n_frames} frames) to {output}")
 
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fccgrb_cli.clinical import ClinicalResults, clinical_results
 from fccgrb_cli.dynamics.contact import MAX_DISTANCE, assign
 from fccgrb_cli.dynamics.convert import Dynamics, classical_dynamics
 from fccgrb_cli.dynamics.loads import ExternalLoad
@@ -52,6 +53,8 @@ class Run:
     filter_cutoff: float | None = None
     dynamics: Dynamics | None = None
     warnings: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
+    clinical: ClinicalResults | None = None
 
 
 def match_labels(model: Model, trial: Trial, mapping: dict[str, str]) -> list[str]:
@@ -149,6 +152,7 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
     which = [(tp.body, tp.point) for tp in model.tracked_points]
     points = np.array([system.point_positions(q, which) for q in result.q])
     warnings: list[str] = []
+    notes: list[str] = []
     solved_dynamics = None
     failed = len(result.failed_frames)
     if dynamics is None and not model.has_inertia:
@@ -165,9 +169,17 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
         baseline = method == "ad" and ad_drivers == "markers"
         contact_points = {body: _body_points(system, result.q, body)
                           for body in model.contact_bodies}
+        loads = plate_loads(model, trial, warnings, contact_points, notes)
+        if filter_cutoff is not None:
+            loads = [load.lowpassed(trial.rate, filter_cutoff, filter_order) for load in loads]
         solved_dynamics = classical_dynamics(
             model, result, cutoff=None if baseline else filter_cutoff, order=filter_order,
-            loads=plate_loads(model, trial, warnings, contact_points), tol=tol)
+            loads=loads, tol=tol)
+    stance = {}
+    if solved_dynamics is not None:
+        for load in solved_dynamics.loads:
+            on = np.abs(load.force).max(axis=1) >= model.plate_threshold
+            stance[load.body] = stance.get(load.body, np.zeros_like(on)) | on
     return Run(
         name=name or run_name(result.method, ad_drivers, filter_cutoff, perturb_level_m,
                               perturb_markers),
@@ -182,7 +194,10 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
         form=",".join(sorted({b.form for b in model.bodies})),
         model_text=model.text, trial_path=trial.path,
         ad_drivers=ad_drivers if method == "ad" else "", filter_cutoff=filter_cutoff,
-        dynamics=solved_dynamics, warnings=tuple(warnings))
+        dynamics=solved_dynamics, warnings=tuple(warnings), notes=tuple(notes),
+        clinical=clinical_results(
+            model, result.theta,
+            None if solved_dynamics is None else solved_dynamics.inverse.joint_moments, stance))
 
 
 def run_name(method: str, ad_drivers: str, cutoff: float | None, level_m: float,
@@ -208,7 +223,8 @@ def _body_points(system: System, q: np.ndarray, body: str) -> np.ndarray:
 
 
 def plate_loads(model: Model, trial: Trial, warnings: list[str],
-                contact_points: dict[str, np.ndarray] | None = None) -> list[ExternalLoad]:
+                contact_points: dict[str, np.ndarray] | None = None,
+                notes: list[str] | None = None) -> list[ExternalLoad]:
     """The trial's force platforms as external loads: those ``loads.force_plates`` assigns to a
     body, and every other plate's contacts to the nearest of ``loads.contact``'s bodies (whose
     point positions, frames × points × 3, are ``contact_points``)."""
@@ -246,12 +262,13 @@ def plate_loads(model: Model, trial: Trial, warnings: list[str],
             warnings.append(f"{trial.path}: FORCE_PLATFORM plate {number} ignored: expected "
                             f"{plate.problem}")
             continue
-        loads.extend(_contact_loads(plate, contact_points or {}, trial.path, warnings))
+        loads.extend(_contact_loads(plate, contact_points or {}, trial.path, warnings,
+                                    notes if notes is not None else []))
     return loads
 
 
 def _contact_loads(plate, contact_points: dict[str, np.ndarray], path: str,
-                   warnings: list[str]) -> list[ExternalLoad]:
+                   warnings: list[str], notes: list[str]) -> list[ExternalLoad]:
     """One plate's loads, each contact given to the nearest contact body."""
     loaded = np.abs(plate.force).any(axis=1)
     mask: dict[str, np.ndarray] = {}
@@ -262,6 +279,8 @@ def _contact_loads(plate, contact_points: dict[str, np.ndarray], path: str,
                             f"the centre of pressure (nearest {1e3 * c.distance:.0f} mm); load "
                             "ignored")
             continue
+        notes.append(f"force plate {plate.number}, frame indices {c.start}:{c.stop} → {c.body} "
+                     f"(centre of pressure {1e3 * c.distance:.0f} mm from its nearest point)")
         mask.setdefault(c.body, np.zeros(len(loaded), dtype=bool))[c.start:c.stop] = True
     out = []
     for body, frames in mask.items():

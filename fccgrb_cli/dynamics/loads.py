@@ -8,9 +8,11 @@ its global position.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
+
+from fccgrb_cli.filtering import lowpass
 
 
 @dataclass(frozen=True)
@@ -38,3 +40,16 @@ class ExternalLoad:
     def power(self, x_body: np.ndarray, xd_body: np.ndarray, frame: int) -> float:
         """Power of the load: f · (velocity of the body point under it) + n · ω."""
         return float(self.generalized(x_body, frame) @ xd_body)
+
+    def lowpassed(self, rate: float, cutoff: float, order: int = 2) -> ExternalLoad:
+        """The load with force and moment low-passed like the kinematics (the same cutoff keeps
+        impact transients of the ground reaction from meeting smoothed accelerations:
+        Kristianslund et al. 2012, J Biomech 45:666). The point keeps its loaded values and
+        holds the nearest loaded one where the filter spreads the force beyond contact."""
+        loaded = np.flatnonzero(np.abs(self.force).any(axis=1))
+        if loaded.size == 0:
+            return self
+        nearest = loaded[np.abs(np.arange(len(self.force))[:, None] - loaded).argmin(axis=1)]
+        return replace(self, force=lowpass(self.force, rate, cutoff, order),
+                       moment=lowpass(self.moment, rate, cutoff, order),
+                       point=self.point[nearest])

@@ -31,6 +31,11 @@ Contract (SI units: m, rad, s):
                                  base drivers apply (N; N·m about the base origin); attribute
                                  ``bases``
       loads/<name>/force, point, moment, body          external loads used (N, m, N·m)
+    with angles declaring a clinical sign (see fccgrb_cli.clinical):
+      clinical/angles            frames × clinical angles, deg; attribute ``names``
+      clinical/moments           frames × clinical angles, N·m, conjugate to them (with the
+                                 dynamics); clinical/moments_per_kg, N·m/kg (attribute ``mass``)
+      clinical/stance/<body>     per frame, True while a force plate loads that body
 """
 
 from __future__ import annotations
@@ -41,6 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fccgrb_cli.clinical import ClinicalResults
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.atomic import atomic_path
 from fccgrb_cli.pipeline import Run
@@ -130,6 +136,24 @@ def write_run(path: str | Path, run: Run, command: str, cell: dict | None = None
                                  dtype=h5py.string_dtype(encoding="utf-8"))
             if run.dynamics is not None:
                 _write_dynamics(g, run)
+            if run.clinical is not None:
+                _write_clinical(g, run.clinical)
+
+
+def _write_clinical(g, c: ClinicalResults) -> None:
+    out = g.create_group("clinical")
+    out["angles"] = c.angles
+    out["angles"].attrs.update({"names": list(c.names), "units": "deg"})
+    if c.moments is not None:
+        out["moments"] = c.moments
+        out["moments"].attrs.update({"names": list(c.names), "units": "N·m"})
+    if c.moments_per_kg is not None:
+        out["moments_per_kg"] = c.moments_per_kg
+        out["moments_per_kg"].attrs.update({"names": list(c.names), "units": "N·m/kg",
+                                            "mass": c.mass})
+    stance = out.create_group("stance")
+    for body, frames in c.stance.items():
+        stance[body] = frames
 
 
 def _write_dynamics(g, run: Run) -> None:

@@ -1,0 +1,97 @@
+"""Clinical joint angles and moments: every angle declared with a `clinical` sign, as
+sign·(θ − 90°) in degrees, and the joint moment conjugate to it, in N·m and N·m/kg.
+
+The moment conjugate to the clinical angle φ = s(θ − 90°) is s·τ (τ conjugate to θ, paper
+§5): positive is the net internal moment acting towards positive φ (a flexor moment for
+flexion, a dorsiflexor moment for dorsiflexion), as OpenSim reports generalized forces.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fccgrb_cli.model import Model
+
+
+@dataclass(frozen=True)
+class ClinicalResults:
+    """Clinical angles (frames × n, deg), their moments (frames × n, N·m, None without the
+    dynamics), the subject's mass (kg, None when the model has none) and the frames of each
+    contact body's loaded stance (name → boolean per frame)."""
+
+    names: tuple[str, ...]
+    angles: np.ndarray
+    moments: np.ndarray | None
+    mass: float | None
+    stance: dict[str, np.ndarray]
+    contact: tuple[str | None, ...] = ()
+
+    def stance_of(self, k: int) -> np.ndarray | None:
+        """Frames in which a force plate loads the contact body distal to angle k, or None."""
+        body = self.contact[k] if self.contact else None
+        return self.stance.get(body) if body is not None else None
+
+    @property
+    def moments_per_kg(self) -> np.ndarray | None:
+        if self.moments is None or self.mass is None:
+            return None
+        return self.moments / self.mass
+
+
+def clinical_results(model: Model, theta: np.ndarray, joint_moments: np.ndarray | None,
+                     stance: dict[str, np.ndarray] | None = None) -> ClinicalResults | None:
+    """The clinical view of a run (θ: frames × angles in the model's order, rad; moments τ:
+    frames × angles, N·m), or None when no angle declares a clinical sign."""
+    index = [k for k, a in enumerate(model.angles) if a.clinical_sign is not None]
+    if not index:
+        return None
+    signs = np.array([model.angles[k].clinical_sign for k in index], dtype=float)
+    angles = np.column_stack([model.angles[k].clinical(theta[:, k]) for k in index])
+    moments = None if joint_moments is None else joint_moments[:, index] * signs
+    contact = tuple(_distal_contact(model, model.angles[k]) for k in index)
+    return ClinicalResults(tuple(model.angles[k].name for k in index), angles, moments,
+                           model.subject_mass, dict(stance or {}), contact)
+
+
+def _distal_contact(model: Model, angle) -> str | None:
+    """The contact body on the far side of an angle's joint (reached from its second body
+    without crossing its first), or None."""
+    neighbours: dict[str, set[str]] = {}
+    for joint in model.joints:
+        a, b = joint.bodies
+        neighbours.setdefault(a, set()).add(b)
+        neighbours.setdefault(b, set()).add(a)
+    seen, todo = {angle.body1, angle.body2}, [angle.body2]
+    while todo:
+        body = todo.pop()
+        if body in model.contact_bodies:
+            return body
+        todo.extend(n for n in neighbours.get(body, ()) if n not in seen)
+        seen.update(neighbours.get(body, ()))
+    return None
+
+
+def clinical_table(c: ClinicalResults) -> str:
+    """One line per clinical angle: its range (deg) and its moment's extremes (N·m/kg when the
+    subject's mass is known, else N·m) while a force plate loads the foot beyond it (over every
+    frame when none does: moments in stance off the plates lack the ground reaction)."""
+    per_kg = c.moments_per_kg
+    moments, unit = (per_kg, "N·m/kg") if per_kg is not None else (c.moments, "N·m")
+    width = max(len(n) for n in c.names)
+    head = f"{'clinical angle':>{width}}  {'min deg':>8}  {'max deg':>8}"
+    if moments is not None:
+        head += f"  {'min ' + unit:>12}  {'max ' + unit:>12}  {'over':>10}"
+    lines = [head]
+    for k, name in enumerate(c.names):
+        angle = c.angles[:, k]
+        line = f"{name:>{width}}  {np.nanmin(angle):8.1f}  {np.nanmax(angle):8.1f}"
+        if moments is not None:
+            stance = c.stance_of(k)
+            over = stance if stance is not None and stance.any() else slice(None)
+            m = moments[over, k]
+            where = f"{int(stance.sum())} stance" if over is stance else "all"
+            line += f"  {np.nanmin(m):12.2f}  {np.nanmax(m):12.2f}  {where:>10}"
+        lines.append(line)
+    return "\n".join(lines)
