@@ -447,14 +447,18 @@ def report(results: str, fmt: str, table: str | None) -> None:
 
 @main.command()
 @click.argument("results")
-@click.option("--kind", type=click.Choice(["point", "ed", "angle", "velocity"]), default="point",
-              show_default=True,
+@click.option("--kind", type=click.Choice(["point", "ed", "angle", "velocity", "clinical"]),
+              default="point", show_default=True,
               help="point: x, y, z of a marker's model point against the reference (m); ed: its "
                    "Euclidean distance to the reference over time (mm); angle: a joint angle "
                    "against the truth (deg); velocity: a component of the point's velocity "
-                   "(m/s, central differences).")
+                   "(m/s, central differences); clinical: clinical angles (deg) and joint "
+                   "moments (N·m/kg) of both legs, force-plate stances shaded.")
 @click.option("--marker", default=None, help="Model marker name [default: the last tracked].")
-@click.option("--angle", default=None, help="Angle name for --kind angle [default: the first].")
+@click.option("--angle", default=None,
+              help="Angle name for --kind angle [default: the first]; for --kind clinical, "
+                   "comma-separated parts of clinical angle names, e.g. 'hip,knee_flexion' "
+                   "[default: 'flexion', the sagittal angles].")
 @click.option("--axis", type=click.Choice(["x", "y", "z"]), default="x", show_default=True,
               help="Velocity component for --kind velocity.")
 @click.option("--runs", default=None, metavar="NAMES",

@@ -1,6 +1,7 @@
 """Figures of the paper's kinds from a results or sweep file (matplotlib, the 'plots' extra):
 a point's x, y, z per run against the reference (Figs 5–6), its Euclidean distance over time
-(Figs 6d, 8c), a joint angle per run against the truth (Fig 7), a point's velocity (Fig 8b)."""
+(Figs 6d, 8c), a joint angle per run against the truth (Fig 7), a point's velocity (Fig 8b);
+and for gait, clinical angles and moments of both legs with the force-plate stances shaded."""
 
 from __future__ import annotations
 
@@ -12,7 +13,8 @@ import numpy as np
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.atomic import atomic_path
 
-KINDS = ("point", "ed", "angle", "velocity")
+KINDS = ("point", "ed", "angle", "velocity", "clinical")
+SIDES = {"r": ("right", "tab:red"), "l": ("left", "tab:blue")}
 STYLES = ("-", "--", ":", "-.")  # runs that overlap (methods that agree) stay visible
 
 
@@ -26,6 +28,31 @@ class Series:
     theta: np.ndarray
     angle_names: tuple[str, ...]
     truth: np.ndarray | None
+    clinical: Clinical | None = None
+
+
+@dataclass(frozen=True)
+class Clinical:
+    """A run's clinical angles (deg) and moments (per kg when known), and per angle the frames
+    in which a force plate loads the foot beyond the joint (None: no contact body)."""
+
+    names: tuple[str, ...]
+    angles: np.ndarray
+    moments: np.ndarray | None
+    moment_unit: str
+    stance: tuple[np.ndarray | None, ...]
+
+
+def _clinical(run) -> Clinical | None:
+    if "clinical" not in run:
+        return None
+    c = run["clinical"]
+    key = "moments_per_kg" if "moments_per_kg" in c else "moments"
+    moments = c[key][()] if key in c else None
+    stance = tuple(c["stance"][body][()] if body in c["stance"] else None
+                   for body in (str(b) for b in c["angles"].attrs["contact"]))
+    return Clinical(tuple(str(x) for x in c["angles"].attrs["names"]), c["angles"][()],
+                    moments, "N·m/kg" if key == "moments_per_kg" else "N·m", stance)
 
 
 def _series(h5, name: str, run, top) -> Series:
@@ -35,7 +62,7 @@ def _series(h5, name: str, run, top) -> Series:
     n = run["model_points"].shape[0]
     return Series(name, np.arange(n) / rate, run["model_points"][()], ref[()],
                   tuple(str(x) for x in ref.attrs["labels"]), run["theta"][()],
-                  tuple(str(x) for x in run["theta"].attrs["names"]), truth)
+                  tuple(str(x) for x in run["theta"].attrs["names"]), truth, _clinical(run))
 
 
 def load_series(path: Path, wanted: tuple[str, ...]) -> list[Series]:
@@ -64,6 +91,75 @@ def _velocity(points: np.ndarray, time: np.ndarray) -> np.ndarray:
     return np.gradient(points, time, axis=0)
 
 
+def _sided(names: tuple[str, ...], wanted: tuple[str, ...]) -> list[str]:
+    """The joint rows to draw: names without their _r/_l suffix, those containing one of
+    ``wanted`` (default: the sagittal ones, whose names hold 'flexion'), in model order."""
+    stems: list[str] = []
+    for name in names:
+        stem = name[:-2] if name[-2:] in ("_r", "_l") else name
+        if stem not in stems and any(w in stem for w in (wanted or ("flexion",))):
+            stems.append(stem)
+    return stems
+
+
+def draw_clinical(series: list[Series], wanted: tuple[str, ...] = ()):
+    """Clinical angles (left column) and moments (right) of both legs, one row per joint;
+    shaded where a force plate loads that leg's foot (moments off the plates in stance lack
+    the ground reaction)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    runs = [s for s in series if s.clinical is not None]
+    if not runs:
+        raise InputError("--kind clinical: expected runs of a model whose angles declare a "
+                         "clinical sign (e.g. configs/models/lower_limb.yaml)")
+    c0 = runs[0].clinical
+    stems = _sided(c0.names, wanted)
+    if not stems:
+        raise InputError(f"--angle: expected parts of the clinical angle names "
+                         f"({', '.join(c0.names)}), got {', '.join(wanted)}")
+    columns = 2 if c0.moments is not None else 1
+    fig, axes = plt.subplots(len(stems), columns, sharex=True, squeeze=False,
+                             figsize=(5.5 * columns, 2.4 * len(stems) + 0.6))
+    time = runs[0].time
+    for row, stem in enumerate(stems):
+        for side, (word, colour) in SIDES.items():
+            name = f"{stem}_{side}" if f"{stem}_{side}" in c0.names else stem
+            if name not in c0.names:
+                continue
+            k = c0.names.index(name)
+            stance = c0.stance[k]
+            for ax in axes[row]:
+                if stance is not None and stance.any():
+                    ax.fill_between(time, 0, 1, where=stance, color=colour, alpha=0.08,
+                                    transform=ax.get_xaxis_transform(), lw=0)
+            for i, s in enumerate(runs):
+                label = f"{word} ({s.name})" if len(runs) > 1 else word
+                axes[row, 0].plot(s.time, s.clinical.angles[:, k], STYLES[i % 4],
+                                  color=colour, lw=1.3, label=label)
+                if columns == 2:
+                    axes[row, 1].plot(s.time, s.clinical.moments[:, k], STYLES[i % 4],
+                                      color=colour, lw=1.3, label=label)
+        axes[row, 0].set_ylabel(f"{stem.replace('_', ' ')} (deg)")
+        if columns == 2:
+            axes[row, 1].set_ylabel(c0.moment_unit)
+            axes[row, 1].axhline(0, color="k", lw=0.6)
+    for ax in axes.ravel():
+        ax.grid(alpha=0.3)
+    for ax in axes[-1]:
+        ax.set_xlabel("time (s)")
+    axes[0, 0].legend(fontsize=8, loc="best")
+    axes[0, 0].set_title("clinical angle", fontsize=10)
+    if columns == 2:
+        axes[0, 1].set_title("internal joint moment (positive towards a positive angle)",
+                             fontsize=10)
+    fig.suptitle("Shaded: a force plate loads that side's foot", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
 def draw(series: list[Series], kind: str, marker: str | None, angle: str | None,
          axis: str = "x"):
     """A matplotlib figure of one kind."""
@@ -72,6 +168,8 @@ def draw(series: list[Series], kind: str, marker: str | None, angle: str | None,
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    if kind == "clinical":
+        return draw_clinical(series, tuple(a for a in (angle or "").split(",") if a))
     first = series[0]
     if kind in ("point", "ed", "velocity"):
         label = marker or first.labels[-1]

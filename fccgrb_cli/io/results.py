@@ -32,7 +32,8 @@ Contract (SI units: m, rad, s):
                                  ``bases``
       loads/<name>/force, point, moment, body          external loads used (N, m, N·m)
     with angles declaring a clinical sign (see fccgrb_cli.clinical):
-      clinical/angles            frames × clinical angles, deg; attribute ``names``
+      clinical/angles            frames × clinical angles, deg; attributes ``names``,
+                                 ``contact`` (the contact body beyond each joint, or "")
       clinical/moments           frames × clinical angles, N·m, conjugate to them (with the
                                  dynamics); clinical/moments_per_kg, N·m/kg (attribute ``mass``)
       clinical/stance/<body>     per frame, True while a force plate loads that body
@@ -143,7 +144,8 @@ def write_run(path: str | Path, run: Run, command: str, cell: dict | None = None
 def _write_clinical(g, c: ClinicalResults) -> None:
     out = g.create_group("clinical")
     out["angles"] = c.angles
-    out["angles"].attrs.update({"names": list(c.names), "units": "deg"})
+    out["angles"].attrs.update({"names": list(c.names), "units": "deg",
+                                "contact": [b or "" for b in c.contact]})
     if c.moments is not None:
         out["moments"] = c.moments
         out["moments"].attrs.update({"names": list(c.names), "units": "N·m"})
