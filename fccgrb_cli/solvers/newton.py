@@ -51,6 +51,9 @@ def newton_raphson(system: System, q0: np.ndarray, drive: Drive, tol: float,
 
 
 HESSIANS = ("auto", "gauss-newton", "exact")
+# Relative size of the rounding in ΦᵀWΦ: near a solution a full step's decrease falls below it,
+# and an Armijo test that ignored it would shrink converging steps a thousandfold.
+ROUNDING = 1e-12
 
 
 def gauss_newton(system: System, q0: np.ndarray, drive: Drive, weights: np.ndarray, tol: float,
@@ -96,7 +99,7 @@ def gauss_newton(system: System, q0: np.ndarray, drive: Drive, weights: np.ndarr
         trial = q + step
         trial_phi, trial_J = system.evaluate(trial, drive)
         trial_cost = float(trial_phi @ (weights * trial_phi))
-        while trial_cost > cost + 2e-4 * alpha * slope and alpha >= 1e-3:
+        while trial_cost > cost + 2e-4 * alpha * slope + ROUNDING * cost and alpha >= 1e-3:
             alpha *= 0.5
             trial = q + alpha * step
             trial_phi = system.residual(trial, drive)
