@@ -153,6 +153,7 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
     points = np.array([system.point_positions(q, which) for q in result.q])
     warnings: list[str] = []
     notes: list[str] = []
+    stance: dict[str, np.ndarray] = {}
     solved_dynamics = None
     failed = len(result.failed_frames)
     if dynamics is None and not model.has_inertia:
@@ -170,16 +171,14 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
         contact_points = {body: _body_points(system, result.q, body)
                           for body in model.contact_bodies}
         loads = plate_loads(model, trial, warnings, contact_points, notes)
+        for load in loads:
+            on = np.abs(load.force).any(axis=1)
+            stance[load.body] = stance.get(load.body, np.zeros_like(on)) | on
         if filter_cutoff is not None:
             loads = [load.lowpassed(trial.rate, filter_cutoff, filter_order) for load in loads]
         solved_dynamics = classical_dynamics(
             model, result, cutoff=None if baseline else filter_cutoff, order=filter_order,
             loads=loads, tol=tol)
-    stance = {}
-    if solved_dynamics is not None:
-        for load in solved_dynamics.loads:
-            on = np.abs(load.force).max(axis=1) >= model.plate_threshold
-            stance[load.body] = stance.get(load.body, np.zeros_like(on)) | on
     return Run(
         name=name or run_name(result.method, ad_drivers, filter_cutoff, perturb_level_m,
                               perturb_markers),

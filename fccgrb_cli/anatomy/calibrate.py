@@ -103,6 +103,10 @@ def _round(values, digits: int) -> list[float]:
     return [round(float(x), digits) + 0.0 for x in values]
 
 
+def _significant(value: float) -> float:
+    return float(f"{value:.6g}")
+
+
 def _pose(frames: Frames) -> dict:
     axes = frames.axes[0]
     return {"r": _round(frames.origin[0], 6), "u": _round(axes[:, 0], 9),
@@ -112,6 +116,8 @@ def _pose(frames: Frames) -> dict:
 def calibrate(model: Model, trial: Trial, frames: tuple[int, int] | None = None,
               mass: float | None = None) -> Calibration:
     """The template ``model`` personalized from ``trial`` over frame indices [A, B)."""
+    if mass is not None and not (np.isfinite(mass) and mass > 0):
+        raise InputError(f"--mass: expected a positive, finite body mass in kg, got {mass}")
     start, stop = frames if frames is not None else (0, trial.n_frames)
     if not 0 <= start < stop <= trial.n_frames:
         raise InputError(f"--frames: expected A:B with 0 ≤ A < B ≤ {trial.n_frames} (frame "
@@ -146,7 +152,8 @@ def calibrate(model: Model, trial: Trial, frames: tuple[int, int] | None = None,
         vectors[f"shank_{s}"].update(
             knee_axis=knee_axis, knee_anterior=_perpendicular(np.array([1.0, 0.0, 0.0]),
                                                               knee_axis))
-        vectors[f"foot_{s}"].update(ankle_arm=arm, ankle_up=np.cross(ankle_axis, arm))
+        vectors[f"foot_{s}"].update(ankle_arm=arm,
+                                    ankle_up=_perpendicular(np.array([0.0, 1.0, 0.0]), arm))
         lengths.update({f"thigh_{s}": float(np.linalg.norm(knee_local)),
                         f"shank_{s}": float(np.linalg.norm(ankle_local)),
                         f"foot_{s}": float(np.linalg.norm(toes - heel))})
@@ -158,12 +165,12 @@ def calibrate(model: Model, trial: Trial, frames: tuple[int, int] | None = None,
                 segment = name.split("_")[0]
                 m, moments = segment_inertia(segment, mass, lengths[name], long_axis)
                 com = start_point + SEGMENTS[segment].com * origin_to_end
-                inertia[name] = {"mass": round(m, 4), "com": _round(com, 5),
+                inertia[name] = {"mass": _significant(m), "com": _round(com, 5),
                                  "inertia": _round(moments, 7)}
     if mass is not None:
         m, moments = segment_inertia("pelvis", mass, PELVIS_LENGTH_PER_WIDTH * width)
         com = 0.5 * (points["pelvis"]["HJC_r"] + points["pelvis"]["HJC_l"])
-        inertia["pelvis"] = {"mass": round(m, 4), "com": _round(com, 5),
+        inertia["pelvis"] = {"mass": _significant(m), "com": _round(com, 5),
                              "inertia": _round(moments, 7)}
     for tp in model.tracked_points:
         if tp.body in seg:
