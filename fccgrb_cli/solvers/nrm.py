@@ -20,6 +20,7 @@ from fccgrb_cli.solvers.newton import Iterate, gauss_newton
 from fccgrb_cli.solvers.rates import central_derivatives, consistent_rates
 from fccgrb_cli.solvers.result import KinematicResult
 from fccgrb_cli.system import Drive, System
+from fccgrb_cli.system.constraints import floating_bases
 
 NEAR_SINGULAR = np.radians(5.0)
 
@@ -159,7 +160,10 @@ def mixed_result(system: System, time: np.ndarray, q_all: np.ndarray, *, iterati
     theta = q_all[:, n_body:]
     dt = float(time[1] - time[0]) if len(time) > 1 else 1.0
     theta_d, theta_dd = central_derivatives(theta, dt)
-    qd, qdd = consistent_rates(system, q_all, theta_d, theta_dd)
+    columns = np.concatenate([np.arange(n_body)[system.layout.q_slice(b)]
+                              for b in floating_bases(system.model)] or [np.zeros(0, int)])
+    base = (columns, *central_derivatives(q_all[:, columns], dt)) if columns.size else None
+    qd, qdd = consistent_rates(system, q_all, theta_d, theta_dd, base)
     return KinematicResult(
         method=method, tol=tol, time=np.asarray(time, dtype=float), q=q_all, qd=qd, qdd=qdd,
         theta=theta, theta_d=theta_d, theta_dd=theta_dd, angle_names=system.layout.angle_names,

@@ -34,21 +34,28 @@ def central_derivatives(y: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarra
     return d1, d2
 
 
-def consistent_rates(system: System, q: np.ndarray, theta_d: np.ndarray,
-                     theta_dd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def consistent_rates(system: System, q: np.ndarray, theta_d: np.ndarray, theta_dd: np.ndarray,
+                     base: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                     ) -> tuple[np.ndarray, np.ndarray]:
     """q̇, q̈ (frames × nq) of a mixed system given θ̇, θ̈ (frames × n_angles); NaN where the
-    frame or its neighbours were left unsolved."""
+    frame or its neighbours were left unsolved. A floating base's rates are not fixed by the
+    topology: ``base`` = (its coordinates' columns, their q̇ and q̈ by central differences)
+    joins the equations (least squares: the differenced rates need not be exactly rigid)."""
     n_body = system.layout.n_body_q
     top = system.masks()["topology"]
+    columns = base[0] if base is not None else np.zeros(0, dtype=int)
+    select = np.zeros((len(columns), n_body))
+    select[np.arange(len(columns)), columns] = 1.0
     qd, qdd = np.full_like(q, np.nan), np.full_like(q, np.nan)
     for f in range(len(q)):
         if not (np.isfinite(q[f]).all() and np.isfinite(theta_d[f]).all()
                 and np.isfinite(theta_dd[f]).all()):
             continue
         J = system.jacobian(q[f])[top]
-        Jb, Jt = J[:, :n_body], J[:, n_body:]
+        Jb, Jt = np.vstack([J[:, :n_body], select]), J[:, n_body:]
+        base_d, base_dd = (base[1][f], base[2][f]) if base is not None else ((), ())
         qd[f, n_body:], qdd[f, n_body:] = theta_d[f], theta_dd[f]
-        qd[f, :n_body] = linear_solve(Jb, -Jt @ theta_d[f])
+        qd[f, :n_body] = linear_solve(Jb, np.concatenate([-Jt @ theta_d[f], base_d]))
         gamma = system.gamma(q[f], qd[f], Drive())[top]
-        qdd[f, :n_body] = linear_solve(Jb, gamma - Jt @ theta_dd[f])
+        qdd[f, :n_body] = linear_solve(Jb, np.concatenate([gamma - Jt @ theta_dd[f], base_dd]))
     return qd, qdd
