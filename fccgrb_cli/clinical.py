@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fccgrb_cli.model import Model
+from fccgrb_cli.system.constraints import joint_neighbours, reachable
 
 
 @dataclass(frozen=True)
@@ -58,19 +59,8 @@ def clinical_results(model: Model, theta: np.ndarray, joint_moments: np.ndarray 
 def _distal_contact(model: Model, angle) -> str | None:
     """The contact body on the far side of an angle's joint (reached from its second body
     without crossing its first), or None."""
-    neighbours: dict[str, set[str]] = {}
-    for joint in model.joints:
-        a, b = joint.bodies
-        neighbours.setdefault(a, set()).add(b)
-        neighbours.setdefault(b, set()).add(a)
-    seen, todo = {angle.body1, angle.body2}, [angle.body2]
-    while todo:
-        body = todo.pop()
-        if body in model.contact_bodies:
-            return body
-        todo.extend(n for n in neighbours.get(body, ()) if n not in seen)
-        seen.update(neighbours.get(body, ()))
-    return None
+    beyond = reachable(joint_neighbours(model), angle.body2, {angle.body1})
+    return next((body for body in model.contact_bodies if body in beyond), None)
 
 
 def clinical_table(c: ClinicalResults) -> str:

@@ -102,31 +102,39 @@ def tracking(features: FeatureTable, out: ConstraintList, model: Model) -> None:
         slot += 1
 
 
-def floating_bases(model: Model) -> tuple[str, ...]:
-    """The first body of every group of bodies that no chain of joints ties to the ground: a
-    floating base, whose 6 degrees of freedom the markers (MC) or base drivers (AD) determine."""
+def joint_neighbours(model: Model) -> dict[str, set[str]]:
+    """Every body (and the ground) → the bodies a joint connects it to."""
     neighbours: dict[str, set[str]] = {GROUND: set(), **{b.name: set() for b in model.bodies}}
     for j in model.joints:
         a, b = j.bodies
         neighbours[a].add(b)
         neighbours[b].add(a)
-    seen = {GROUND}
-    stack = [GROUND]
+    return neighbours
+
+
+def reachable(neighbours: dict[str, set[str]], start: str, seen: set[str]) -> set[str]:
+    """The bodies reached from ``start`` through joints without entering ``seen`` (updated)."""
+    seen.add(start)
+    reached, stack = {start}, [start]
     while stack:
         for other in neighbours[stack.pop()] - seen:
             seen.add(other)
+            reached.add(other)
             stack.append(other)
+    return reached
+
+
+def floating_bases(model: Model) -> tuple[str, ...]:
+    """The first body of every group of bodies that no chain of joints ties to the ground: a
+    floating base, whose 6 degrees of freedom the markers (MC) or base drivers (AD) determine."""
+    neighbours = joint_neighbours(model)
+    seen: set[str] = set()
+    reachable(neighbours, GROUND, seen)
     bases = []
     for body in model.bodies:
-        if body.name in seen:
-            continue
-        bases.append(body.name)
-        stack = [body.name]
-        seen.add(body.name)
-        while stack:
-            for other in neighbours[stack.pop()] - seen:
-                seen.add(other)
-                stack.append(other)
+        if body.name not in seen:
+            bases.append(body.name)
+            reachable(neighbours, body.name, seen)
     return tuple(bases)
 
 
