@@ -21,6 +21,7 @@ from fccgrb_cli.solvers import KinematicResult, solve_ad
 from fccgrb_cli.solvers.baseline import solve_baseline
 from fccgrb_cli.solvers.nrm import solve_nrm
 from fccgrb_cli.solvers.optimize import Settings, solve_optimization
+from fccgrb_cli.solvers.quality import JUMP, assessed
 from fccgrb_cli.system import System, compile_system
 
 METHODS = ("ad", "nrm-ls", "nrm-wls", "cno-sqp", "cno-ip", "mo-tc", "mo-ed")
@@ -151,7 +152,8 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
                                         progress=progress)
     which = [(tp.body, tp.point) for tp in model.tracked_points]
     points = np.array([system.point_positions(q, which) for q in result.q])
-    warnings: list[str] = []
+    result = assessed(result, points, inputs)
+    warnings: list[str] = _quality_advice(result)
     notes: list[str] = []
     stance: dict[str, np.ndarray] = {}
     solved_dynamics = None
@@ -197,6 +199,17 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
         clinical=clinical_results(
             model, result.theta,
             None if solved_dynamics is None else solved_dynamics.inverse.joint_moments, stance))
+
+
+def _quality_advice(result: KinematicResult) -> list[str]:
+    """What to do about flagged frames, where the method is known to cause them."""
+    jumps = int((result.converged & (result.flags & JUMP > 0)).sum())
+    if not jumps or not result.method.startswith("mo-"):
+        return []
+    return [f"{result.method}: {jumps} of {result.n_frames} frames jump: goal attainment "
+            "minimizes the largest residual only, so on noisy markers its per-frame optimum is "
+            "not unique and successive frames land anywhere on it; its accelerations and joint "
+            "moments are meaningless there. For joint moments use cno-sqp or nrm-wls"]
 
 
 def run_name(method: str, ad_drivers: str, cutoff: float | None, level_m: float,
@@ -334,6 +347,7 @@ def summary(run: Run) -> dict[str, float | str | int]:
         "max ED mm": 1e3 * float(np.nanmax(run.ed[ok])) if ok.any() else float("nan"),
         "jump mm": 1e3 * mean_jump(run.model_points),
         "failed": int((~r.converged).sum()),
+        "flagged": int((r.converged & ~r.trusted).sum()),
     }
     if run.truth_theta is not None:
         err = np.abs(r.theta - run.truth_theta)[ok]

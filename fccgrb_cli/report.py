@@ -29,6 +29,7 @@ METRICS = (
     ("max ED (mm)", None, "{:.3g}"),
     ("jump (mm)", None, "{:.3g}"),
     ("failed frames", None, "{:.0f}"),
+    ("flagged frames", None, "{:.0f}"),
 )
 FAMILY = {"ad": "KA", "nrm": "NRM", "cno": "CNO", "mo": "MO"}
 VARIANT = {"ad": "AD", "ls": "LS", "wls": "WLS", "sqp": "SQP", "ip": "IP", "tc": "TC", "ed": "ED"}
@@ -84,7 +85,8 @@ def _extra(params: dict) -> str:
 
 
 def _row(run, points: str, extra: str = "") -> Row:
-    converged = run["converged"][()]
+    trusted = run["converged"][()]
+    converged = run["solver_converged"][()] if "solver_converged" in run else trusted
     ed = run["ed"][()]
     ok = converged & np.isfinite(ed).all(axis=1)
     time_s = run["time_s"][()]
@@ -102,6 +104,7 @@ def _row(run, points: str, extra: str = "") -> Row:
         "max ED (mm)": 1e3 * float(np.max(ed[ok])) if ok.any() else np.nan,
         "jump (mm)": 1e3 * mean_jump(run["model_points"][()]),
         "failed frames": float((~converged).sum()),
+        "flagged frames": float((converged & ~trusted).sum()),
     }
     family, variant = describe(str(attrs["method"]))
     return Row(family, variant + extra, points, float(attrs["tol"]),

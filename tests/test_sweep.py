@@ -39,7 +39,7 @@ from cli_helpers import one_error_line, run_cli
 from click.testing import Result
 
 from fccgrb_cli.errors import InputError
-from fccgrb_cli.report import collect
+from fccgrb_cli.report import METRICS, collect
 from fccgrb_cli.sweep import Cell, cells_folder, load_sweep
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -51,6 +51,7 @@ SYNTH = {"synth": {"duration": 0.3, "rate": 100}}
 FINAL_LINE = re.compile(r"^wrote (?P<out>.+): (?P<ran>\d+) cells run, (?P<kept>\d+) already done")
 CSV_HEADER = ["table", "method", "variant", "points", "tol", "level", "metric", "ours", "paper"]
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+N_METRICS = len(METRICS)
 
 # The base sweep: the AD baseline with the true angles, NRM LS / WLS at P0 and P30 (rows of the
 # paper's Table 1) and NRM WLS at a tolerance the paper does not have (no paper figures).
@@ -500,7 +501,7 @@ def test_text_table_shows_the_paper_in_brackets(base: tuple[Path, Path]) -> None
 def test_csv_table_has_the_paper_column(base: tuple[Path, Path]) -> None:
     _, out = base
     rows = csv_rows(ok(run_cli("report", out, "--format", "csv")).stdout)
-    assert len(rows) == BASE_COUNT * 8
+    assert len(rows) == BASE_COUNT * N_METRICS
     assert {r["table"] for r in rows} == {"table1"}
     paper = {(r["method"], r["variant"], float(r["tol"]), r["level"]): r
              for r in paper_rows() if r["table"] == "table1"}
@@ -516,24 +517,24 @@ def test_csv_table_has_the_paper_column(base: tuple[Path, Path]) -> None:
         else:
             assert row["paper"] == "", row
             empty += 1
-    assert filled == 5 * 4 and empty == BASE_COUNT * 8 - 20
+    assert filled == 5 * 4 and empty == BASE_COUNT * N_METRICS - 20
     wls = [r for r in rows if (r["method"], r["variant"], r["tol"], r["level"], r["metric"])
            == ("NRM", "WLS", "1e-10", "P0", "ms/frame")]
     assert [r["paper"] for r in wls] == ["8.8"]
     assert [r["points"] for r in wls] == [""]
     unmatched = [r for r in rows if r["tol"] == "1e-08"]
-    assert len(unmatched) == 8 and all(r["paper"] == "" for r in unmatched)
+    assert len(unmatched) == N_METRICS and all(r["paper"] == "" for r in unmatched)
 
 
 def test_markdown_table_is_pipe_tables(base: tuple[Path, Path]) -> None:
     _, out = base
     text = ok(run_cli("report", out, "--format", "markdown")).stdout
     assert "**table1 — ms/frame (ours [paper])**" in text
-    assert text.count("| method | variant | points | tol | P0 | P7.5 | P30 |") == 8
-    assert text.count("|---|---|---|---|---|---|---|") == 8
+    assert text.count("| method | variant | points | tol | P0 | P7.5 | P30 |") == N_METRICS
+    assert text.count("|---|---|---|---|---|---|---|") == N_METRICS
     rows = [line for line in text.splitlines()
             if line.startswith("| NRM | WLS |  | 1e-10 |")]
-    assert len(rows) == 8
+    assert len(rows) == N_METRICS
     assert "[8.8]" in rows[0] and "[4]" in rows[1]
     assert all(line.endswith(" |") for line in rows)
 

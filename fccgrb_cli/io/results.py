@@ -17,7 +17,14 @@ Contract (SI units: m, rad, s):
       theta, theta_d, theta_dd   frames × angles; attribute ``names``
       model_points               frames × markers × 3, same marker order as /reference/markers
       markers_input              frames × markers × 3, the (perturbed) markers the solver saw
-      iterations, time_s, phi_norm, phi_top_max, converged   per frame
+      iterations, time_s, phi_norm, phi_top_max   per frame
+      converged                  per frame: True only where the solver converged AND no quality
+                                 check flagged the frame (a frame on another assembly branch, a
+                                 jump, a broken topology is never counted as converged)
+      solver_converged           per frame, the solver's own verdict
+      flags                      per frame, why it is not trusted: a bit mask whose bits are the
+                                 attributes (unconverged 1, topology 2, jump 4; 0 = trusted;
+                                 see fccgrb_cli/solvers/quality.py)
       status                     per frame, the optimizer's own message (optimizers only)
       ed, ed_input               frames × markers: distance of each model point to the
                                  reference marker and to the input marker, m
@@ -51,6 +58,7 @@ from fccgrb_cli.clinical import ClinicalResults
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.atomic import atomic_path
 from fccgrb_cli.pipeline import Run
+from fccgrb_cli.solvers.quality import BITS
 
 
 def open_results(path: str | Path):
@@ -124,9 +132,12 @@ def write_run(path: str | Path, run: Run, command: str, cell: dict | None = None
                 "ad_drivers": run.ad_drivers, "command": command, "wall_s": r.wall_s,
                 "filter_cutoff_hz": np.nan if run.filter_cutoff is None else run.filter_cutoff,
             })
-            for key in ("q", "qd", "qdd", "iterations", "time_s", "phi_norm", "phi_top_max",
-                        "converged"):
+            for key in ("q", "qd", "qdd", "iterations", "time_s", "phi_norm", "phi_top_max"):
                 g.create_dataset(key, data=getattr(r, key), compression="gzip")
+            g["converged"] = r.trusted
+            g["solver_converged"] = r.converged
+            g["flags"] = r.flags if r.flags is not None else np.zeros(r.n_frames, np.uint8)
+            g["flags"].attrs.update(BITS)
             for key in ("theta", "theta_d", "theta_dd"):
                 g[key] = getattr(r, key)
                 g[key].attrs["names"] = list(r.angle_names)

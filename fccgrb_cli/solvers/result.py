@@ -15,7 +15,9 @@ class KinematicResult:
     (frames × n_angles) the angular coordinates (solved MC coordinates, or the AR drivers);
     iterations, time_s, phi_norm (‖Φ‖), phi_top_max (max |topological Φ|), converged: per frame;
     wall_s: the whole solve's wall-clock time when frames ran in parallel (else NaN);
-    status: the optimizer's own message for every frame (optimization methods only).
+    status: the optimizer's own message for every frame (optimization methods only);
+    flags: per frame, why it is not to be trusted (a bit mask of solvers/quality.py; None until
+    the run is assessed, 0 for a trusted frame).
     """
 
     method: str
@@ -36,6 +38,7 @@ class KinematicResult:
     messages: tuple[str, ...] = field(default=())
     wall_s: float = float("nan")
     status: tuple[str, ...] = field(default=())
+    flags: np.ndarray | None = None
 
     @property
     def n_frames(self) -> int:
@@ -43,4 +46,10 @@ class KinematicResult:
 
     @property
     def failed_frames(self) -> np.ndarray:
+        """Frames the solver did not converge on (or left unsolved)."""
         return np.flatnonzero(~self.converged)
+
+    @property
+    def trusted(self) -> np.ndarray:
+        """Per frame: converged and not flagged by the quality checks."""
+        return self.converged if self.flags is None else self.converged & (self.flags == 0)
