@@ -169,11 +169,14 @@ def format_summary(row: dict) -> str:
                    "frame from the same initial guess (the paper's parallel mode).")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Processes for --parallel [default: the number of CPUs].")
-@click.option("--parallel-init", type=click.Choice(["same", "chunks", "nrm"]), default="same",
+@click.option("--parallel-init", type=click.Choice(["same", "chunks", "nrm"]), default="nrm",
               show_default=True,
-              help="With --parallel: every frame from the same guess (same), contiguous chunks "
-                   "solved sequentially within each worker (chunks), or NRM-WLS positions as "
-                   "each frame's guess (nrm).")
+              help="With --parallel: NRM-WLS positions as each frame's guess (nrm), or "
+                   "contiguous chunks solved sequentially within each worker (chunks); both "
+                   "then re-solve, in order from a trusted neighbour, every frame that failed, "
+                   "jumped or left its neighbours' assembly branch, and give the sequential "
+                   "answer. 'same' is the paper's parallel mode: every frame from the same guess, "
+                   "no re-solve (its wrong frames are flagged).")
 @click.option("--ad-drivers", type=click.Choice(["markers", "truth"]), default="markers",
               show_default=True,
               help="With --method ad: angles from the markers, or the true angles of a trial "

@@ -103,7 +103,7 @@ def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: flo
                 ad_drivers: str = "markers", filter_cutoff: float | None = None,
                 filter_order: int = 2, dynamics: bool | None = None, objective: str = "tc",
                 max_iter: int | None = None, parallel: bool = False, workers: int | None = None,
-                parallel_init: str = "same", truth: Truth | None = None,
+                parallel_init: str = "nrm", truth: Truth | None = None,
                 progress: Callable[[int, int], None] | None = None) -> Run:
     """Solve a trial with one method, then (when the model has inertia, or ``dynamics``) its
     inverse dynamics on the classical model driven by the solved angles."""

@@ -47,8 +47,8 @@ class Cell:
         p = dict(self.params)
         text = json.dumps(p, sort_keys=True, default=str)
         digest = hashlib.sha1(text.encode()).hexdigest()[:8]
-        mode = "par" + ("" if p.get("parallel_init", "same") == "same" else
-                        f"-{p['parallel_init']}") if p.get("parallel") else "seq"
+        init = p.get("parallel_init", "nrm")
+        mode = ("par" + ("" if init == "same" else f"-{init}")) if p.get("parallel") else "seq"
         return (f"{p['method']}_{p.get('objective', 'tc')}_pts{p.get('points', 'all')}_"
                 f"tol{p['tol']:g}_P{p.get('level', 0):g}_{mode}_s{p.get('seed', 0)}_{digest}")
 
@@ -203,7 +203,7 @@ def run_cell(sweep: Sweep, cell: Cell, store: Path) -> Path:
         ad_drivers=p.get("ad_drivers", "markers"), filter_cutoff=p.get("filter_cutoff"),
         dynamics=p.get("dynamics", False), objective=p.get("objective", "tc"),
         parallel=bool(p.get("parallel", False)), workers=p.get("workers"),
-        parallel_init=p.get("parallel_init", "same"), name="run", truth=truth)
+        parallel_init=p.get("parallel_init", "nrm"), name="run", truth=truth)
     write_run(target, run, f"fccgrb sweep {sweep.source} (cell {cell.key})",
               cell=dict(cell.params) | {"sweep": sweep.name, "table": sweep.table})
     return target

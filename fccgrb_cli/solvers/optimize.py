@@ -4,7 +4,10 @@ Sequential: each frame starts from the previous solution (extrapolated, or as it
 from the rigid-fit initializer. Parallel (the paper's §4.2): every frame is solved independently
 from the same initial guess, which the paper found noisy; two remedies are offered: contiguous
 chunks solved sequentially within each worker ('chunks'), or NRM-WLS positions as each frame's
-initial guess ('nrm'). The compiled system reaches each worker once, at its start.
+initial guess ('nrm', the default). After a remedy's parallel pass, every frame the quality
+checks flag (unconverged, a jump, another assembly branch) is re-solved in order from a trusted
+neighbour (:func:`repair`), which gives the sequential answer; 'same' is kept without it, to
+reproduce the paper. The compiled system reaches each worker once, at its start.
 """
 
 from __future__ import annotations
@@ -25,11 +28,13 @@ from fccgrb_cli.solvers.goal import FrameOutcome, solve_goal_frame
 from fccgrb_cli.solvers.initial import initial_guess
 from fccgrb_cli.solvers.newton import gauss_newton
 from fccgrb_cli.solvers.nrm import mixed_result, predict, row_weights, solve_nrm, without_gaps
+from fccgrb_cli.solvers.quality import flags_of
 from fccgrb_cli.solvers.result import KinematicResult
 from fccgrb_cli.system import System
 
 METHODS = ("cno-sqp", "cno-ip", "mo-tc", "mo-ed")
 PARALLEL_INITS = ("same", "chunks", "nrm")
+REJOINED = 1e-6
 
 
 @dataclass(frozen=True)
@@ -118,7 +123,7 @@ def _work(frames: list[int], guesses: list[np.ndarray], chained: bool) -> list[F
 @single_threaded
 def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
                        settings: Settings, *, parallel: bool = False, workers: int | None = None,
-                       init: str = "same", warm_start: str = "extrapolate",
+                       init: str = "nrm", warm_start: str = "extrapolate",
                        nrm_weight: float = 1e-3,
                        progress: Callable[[int, int], None] | None = None) -> KinematicResult:
     """Every frame (targets: frames × n_targets × 3, m, NaN in gaps) with one optimizer."""
@@ -138,10 +143,16 @@ def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
     else:
         records = _parallel(system, time, targets, settings, workers or os.cpu_count() or 1,
                             init, warm_start, nrm_weight, first, progress)
+        resolved = 0 if init == "same" else repair(system, settings, targets, records,
+                                                   warm_start)
         wall = clock.perf_counter() - started
         label += "-parallel" + ("" if init == "same" else f"-{init}")
     messages = [f"frame index {f} (t = {time[f]:.3f} s): {r.message}"
                 for f, r in enumerate(records) if not r.converged]
+    if parallel and init != "same" and resolved:
+        messages.append(f"{label}: {resolved} frames re-solved in order from a trusted "
+                        "neighbour after the parallel pass (frames that failed, jumped or "
+                        "left the branch of their neighbours)")
     return mixed_result(
         system, time, np.array([r.q for r in records]),
         iterations=np.array([r.iterations for r in records]),
@@ -187,3 +198,67 @@ def _parallel(system: System, time: np.ndarray, targets: np.ndarray, settings: S
             if progress is not None:
                 progress(done, n)
     return records
+
+
+def tracked_points(system: System, q: np.ndarray) -> np.ndarray:
+    """The tracked model points (frames × points × 3) along a solution q (frames × nq)."""
+    rows = system.trk_a[: len(system.model.tracked_points)]
+    return np.array([system.features(system.layout.expand(qf))[rows] for qf in q])
+
+
+def objective_value(problem: FrameProblem, settings: Settings, q: np.ndarray) -> float:
+    """What the method minimizes at q: Σ w‖d‖² or Σ w‖d‖ (CNO), the largest weighted
+    component or distance (MO)."""
+    if settings.method.startswith("cno"):
+        return (problem.tc if settings.objective == "tc" else problem.ed)(q)[0]
+    active = problem.point_weights > 0
+    if settings.method == "mo-tc":
+        d = np.abs(problem.residuals(q)[0][active]) / problem.point_weights[active, None]
+    else:
+        d = problem.distances(q)[0][active] / problem.point_weights[active]
+    return float(d.max(initial=0.0))
+
+
+def repair(system: System, settings: Settings, targets: np.ndarray,
+           records: list[FrameRecord], warm_start: str, passes: int = 2) -> int:
+    """Re-solve, in place, the frames a parallel pass got wrong, and say how many solves it took.
+
+    Frames flagged by the quality checks (solvers/quality.py: unconverged, broken topology,
+    a jump) are solved again in order, each from its trusted neighbour's solution, forwards and
+    then backwards; the continuation goes on past the flagged frames while its solutions differ
+    from the stored ones (frames between two jumps sit on another assembly branch without
+    jumping themselves) and fit no worse, and stops where it rejoins them. A flagged frame keeps
+    its first solution when the continued one fits worse (the jump is then the trial's own)."""
+    n = len(records)
+    markers = targets[:, : len(system.model.tracked_points)]
+    resolved = 0
+    for _ in range(passes):
+        bad = flags_of(settings.method, np.array([r.converged for r in records]),
+                       np.array([r.phi_top for r in records]),
+                       tracked_points(system, np.array([r.q for r in records])), markers) != 0
+        if not bad.any() or bad.all():
+            break
+        changed = False
+        for step in (1, -1):
+            for f in range(n) if step == 1 else range(n - 1, -1, -1):
+                if not bad[f] or not 0 <= f - step < n or bad[f - step]:
+                    continue
+                history, g = [records[f - step].q], f
+                while 0 <= g < n:
+                    new, old = solve_frame(system, settings, predict(history, warm_start, 3),
+                                           targets[g]), records[g]
+                    resolved += 1
+                    rejoined = bool(np.abs(new.q - old.q).max() <= REJOINED)
+                    problem = FrameProblem(system, targets[g])
+                    better = objective_value(problem, settings, new.q) <= \
+                        objective_value(problem, settings, old.q) * (1 + 1e-6) + 1e-12
+                    if not new.converged or not (better or not old.converged):
+                        break
+                    records[g], bad[g], changed = new, False, True
+                    if rejoined:
+                        break
+                    history = [*history[-2:], new.q]
+                    g += step
+        if not changed:
+            break
+    return resolved
