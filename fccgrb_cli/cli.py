@@ -165,8 +165,8 @@ def format_summary(row: dict) -> str:
 @click.option("--max-iter", type=click.IntRange(min=1), default=None,
               help="Iteration cap per frame [default: 50 for NRM, 500 for the optimizers].")
 @click.option("--parallel", is_flag=True,
-              help="Optimizers only: solve frames independently over a process pool, every "
-                   "frame from the same initial guess (the paper's parallel mode).")
+              help="Optimizers only: solve frames independently over a process pool (the "
+                   "paper's parallel mode; see --parallel-init).")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Processes for --parallel [default: the number of CPUs].")
 @click.option("--parallel-init", type=click.Choice(["same", "chunks", "nrm"]), default="nrm",
