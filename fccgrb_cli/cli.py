@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import sys
 from collections.abc import Callable
@@ -17,6 +18,11 @@ from fccgrb_cli.progress import Progress
 from fccgrb_cli.system.structure import analyse
 
 FORM = click.Choice(["model", "full", "reduced"])
+ACCEPT_TRUNCATED = click.option(
+    "--accept-truncated", is_flag=True,
+    help="Use a trial whose data end before the last frame its header announces (an "
+         "interrupted copy?) with the frames it holds, and warn (for solves also in the results "
+         "file), instead of stopping with an error.")
 
 
 def reports_input_errors(command: Callable) -> Callable:
@@ -229,6 +235,7 @@ def format_summary(row: dict) -> str:
 @click.option("--skip-unsolvable", is_flag=True,
               help="Report frames whose remaining markers cannot determine the model as "
                    "unsolved and go on, instead of stopping with an error.")
+@ACCEPT_TRUNCATED
 @reports_input_errors
 def solve(model: str, trial: str, method: str, objective: str, max_iter: int | None,
           parallel: bool, workers: int | None, parallel_init: str, ad_drivers: str,
@@ -236,7 +243,7 @@ def solve(model: str, trial: str, method: str, objective: str, max_iter: int | N
           filter_order: int, dynamics: bool | None, output: str, name: str | None, tol: float,
           tracking_weight: float, form: str, track: str | None, maps: tuple[str, ...],
           perturb_mm: float, perturb_markers: str | None, seed: int, warm_start: str,
-          hessian: str, skip_unsolvable: bool) -> None:
+          hessian: str, skip_unsolvable: bool, accept_truncated: bool) -> None:
     """Solve the kinematics of MODEL (YAML) over TRIAL (C3D or TRC markers) and write HDF5.
 
     Prints a one-row summary: ms/frame (positions), iterations/frame, mean ‖Φ‖ over the active
@@ -261,7 +268,7 @@ def solve(model: str, trial: str, method: str, objective: str, max_iter: int | N
             raise InputError(f"--track: expected marker names of {model} "
                              f"({', '.join(loaded.marker_labels)}), got {', '.join(unknown)}")
         loaded = loaded.with_tracked(wanted)
-    data = read_trial(trial)
+    data = read_trial(trial, accept_truncated)
     run = solve_trial(loaded, data, method=method, tol=tol, mapping=_mapping(maps),
                       perturb_level_m=perturb_mm * 1e-3, perturb_markers=_split(perturb_markers),
                       seed=seed, tracking_weight=tracking_weight, warm_start=warm_start,
@@ -303,9 +310,10 @@ def _frame_range(text: str | None) -> tuple[int, int] | None:
 @click.option("--mass", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Body mass in kg: scales segment inertia (de Leva 1996) and gives moments "
                    "in N·m/kg. Without it the model has no inertia (kinematics only).")
+@ACCEPT_TRUNCATED
 @reports_input_errors
 def calibrate(model: str, trial: str, output: str, frames: str | None,
-              mass: float | None) -> None:
+              mass: float | None, accept_truncated: bool) -> None:
     """Personalize MODEL (a lower-limb template such as configs/models/lower_limb.yaml) from
     TRIAL's markers: ISB segment frames from the landmarks named in its `calibration` section,
     hip centres by Harrington et al. (2007), knee and ankle centres between the epicondyles and
@@ -317,7 +325,9 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
     from fccgrb_cli.model import parse_model
 
     template = load_model(model)
-    data = read_trial(trial)
+    data = read_trial(trial, accept_truncated)
+    for message in data.warnings:
+        click.echo(f"fccgrb: warning: {message}", err=True)
     result = personalize(template, data, _frame_range(frames), mass)
     personal = parse_model(result.text, output)
     analyse(personal)
@@ -344,9 +354,10 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
               help="Seed of the perturbation (same seed, same artefact).")
 @click.option("--units", type=click.Choice(["mm", "m"]), default="mm", show_default=True,
               help="Length unit written to TARGET.")
+@ACCEPT_TRUNCATED
 @reports_input_errors
 def perturb_command(source: str, target: str, level_mm: float, markers: str | None, seed: int,
-                    units: str) -> None:
+                    units: str, accept_truncated: bool) -> None:
     """Add a soft-tissue artefact to the markers of SOURCE and write TARGET (.c3d or .trc).
 
     Each perturbed marker and axis gets a seeded sum of sinusoids in the band of human movement
@@ -359,7 +370,9 @@ def perturb_command(source: str, target: str, level_mm: float, markers: str | No
     from fccgrb_cli.io.truth import truth_path
     from fccgrb_cli.perturb import perturb
 
-    data = read_trial(source)
+    data = read_trial(source, accept_truncated)
+    for message in data.warnings:
+        click.echo(f"fccgrb: warning: {message}", err=True)
     only = _split(markers)
     unknown = sorted(set(only) - set(data.labels))
     if unknown:
@@ -390,9 +403,10 @@ def perturb_command(source: str, target: str, level_mm: float, markers: str | No
 @click.option("--fresh", is_flag=True, help="Forget finished cells and run every cell again.")
 @click.option("--format", "fmt", type=click.Choice(["text", "csv", "markdown"]), default="text",
               show_default=True, help="Format of the tables printed at the end.")
+@ACCEPT_TRUNCATED
 @reports_input_errors
 def sweep(config: str, output: str | None, workers: int, scheduler: str | None, fresh: bool,
-          fmt: str) -> None:
+          fmt: str, accept_truncated: bool) -> None:
     """Run a grid of solves (models, trials, methods, tolerances, perturbation levels, seeds,
     tracked-point variants, sequential/parallel) from CONFIG (YAML; see configs/sweeps/), and
     print tables laid out like the paper's Tables 1 and 2 with the paper's figures beside ours."""
@@ -402,6 +416,8 @@ def sweep(config: str, output: str | None, workers: int, scheduler: str | None, 
     from fccgrb_cli.sweep import load_sweep, remove_cells, run_sweep
 
     spec = load_sweep(config)
+    if accept_truncated and "file" in spec.trial:
+        spec = dataclasses.replace(spec, trial=spec.trial | {"accept_truncated": True})
     out = Path(output or f"{spec.name}.h5")
     if fresh:
         remove_cells(out)

@@ -194,7 +194,7 @@ def run_cell(sweep: Sweep, cell: Cell, store: Path) -> Path:
         trial, truth = _synthesized(str(sweep.model), float(spec.get("duration", 3.0)),
                                     float(spec.get("rate", 100.0)), 1e-12)
     else:
-        trial = read_trial(sweep.trial["file"])
+        trial = read_trial(sweep.trial["file"], sweep.trial.get("accept_truncated", False))
     run = solve_trial(
         model, trial, method=p["method"], tol=p["tol"], perturb_level_m=p["level"] * 1e-3,
         perturb_markers=tuple(p.get("perturb_markers") or ()), seed=int(p.get("seed", 0)),

@@ -1,6 +1,11 @@
 """Marker trials in: C3D (ezc3d) and OpenSim TRC; out: TRC. SI (metres) inside.
 
 Gaps are NaN: a C3D point whose residual is negative, or an empty TRC field.
+
+A trial whose data end before the last frame its header announces (a C3D whose bytes hold fewer
+frames than POINT:FRAMES, see ``c3d_header``; a TRC with fewer rows than NumFrames) is an
+InputError naming the file and both counts, unless the caller accepts it: then the frames present
+are read and the trial carries a warning saying so.
 """
 
 from __future__ import annotations
@@ -13,16 +18,19 @@ import numpy as np
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.atomic import atomic_path
 from fccgrb_cli.io.c3d import UNIT_SCALE, write_markers
+from fccgrb_cli.io.c3d_header import TRUNCATED, read_layout
 
 
 @dataclass(frozen=True)
 class Trial:
-    """Marker positions (frames × markers × 3, metres, NaN in gaps) sampled at ``rate`` Hz."""
+    """Marker positions (frames × markers × 3, metres, NaN in gaps) sampled at ``rate`` Hz;
+    ``warnings`` says what the reader let through (a truncated file accepted)."""
 
     path: str
     labels: tuple[str, ...]
     markers: np.ndarray
     rate: float
+    warnings: tuple[str, ...] = ()
 
     @property
     def n_frames(self) -> int:
@@ -52,9 +60,28 @@ def _unit_scale(units: str, path: Path, key: str) -> float:
     return scale
 
 
-def read_c3d(path: Path) -> Trial:
+def _complete(path: Path, announced: str, held: int, accept_truncated: bool) -> tuple[str, ...]:
+    """The data hold fewer frames than announced: an InputError, or (accepted, and some frames
+    held) the warning the trial carries."""
+    if held == 0:
+        raise InputError(f"{path}: {announced}, the data hold none: {TRUNCATED}")
+    if not accept_truncated:
+        raise InputError(f"{path}: {announced}, the data hold {held}: {TRUNCATED}; pass "
+                         f"--accept-truncated to use the {held} frames")
+    return (f"{path}: {announced}, the data hold only {held}: the file is truncated; its first "
+            f"{held} frames were read (--accept-truncated)",)
+
+
+def read_c3d(path: Path, accept_truncated: bool = False) -> Trial:
+    """A C3D trial; its layout is read first, so that a cut file is not read as a short one."""
     import ezc3d
 
+    layout = read_layout(path)
+    warnings: tuple[str, ...] = ()
+    frames = layout.frames
+    if layout.truncated:
+        frames = layout.frames_held
+        warnings = _complete(path, layout.announced(), frames, accept_truncated)
     try:
         c3d = ezc3d.c3d(str(path))
     except Exception as exc:  # ezc3d raises bare RuntimeError/IOError on bad files
@@ -71,13 +98,18 @@ def read_c3d(path: Path) -> Trial:
     residuals = c3d["data"]["meta_points"].get("residuals")
     if residuals is not None and residuals.size:
         xyz[np.transpose(residuals[0], (1, 0)) < 0] = np.nan
-    return Trial(str(path), labels[: xyz.shape[1]], xyz, rate)
+    if xyz.shape[0] != frames:
+        raise InputError(f"{path}: ezc3d read {xyz.shape[0]} frames where the file holds "
+                         f"{frames} ({layout.announced()})")
+    return Trial(str(path), labels[: xyz.shape[1]], xyz, rate, warnings)
 
 
-def read_trc(path: Path) -> Trial:
-    """OpenSim TRC: header line 3 holds DataRate … Units; line 4 the labels; data from line 6."""
+def read_trc(path: Path, accept_truncated: bool = False) -> Trial:
+    """OpenSim TRC: header line 3 holds DataRate … NumFrames … Units; line 4 the labels; data
+    from line 6. A last line without its newline is a cut row when rows are missing."""
     try:
-        lines = path.read_text(encoding="utf-8", errors="strict").splitlines()
+        text = path.read_text(encoding="utf-8", errors="strict")
+        lines = text.splitlines()
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: cannot read the TRC file ({exc.__class__.__name__})") from None
     if len(lines) < 5 or not lines[0].startswith("PathFileType"):
@@ -89,14 +121,24 @@ def read_trc(path: Path) -> Trial:
         n_markers = int(header["NumMarkers"])
     except (KeyError, ValueError):
         raise InputError(f"{path}: lines 2-3: expected DataRate and NumMarkers values") from None
+    try:
+        announced = int(header["NumFrames"]) if header.get("NumFrames") else None
+    except ValueError:
+        raise InputError(f"{path}: line 3: NumFrames: expected a whole number, got "
+                         f"{header['NumFrames']!r}") from None
     scale = _unit_scale(header.get("Units", "mm"), path, "Units")
     names = [n.strip() for n in lines[3].split("\t")[2:]]
     labels = tuple(n for n in names if n)
     if len(labels) != n_markers:
         raise InputError(f"{path}: line 4: expected {n_markers} marker labels (NumMarkers), "
                          f"got {len(labels)}")
+    data = lines[5:]
+    complete = [line for line in data if line.strip()]
+    if announced is not None and len(complete) < announced and not text.endswith("\n") \
+            and complete:
+        data = data[:-1]  # the cut last row: its values may be cut too
     rows = []
-    for number, line in enumerate(lines[5:], start=6):
+    for number, line in enumerate(data, start=6):
         if not line.strip():
             continue
         coords = line.rstrip("\r\n").split("\t")[2:]
@@ -111,14 +153,20 @@ def read_trc(path: Path) -> Trial:
         except ValueError:
             raise InputError(f"{path}: line {number}: expected numbers in every marker column") \
                 from None
+    warnings: tuple[str, ...] = ()
+    if announced is not None and len(rows) < announced:
+        warnings = _complete(path, f"the header announces {announced} frames (NumFrames, line 3)",
+                             len(rows), accept_truncated)
     if not rows:
         raise InputError(f"{path}: expected at least one frame of data after the header")
     xyz = np.array(rows).reshape(len(rows), n_markers, 3) * scale
-    return Trial(str(path), labels, xyz, rate)
+    return Trial(str(path), labels, xyz, rate, warnings)
 
 
-def read_trial(path: str | Path) -> Trial:
-    """Read a C3D or TRC marker file (by its ending)."""
+def read_trial(path: str | Path, accept_truncated: bool = False) -> Trial:
+    """Read a C3D or TRC marker file (by its ending). A file whose data end before the last
+    frame its header announces is an InputError, or with ``accept_truncated`` is read with the
+    frames it holds, the trial's ``warnings`` saying so."""
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: trial file not found")
@@ -126,9 +174,9 @@ def read_trial(path: str | Path) -> Trial:
         raise InputError(f"{path}: expected a trial file, got a folder")
     suffix = path.suffix.lower()
     if suffix == ".trc":
-        return read_trc(path)
+        return read_trc(path, accept_truncated)
     if suffix == ".c3d":
-        return read_c3d(path)
+        return read_c3d(path, accept_truncated)
     raise InputError(f"{path}: expected a .c3d or .trc trial file")
 
 
