@@ -412,12 +412,15 @@ def sweep(config: str, output: str | None, workers: int, scheduler: str | None, 
     print tables laid out like the paper's Tables 1 and 2 with the paper's figures beside ours."""
     import time
 
+    from fccgrb_cli.io.trial import read_trial
     from fccgrb_cli.report import collect, render
     from fccgrb_cli.sweep import load_sweep, remove_cells, run_sweep
 
     spec = load_sweep(config)
-    if accept_truncated and "file" in spec.trial:
-        spec = dataclasses.replace(spec, trial=spec.trial | {"accept_truncated": True})
+    if "file" in spec.trial:  # read once here: a bad trial stops before any cell runs
+        for message in read_trial(spec.trial["file"], accept_truncated).warnings:
+            click.echo(f"fccgrb: warning: {message}", err=True)
+        spec = dataclasses.replace(spec, trial=spec.trial | {"accept_truncated": accept_truncated})
     out = Path(output or f"{spec.name}.h5")
     if fresh:
         remove_cells(out)

@@ -31,6 +31,8 @@ import yaml
 from cli_helpers import one_error_line, run_cli
 from click.testing import Result
 
+from fccgrb_cli.errors import InputError
+from fccgrb_cli.io.c3d_header import decode_floats, read_layout
 from fccgrb_cli.io.trial import read_trial, write_trial
 
 MODELS = Path(__file__).resolve().parents[1] / "configs" / "models"
@@ -603,3 +605,404 @@ def test_fp_type1_c3d() -> None:
     assert 0.1 < np.nanmedian(norms) < 2.5
     assert np.nanmax(norms) < 5.0
     assert digest(path) == before
+
+
+# ---- truncated trials ---------------------------------------------------------------------
+#
+# A copy interrupted in the data section must not read as a shorter trial. The expected frame
+# counts come from outside fccgrb_cli.io.c3d_header: ezc3d's own reading of POINT:DATA_START and
+# of the cut files (it reads the whole frames present), and the frame size the C3D format gives
+# (4 words per point, then the analog values; 4 bytes a word in float files, 2 in integer ones).
+
+POINT_BYTES = 4 * 4  # x, y, z, residual as 32-bit floats
+
+
+def data_start_byte(path: Path) -> int:
+    """Where the data start, as ezc3d reads POINT:DATA_START (1-based 512-byte blocks)."""
+    return (int(ezc3d.c3d(str(path))["parameters"]["POINT"]["DATA_START"]["value"][0]) - 1) * 512
+
+
+def cut(source: Path | bytes, target: Path, size: int) -> Path:
+    raw = source if isinstance(source, bytes) else source.read_bytes()
+    target.write_bytes(raw[:size])
+    return target
+
+
+def ezc3d_frames(path: Path) -> int:
+    return ezc3d.c3d(str(path))["data"]["points"].shape[2]
+
+
+def input_error(path: Path, accept_truncated: bool = False) -> str:
+    """read_trial's InputError message (one line)."""
+    with pytest.raises(InputError) as caught:
+        read_trial(path, accept_truncated)
+    message = str(caught.value)
+    assert "\n" not in message and str(path) in message, message
+    return message
+
+
+@pytest.fixture(scope="module")
+def five_bar_300(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """``fccgrb synth five_bar.yaml`` with its defaults: 300 frames (1–300) at 100 Hz, 9 markers."""
+    path = tmp_path_factory.mktemp("synth300") / "x.c3d"
+    solved(run_cli("synth", FIVE_BAR, "-o", path))
+    return path
+
+
+def test_copy_cut_at_byte_5000_is_one_line_naming_both_counts(five_bar_300: Path,
+                                                               tmp_path: Path) -> None:
+    held = (5000 - data_start_byte(five_bar_300)) // (9 * POINT_BYTES)
+    assert held == 24
+    trial = cut(five_bar_300, tmp_path / "cut.c3d", 5000)
+    assert ezc3d_frames(trial) == held  # what ezc3d alone makes of it: a 24-frame trial
+    before, names = digest(trial), listing(tmp_path)
+    out = tmp_path / "out.h5"
+    result = run_cli("solve", FIVE_BAR, trial, "-o", out)
+    one_error_line(result, str(trial), "announces 300 frames (1–300)", "the data hold 24:",
+                   "truncated", "--accept-truncated")
+    assert result.stdout == ""
+    assert not out.exists()
+    assert listing(tmp_path) == names
+    assert digest(trial) == before
+
+
+def test_copy_cut_at_byte_5000_accepted_warns_in_summary_and_results(
+        five_bar_300: Path, trials: dict[str, Synth], tmp_path: Path) -> None:
+    trial = cut(five_bar_300, tmp_path / "cut.c3d", 5000)
+    out = tmp_path / "out.h5"
+    result = run_cli("solve", FIVE_BAR, trial, "-o", out, "--accept-truncated")
+    solved(result)
+    warnings = [line for line in result.stderr.splitlines() if "truncated" in line]
+    assert len(warnings) == 1 and warnings[0].startswith("fccgrb: warning: "), result.stderr
+    assert all(f in warnings[0] for f in (str(trial), "300 frames (1–300)", "only 24")), warnings
+    assert "(24 frames)" in result.stdout
+    with h5py.File(out, "r") as h5:
+        run = h5["runs/nrm-wls"]
+        stored = [str(w) for w in run.attrs["warnings"]]
+        inputs = run["markers_input"][()]
+    assert stored == [warnings[0].removeprefix("fccgrb: warning: ")]
+    # the frames present, the first 24 of the complete file
+    np.testing.assert_array_equal(inputs, read_trial(five_bar_300).markers[:24])
+    # a complete trial stores no warning
+    solved(run_cli("solve", PENDULUM, trials["pendulum"].path, "-o", tmp_path / "full.h5"))
+    with h5py.File(tmp_path / "full.h5", "r") as h5:
+        assert h5["runs/nrm-wls"].attrs["warnings"].shape == (0,)
+
+
+def test_every_cut_in_the_data_section_is_detected(five_bar_300: Path, tmp_path: Path) -> None:
+    raw = five_bar_300.read_bytes()
+    start, frame = data_start_byte(five_bar_300), 9 * POINT_BYTES
+    end = start + 300 * frame
+    assert end <= len(raw) < end + 512  # the data, then the last block's padding
+    full = read_trial(five_bar_300).markers
+    rng = np.random.default_rng(12)
+    sizes = {start + k * frame + r for k in (0, 1, 2, 150, 299) for r in (0, 1, frame - 1)}
+    sizes |= set(rng.integers(start, end, 60).tolist())
+    for size in sorted(sizes):
+        held = (size - start) // frame
+        path = cut(raw, tmp_path / f"cut{size}.c3d", size)
+        message = input_error(path)
+        assert "announces 300 frames (1–300)" in message and "truncated" in message, message
+        if held == 0:
+            assert "the data hold none" in message, message
+            input_error(path, accept_truncated=True)  # nothing to read, even when accepted
+            continue
+        assert f"the data hold {held}:" in message and "--accept-truncated" in message, message
+        trial = read_trial(path, accept_truncated=True)
+        assert trial.n_frames == held == ezc3d_frames(path)
+        assert len(trial.warnings) == 1 and f"only {held}" in trial.warnings[0]
+        np.testing.assert_array_equal(trial.markers, full[:held])
+    for size in (end, end + 1, len(raw) - 1, len(raw)):  # all 300 frames there: complete
+        trial = read_trial(cut(raw, tmp_path / f"whole{size}.c3d", size))
+        assert trial.n_frames == 300 and trial.warnings == ()
+
+
+def test_every_cut_in_the_header_or_parameters_is_one_line(five_bar_300: Path,
+                                                           tmp_path: Path) -> None:
+    raw = five_bar_300.read_bytes()
+    start = data_start_byte(five_bar_300)
+    assert raw[0] == 2 and start == 3 * 512  # the header, two parameter blocks, the data
+    path = tmp_path / "cut.c3d"
+    for size in range(1, start):
+        message = input_error(cut(raw, path, size))
+        where = ("inside its 512-byte header" if size < 512 else
+                 "before its parameter section (byte 512)" if size == 512 else
+                 "inside its parameter section's header (bytes 512–515)" if size < 516 else
+                 "inside its parameter section (bytes 512–1535)")
+        assert f"ends at byte {size}, {where}" in message, message
+        assert "300 frames (1–300)" in message or size < 516
+        assert "truncated" in message
+    assert "not a readable C3D file" in input_error(cut(raw, path, 0))
+    for size in (100, 1000):
+        one_error_line(run_cli("solve", FIVE_BAR, cut(raw, path, size), "-o", tmp_path / "o.h5"),
+                       str(path), f"ends at byte {size}", "truncated")
+        one_error_line(run_cli("solve", FIVE_BAR, path, "-o", tmp_path / "o.h5",
+                               "--accept-truncated"), str(path), "truncated")
+    assert not (tmp_path / "o.h5").exists()
+
+
+def test_damaged_header_or_parameters_give_an_input_error_or_a_layout(five_bar_300: Path,
+                                                                      tmp_path: Path) -> None:
+    """Bytes changed at random in the header and parameter section: never a crash (IndexError,
+    struct.error, …), either a layout or one line."""
+    raw = bytearray(five_bar_300.read_bytes())
+    rng = np.random.default_rng(5)
+    path = tmp_path / "damaged.c3d"
+    for _ in range(300):
+        damaged = raw.copy()
+        for at in rng.integers(0, 1536, rng.integers(1, 5)):
+            damaged[at] = int(rng.integers(0, 256))
+        path.write_bytes(bytes(damaged[: int(rng.integers(1, len(raw)))]))
+        try:
+            read_layout(path)
+        except InputError as exc:
+            assert "\n" not in str(exc) and str(path) in str(exc)
+
+
+def analog_trial(path: Path, frames: int = 50) -> Path:
+    """An ezc3d file with 3 points and 2 analog channels at 10 samples per frame."""
+    rng = np.random.default_rng(3)
+    c3d = ezc3d.c3d()
+    c3d["parameters"]["POINT"]["RATE"]["value"] = [100.0]
+    c3d["parameters"]["POINT"]["LABELS"]["value"] = ["A", "B", "C"]
+    c3d["parameters"]["ANALOG"]["RATE"]["value"] = [1000.0]
+    c3d["parameters"]["ANALOG"]["LABELS"]["value"] = ["E1", "E2"]
+    points = np.ones((4, 3, frames))
+    points[:3] = rng.uniform(-1000, 1000, (3, 3, frames))
+    c3d["data"]["points"] = points
+    c3d["data"]["analogs"] = rng.uniform(-1, 1, (1, 2, 10 * frames))
+    c3d.write(str(path))
+    return path
+
+
+def analog_values_per_frame(path: Path) -> int:
+    """Channels × samples per frame, from ezc3d's analog array (1 × channels × samples)."""
+    c3d = ezc3d.c3d(str(path))
+    analogs, frames = c3d["data"]["analogs"], c3d["data"]["points"].shape[2]
+    return analogs.shape[1] * analogs.shape[2] // frames
+
+
+@pytest.mark.parametrize("name", ["analog", "Qualisys.c3d", "FP_Type1.c3d"])
+def test_files_with_analog_data_complete_and_cut(name: str, tmp_path: Path) -> None:
+    source = analog_trial(tmp_path / "a.c3d") if name == "analog" else shared_c3d(name)
+    frames, points = ezc3d_frames(source), ezc3d.c3d(str(source))["data"]["points"].shape[1]
+    frame = (4 * points + analog_values_per_frame(source)) * 4
+    if name == "analog":
+        assert frame == (4 * 3 + 20) * 4
+    layout = read_layout(source)
+    assert (layout.frames, layout.frame_bytes, layout.truncated) == (frames, frame, False)
+    assert read_trial(source).warnings == ()
+    start = data_start_byte(source)
+    for k, r in ((1, 0), (frames // 3, 7), (frames - 1, frame - 1)):
+        path = cut(source, tmp_path / "cut.c3d", start + k * frame + r)
+        assert ezc3d_frames(path) == k
+        message = input_error(path)
+        assert f"announces {frames} frames" in message and f"the data hold {k}:" in message
+        assert read_trial(path, accept_truncated=True).n_frames == k
+
+
+# C3D files as DEC and MIPS processors and integer data write them, recoded from an ezc3d file
+# (Intel, floats) with the record layout of the C3D User Guide; ezc3d reads DEC and integer
+# files back (MIPS it refuses), which checks the recoding.
+
+PROCESSOR_BYTE = {"Intel": 84, "DEC": 85, "MIPS": 86}
+
+
+def int8(byte: int) -> int:
+    """A byte read as a signed 8-bit integer."""
+    return byte - 256 if byte > 127 else byte
+
+
+def float_bytes(values: np.ndarray, processor: str) -> bytes:
+    values = np.asarray(values, dtype=float)
+    if processor == "MIPS":
+        return values.astype(">f4").tobytes()
+    if processor == "Intel":
+        return values.astype("<f4").tobytes()
+    # VAX F: the IEEE bits of 4 × value (exponent bias 128, hidden bit ½) in swapped 16-bit words
+    ieee = np.frombuffer((4.0 * values).astype("<f4").tobytes(), np.uint8).reshape(-1, 4)
+    return ieee[:, [2, 3, 0, 1]].tobytes()
+
+
+def recoded(raw: bytes, processor: str, points: int, frames: int,
+            integer_scale: float | None = None) -> bytes:
+    """An Intel float C3D rewritten for ``processor``, with 16-bit integer data scaled by
+    ``integer_scale`` when given (residual word 0, or -1 for a gap)."""
+    words = ">i2" if processor == "MIPS" else "<i2"
+    out = bytearray(raw)
+    for at in (2, 4, 6, 8, 10, 16, 18):  # header words
+        out[at:at + 2] = np.frombuffer(raw[at:at + 2], "<u2").astype(words.replace("i", "u"))\
+            .tobytes()
+    for at in (12, 20):  # header floats: scale, rate
+        value = np.frombuffer(raw[at:at + 4], "<f4")
+        if at == 12 and integer_scale is not None:
+            value = np.array([integer_scale])
+        out[at:at + 4] = float_bytes(value, processor)
+    section = (raw[0] - 1) * 512
+    out[section + 3] = PROCESSOR_BYTE[processor]
+    pos, groups = section + 4, {}
+    while True:  # group and parameter records: name length, id, name, offset to the next, …
+        length, group = abs(int8(raw[pos])), int8(raw[pos + 1])
+        if length == 0:
+            break
+        name = raw[pos + 2:pos + 2 + length].decode()
+        at = pos + 2 + length
+        offset = int(np.frombuffer(raw[at:at + 2], "<i2")[0])
+        out[at:at + 2] = np.array([offset]).astype(words).tobytes()
+        if group < 0:
+            groups[-group] = name
+        else:
+            kind, n_dims = int8(raw[at + 2]), raw[at + 3]
+            data = at + 4 + n_dims
+            count = int(np.prod(list(raw[at + 4:data]))) if n_dims else 1
+            if kind == 2:
+                values = np.frombuffer(raw[data:data + 2 * count], "<i2")
+                out[data:data + 2 * count] = values.astype(words).tobytes()
+            elif kind == 4:
+                values = np.frombuffer(raw[data:data + 4 * count], "<f4")
+                if (groups[group], name) == ("POINT", "SCALE") and integer_scale is not None:
+                    values = np.array([integer_scale])
+                out[data:data + 4 * count] = float_bytes(values, processor)
+        if offset == 0:
+            break
+        pos = at + offset
+    start = (int(np.frombuffer(raw[16:18], "<u2")[0]) - 1) * 512
+    data = np.frombuffer(raw[start:start + frames * points * 16], "<f4").reshape(-1, 4)
+    if integer_scale is None:
+        out[start:start + data.size * 4] = float_bytes(data, processor)
+        return bytes(out)
+    ints = np.round(data / integer_scale).astype(int)
+    ints[:, 3] = np.where(data[:, 3] < 0, -1, 0)
+    body = ints.astype(words).tobytes()
+    body += bytes(-len(body) % 512)
+    return bytes(out[:start]) + body
+
+
+FORMATS = [("Intel", None), ("DEC", None), ("MIPS", None), ("Intel", 0.1), ("DEC", 0.1),
+           ("MIPS", 0.1)]  # 0.1 mm: the five-bar's ±1.5 m stay inside 16 bits
+
+
+@pytest.mark.parametrize(("processor", "scale"), FORMATS,
+                         ids=[f"{p}-{'int' if s else 'float'}" for p, s in FORMATS])
+def test_processor_types_and_integer_data(trials: dict[str, Synth], tmp_path: Path,
+                                          processor: str, scale: float | None) -> None:
+    synth = trials["five_bar"]
+    raw = recoded(synth.path.read_bytes(), processor, 9, 100, scale)
+    path = tmp_path / "recoded.c3d"
+    path.write_bytes(raw)
+    layout = read_layout(path)
+    frame = 9 * 4 * (2 if scale else 4)
+    assert (layout.processor, layout.float_data, layout.points, layout.frames,
+            layout.frame_bytes, layout.truncated) == (processor, scale is None, 9, 100, frame,
+                                                      False)
+    start = data_start_byte(synth.path)
+    if processor != "MIPS":  # ezc3d reads the recoded file back as the original (mm → m)
+        trial = read_trial(path)
+        np.testing.assert_allclose(trial.markers, synth.markers, rtol=0,
+                                   atol=1e-12 if scale is None else 0.51 * scale * 1e-3)
+    for held in (1, 40, 99):
+        size = start + held * frame + frame // 2
+        message = input_error(cut(raw, tmp_path / "cut.c3d", size))
+        assert "announces 100 frames (1–100)" in message and f"the data hold {held}:" in message
+        if processor != "MIPS":
+            assert ezc3d_frames(tmp_path / "cut.c3d") == held
+
+
+def test_dec_and_mips_floats_decode_known_values() -> None:
+    """VAX F 1.0 is the longword 0x00004080 (bytes 80 40 00 00); −2.5 is 20 C1 00 00."""
+    dec = decode_floats(bytes([0x80, 0x40, 0, 0, 0x20, 0xC1, 0, 0, 0, 0, 0, 0]), "DEC")
+    np.testing.assert_array_equal(dec, [1.0, -2.5, 0.0])
+    np.testing.assert_array_equal(decode_floats(bytes([0x3F, 0x80, 0, 0]), "MIPS"), [1.0])
+    np.testing.assert_array_equal(decode_floats(bytes([0, 0, 0x80, 0x3F]), "Intel"), [1.0])
+
+
+def test_more_than_65535_frames(tmp_path: Path) -> None:
+    """ezc3d writes POINT:FRAMES 65535 (-1) past 65535 frames and reads 65535 back: without
+    TRIAL or LONG_FRAMES the count is lost (one line); with them, the count is known, a cut is
+    detected, and ezc3d dropping frames is an error, not a shorter trial."""
+    n = 70000
+    c3d = ezc3d.c3d()
+    c3d["parameters"]["POINT"]["RATE"]["value"] = [100.0]
+    c3d["parameters"]["POINT"]["LABELS"]["value"] = ["A"]
+    points = np.ones((4, 1, n))
+    points[0, 0] = np.arange(n)
+    c3d["data"]["points"] = points
+    bare = tmp_path / "bare.c3d"
+    c3d.write(str(bare))
+    message = input_error(bare)
+    assert "65535" in message and "split the trial" in message
+    c3d.add_parameter("TRIAL", "ACTUAL_START_FIELD", [1, 0])
+    c3d.add_parameter("TRIAL", "ACTUAL_END_FIELD", [n - 65536, 1])  # low word, high word
+    trial = tmp_path / "trial.c3d"
+    c3d.write(str(trial))
+    layout = read_layout(trial)
+    assert (layout.frames, layout.first_frame, layout.last_frame) == (n, 1, n)
+    assert not layout.truncated
+    assert f"ezc3d read 65535 frames where the file holds {n}" in input_error(trial)
+    start = data_start_byte(trial)
+    message = input_error(cut(trial, tmp_path / "cut.c3d", start + 40000 * 16 + 5))
+    assert f"announces {n} frames (1–{n})" in message and "the data hold 40000:" in message
+    c3d.add_parameter("POINT", "LONG_FRAMES", [float(n - 1)])  # wins over TRIAL
+    long = tmp_path / "long.c3d"
+    c3d.write(str(long))
+    assert read_layout(long).frames == n - 1
+
+
+# ---- truncated TRC ------------------------------------------------------------------------
+
+
+def test_trc_with_fewer_rows_than_num_frames(trials: dict[str, Synth], tmp_path: Path) -> None:
+    synth = trials["pendulum"]
+    text = "\n".join(trc_lines(tmp_path, synth))
+    header, rows = 6, text.split("\n")[6:]
+    assert text.split("\n")[2].split("\t")[2] == "100"  # NumFrames
+    path = tmp_path / "short.trc"
+    # whole rows missing (the copy stopped at a line end)
+    path.write_text("\n".join(text.split("\n")[:header + 60]) + "\n", encoding="utf-8")
+    message = input_error(path)
+    assert "announces 100 frames (NumFrames" in message and "the data hold 60:" in message
+    assert read_trial(path, accept_truncated=True).n_frames == 60
+    # a cut inside the last field of row 50: that row's last value would be wrong, it is dropped
+    cut_at = len("\n".join(text.split("\n")[:header + 50])) - 2
+    assert rows[49][-3:].strip("\t").replace(".", "").isdigit()
+    path.write_text(text[:cut_at], encoding="utf-8")
+    assert "the data hold 49:" in input_error(path)
+    trial = read_trial(path, accept_truncated=True)
+    assert trial.n_frames == 49 and len(trial.warnings) == 1
+    np.testing.assert_allclose(trial.markers, synth.markers[:49], rtol=6e-9, atol=1e-300)
+    one_error_line(run_cli("solve", PENDULUM, path, "-o", tmp_path / "o.h5"), str(path),
+                   "100 frames", "the data hold 49:", "--accept-truncated")
+    complete = tmp_path / "complete.trc"
+    complete.write_text(text, encoding="utf-8")
+    assert read_trial(complete).warnings == ()
+
+
+# ---- the other commands that read trials --------------------------------------------------
+
+
+def test_perturb_calibrate_and_sweep_refuse_a_cut_trial_unless_told(five_bar_300: Path,
+                                                                    tmp_path: Path) -> None:
+    trial = cut(five_bar_300, tmp_path / "cut.c3d", 5000)
+    target = tmp_path / "p.c3d"
+    one_error_line(run_cli("perturb", trial, target, "--level", "30"), str(trial), "hold 24:")
+    assert not target.exists()
+    result = run_cli("perturb", trial, target, "--level", "30", "--accept-truncated")
+    solved(result)
+    assert "fccgrb: warning: " in result.stderr and "only 24" in result.stderr
+    assert read_trial(target).n_frames == 24
+    template = MODELS / "lower_limb.yaml"
+    one_error_line(run_cli("calibrate", template, trial, "-o", tmp_path / "m.yaml"),
+                   str(trial), "hold 24:")
+    config = tmp_path / "sweep.yaml"
+    config.write_text(yaml.safe_dump({
+        "name": "cut", "table": "table2", "model": str(FIVE_BAR), "trial": {"file": "cut.c3d"},
+        "cells": [{"method": "nrm-wls", "tol": 1e-10, "level": 0}]}), encoding="utf-8")
+    out = tmp_path / "sweep.h5"
+    one_error_line(run_cli("sweep", config, "-o", out), str(trial), "hold 24:")
+    assert not out.exists()
+    result = run_cli("sweep", config, "-o", out, "--accept-truncated")
+    solved(result)
+    assert "only 24" in result.stderr
+    with h5py.File(out, "r") as h5:
+        (cell,) = h5["cells"].values()
+        assert "only 24" in str(cell["runs/run"].attrs["warnings"][0])

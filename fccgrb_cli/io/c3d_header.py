@@ -131,8 +131,10 @@ def read_layout(path: str | Path) -> C3DLayout:
             f.seek(param_start)
             head = f.read(4)
             if len(head) < 4:
-                raise InputError(f"{path}: the file ends at byte {size}, before its parameter "
-                                 f"section (byte {param_start}): {TRUNCATED}")
+                where = (f"before its parameter section (byte {param_start})" if not head else
+                         f"inside its parameter section's header (bytes {param_start}–"
+                         f"{param_start + 3})")
+                raise InputError(f"{path}: the file ends at byte {size}, {where}: {TRUNCATED}")
             processor = PROCESSORS.get(head[3])
             if processor is None:
                 raise InputError(f"{path}: not a readable C3D file (processor type {head[3]} at "
