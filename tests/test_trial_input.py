@@ -931,21 +931,40 @@ def test_more_than_65535_frames(tmp_path: Path) -> None:
     c3d.write(str(bare))
     message = input_error(bare)
     assert "65535" in message and "split the trial" in message
-    c3d.add_parameter("TRIAL", "ACTUAL_START_FIELD", [1, 0])
-    c3d.add_parameter("TRIAL", "ACTUAL_END_FIELD", [n - 65536, 1])  # low word, high word
+    first, last = 100000, 100000 + n - 1  # 32-bit frame numbers: low word, high word
+    c3d.add_parameter("TRIAL", "ACTUAL_START_FIELD", [first % 65536, first // 65536])
+    c3d.add_parameter("TRIAL", "ACTUAL_END_FIELD", [last % 65536, last // 65536])
     trial = tmp_path / "trial.c3d"
     c3d.write(str(trial))
     layout = read_layout(trial)
-    assert (layout.frames, layout.first_frame, layout.last_frame) == (n, 1, n)
+    assert (layout.frames, layout.first_frame, layout.last_frame) == (n, first, last)
     assert not layout.truncated
     assert f"ezc3d read 65535 frames where the file holds {n}" in input_error(trial)
     start = data_start_byte(trial)
     message = input_error(cut(trial, tmp_path / "cut.c3d", start + 40000 * 16 + 5))
-    assert f"announces {n} frames (1–{n})" in message and "the data hold 40000:" in message
+    assert f"announces {n} frames ({first}–{last})" in message, message
+    assert "the data hold 40000:" in message
     c3d.add_parameter("POINT", "LONG_FRAMES", [float(n - 1)])  # wins over TRIAL
     long = tmp_path / "long.c3d"
     c3d.write(str(long))
     assert read_layout(long).frames == n - 1
+
+
+def test_point_frames_not_the_header_range_is_the_count(five_bar_300: Path,
+                                                        tmp_path: Path) -> None:
+    """The header's words 4–5 may be the raw frame numbers; POINT:FRAMES (300) is the master
+    copy of the count (C3D User Guide), and ezc3d reads 300 frames either way."""
+    raw = bytearray(five_bar_300.read_bytes())
+    assert np.frombuffer(bytes(raw[6:10]), "<u2").tolist() == [1, 300]
+    start, frame = data_start_byte(five_bar_300), 9 * POINT_BYTES
+    for last in (200, 400):
+        raw[8:10] = np.array([last], "<u2").tobytes()
+        path = tmp_path / f"last{last}.c3d"
+        path.write_bytes(bytes(raw))
+        assert ezc3d_frames(path) == 300
+        assert read_trial(path).n_frames == 300
+        message = input_error(cut(bytes(raw), tmp_path / "cut.c3d", start + 250 * frame))
+        assert "POINT:FRAMES announces 300 frames" in message and "hold 250:" in message
 
 
 # ---- truncated TRC ------------------------------------------------------------------------
