@@ -274,10 +274,22 @@ def test_wls_keeps_topology_far_better_than_ls_at_30mm():
     noisy = perturb(s.markers, s.labels, s.rate, 0.03, seed=0)
     system = mc_system(model)
     worst = {}
+    top, tracking = system.masks()["topology"], system.masks()["tracking"]
     for label, weight in (("LS", None), ("WLS", WLS_WEIGHT)):
         result = solve_nrm(system, s.result.time, noisy, tracking_weight=weight, tol=TOL)
         assert result.converged.all(), (label, result.messages)
-        assert np.isfinite(result.phi_top_max).all()
+        # each frame is the minimum of ½ΦᵀWΦ with W built here (1 on topological rows, the
+        # tracking weight on tracking rows): Φ_qᵀWΦ = 0 to 1e-10 relative (measured ~1e-12),
+        # and the reported violation is the solution's own, recomputed from q
+        W = np.where(tracking, 1.0 if weight is None else weight, 1.0)
+        stationarity, violation = 0.0, np.empty(len(result.q))
+        for f, (q, y) in enumerate(zip(result.q, noisy, strict=True)):
+            phi, J = system.residual(q, Drive(ref=y)), system.jacobian(q)
+            stationarity = max(stationarity, float(np.linalg.norm(J.T @ (W * phi))
+                                                   / (np.linalg.norm(J) * np.linalg.norm(W * phi))))
+            violation[f] = np.abs(phi[top]).max()
+        assert stationarity <= 1e-10, (label, stationarity)
+        np.testing.assert_allclose(result.phi_top_max, violation, rtol=1e-12, atol=0)
         worst[label] = float(result.phi_top_max.max())
     ratio = worst["LS"] / worst["WLS"]
     print(f"\n[P30] max |Φ_top| LS {worst['LS']:.3e}, WLS {worst['WLS']:.3e}, ratio {ratio:.1f}")
@@ -476,7 +488,9 @@ def test_gap_that_leaves_model_determined():
         for frames in gaps.values():
             f = list(frames)
             assert np.abs(result.theta[f] - s.result.theta[f]).max() < EXACT_TOL
-            assert np.isfinite(result.phi_norm[f]).all()
+            # ‖Φ‖ over the equations left: ~0 on exact markers; the missing marker's rows
+            # (target zeroed, ~1 m away) are not among them
+            assert (result.phi_norm[f] < EXACT_TOL).all(), result.phi_norm[f]
 
 
 GAP_FRAME = 60
@@ -537,8 +551,23 @@ def test_skip_unsolvable_reports_frame():
                        target_labels=model.marker_labels, skip_unsolvable=True)
     check_skipped(model, s, result)
     assert np.isnan(result.qd[GAP_FRAME]).all()
-    far = [f for f in range(len(s.result.time)) if abs(f - GAP_FRAME) > 1]
-    assert np.isfinite(result.qd[far]).all() and np.isfinite(result.qdd[far]).all()
+    # away from the gap the rates are the closed form's, to the stencils' truncation (the
+    # bounds of test_rates_against_closed_form_and_topology; frames beside the gap difference
+    # across it centrally, the trial's two ends one-sidedly)
+    n = len(s.result.time)
+    far = [f for f in range(n) if abs(f - GAP_FRAME) > 1]
+    m3, m4 = derivative_bounds("five_bar", 3), derivative_bounds("five_bar", 4)
+    eps = float(np.abs(result.theta[far] - s.result.theta[far]).max()) + 1e-15
+    ev = np.abs(result.theta_d - s.result.theta_d)
+    ea = np.abs(result.theta_dd - s.result.theta_dd)
+    inner = [f for f in far if 0 < f < n - 1]
+    assert (ev[inner] <= H**2 / 6 * m3 + eps / H).all(), ev[inner].max(axis=0)
+    assert (ea[inner] <= H**2 / 12 * m4 + 4 * eps / H**2).all(), ea[inner].max(axis=0)
+    assert (ev[[0, -1]] <= H**2 * m3 + 4 * eps / H).all()
+    assert (ea[[0, -1]] <= 6.25 * H**2 * m4 + 12 * eps / H**2).all()
+    nb = mc_system(model).layout.n_body_q
+    np.testing.assert_array_equal(result.qd[far, nb:], result.theta_d[far])
+    np.testing.assert_array_equal(result.qdd[far, nb:], result.theta_dd[far])
 
 
 # --- 8. guard against a vacuous check ----------------------------------------------------------
