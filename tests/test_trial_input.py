@@ -413,7 +413,9 @@ def test_c3d_gap_reads_as_nan_and_still_solves(trials: dict[str, Synth], tmp_pat
     assert "fccgrb: error" not in result.stderr
     run = runs(out)["nrm-wls"]
     assert run["converged"].all()
-    assert np.isfinite(run["q"]).all()
+    # every frame, the gap's too, gives the YAML's closed-form angles (32-bit C3D: ~1e-6 rad)
+    from five_bar_minimal import closed_form
+    assert np.abs(run["theta"] - closed_form(np.arange(100) / synth.rate)).max() < 1e-5
     assert np.isnan(run["markers_input"][frame, k]).all()
     # P2 and P3 still place B2: the gap frame's model points stay on the other markers
     others = [j for j in range(9) if j != k]
@@ -504,11 +506,21 @@ def test_perturb_refuses_its_input_as_output(pendulum_copy: Path, tmp_path: Path
 
 
 def test_perturb_to_trc_beside_the_c3d(pendulum_copy: Path, tmp_path: Path) -> None:
+    """Level 0 into a TRC in metres beside the C3D: the same markers (the TRC's 9 significant
+    digits: ~1e-9 m), labels and rate, the header in m; the C3D and the truth sidecar the two
+    files share by name (p.truth.h5) are left as they were."""
     target = tmp_path / "p.trc"
+    truth = tmp_path / "p.truth.h5"
+    before = {path: digest(path) for path in (pendulum_copy, truth)}
     result = run_cli("perturb", pendulum_copy, target, "--level", "0", "--units", "m")
     assert result.exception is None or isinstance(result.exception, SystemExit), \
         repr(result.exception)
     assert result.exit_code == 0
+    source, written = read_trial(pendulum_copy), read_trial(target)
+    assert written.labels == source.labels and written.rate == source.rate
+    np.testing.assert_allclose(written.markers, source.markers, rtol=0, atol=1e-8)
+    assert target.read_text(encoding="utf-8").splitlines()[2].split("\t")[4] == "m"
+    assert {path: digest(path) for path in before} == before
 
 
 # ---- the solve summary and the results file -----------------------------------------------
