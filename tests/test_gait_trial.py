@@ -10,9 +10,12 @@
    lengths of the posture the trial was built from.
 3. The Qualisys walking trial in ``../shared/data/c3d`` (skipped when absent, read in place, never
    copied): calibrate at 67 kg, solve by NRM-WLS with a 6 Hz filter, then check convergence, the
-   marker fit, finite angles and moments, and that each force plate went to the foot whose heel
-   strike (C3D EVENT parameters, read here with ezc3d) starts its load; a ``loads.force_plates``
-   override moves plate 1 to the right foot.
+   marker fit, and that each force plate went to the foot whose heel strike (C3D EVENT
+   parameters, read here with ezc3d) starts its load; a ``loads.force_plates`` override moves
+   plate 1 to the right foot. The results are checked against physics computed here from the
+   file and the personal YAML: the angles are those of the solved vectors, the rates those of
+   the positions, the pelvis residual wrench the whole body's Newton–Euler with the plates, every
+   joint moment the moment balance of the segments distal to it, and left and right agree.
 4. The trial is not modified by any of this (SHA-256 before and after).
 
 Also: ``--mass nan`` / ``inf`` are refused as ``--mass``; ``clinical/stance/<body>`` is the plate's

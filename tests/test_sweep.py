@@ -682,6 +682,9 @@ def test_cells_differing_only_in_seed_get_their_own_rows(tmp_path: Path) -> None
     assert run_cli("sweep", config, "-o", out).exit_code == 0
     _, rows = collect(out)
     assert sorted(r.variant for r in rows) == ["WLS", "WLS [seed=1]"]
+    # each row is its own seed's: the artefacts differ, so do the fits (mean ED, mm)
+    ed = {r.variant: r.values["mean ED (mm)"] for r in rows}
+    assert all(v > 1.0 for v in ed.values()) and abs(ed["WLS"] - ed["WLS [seed=1]"]) > 1e-3
 
 
 def test_a_broken_cell_file_is_run_again(tmp_path: Path) -> None:
