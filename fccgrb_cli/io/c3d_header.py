@@ -68,7 +68,6 @@ class Parameter:
 class C3DLayout:
     """What a C3D file announces and how its data section is laid out."""
 
-    path: str
     size: int                  # bytes in the file
     processor: str             # "Intel", "DEC" or "MIPS"
     float_data: bool           # 32-bit floats (negative scale), else 16-bit integers
@@ -110,7 +109,8 @@ class C3DLayout:
 
 def read_layout(path: str | Path) -> C3DLayout:
     """Read a C3D file's header and parameter section; InputError (one line naming the file)
-    when the file is not C3D, or ends inside its header or parameter section."""
+    when the file is not C3D, ends inside its header or parameter section, or counts 65535
+    frames (a 16-bit word's limit) with more data after them and nothing giving the count."""
     path = Path(path)
     try:
         with path.open("rb") as f:
@@ -170,7 +170,7 @@ def read_layout(path: str | Path) -> C3DLayout:
     if "ANALOG:USED" in params and rate > 0:
         analog = int(number("ANALOG:USED", 0)) * round(number("ANALOG:RATE", 0.0) / rate)
     frames, first, last, source = _frame_count(params, first, last)
-    layout = C3DLayout(str(path), size, processor, float_data, points, analog, data_start,
+    layout = C3DLayout(size, processor, float_data, points, analog, data_start,
                        frames, first, last, source)
     beyond = size - data_offset - frames * layout.frame_bytes  # bytes after the last frame
     if frames == WORD_LIMIT and source in ("header", "POINT:FRAMES") and beyond >= BLOCK:
