@@ -9,8 +9,11 @@ file behind. Inputs are never modified: each case hashes its input before and af
 The trials come from ``fccgrb synth`` (pendulum and five-bar, 1 s at 100 Hz, module fixture) and
 are varied with ``write_trial`` or ezc3d. The file also covers ``--skip-unsolvable``, TRC round
 trips (units, gaps, labels), C3D gaps (negative residuals), label prefixes and ``--map``,
-``fccgrb perturb``, the ``solve`` summary and results files that gain runs, and two C3D files from
-commercial systems in ``shared/data/c3d`` (skipped when absent, never copied).
+``fccgrb perturb``, the ``solve`` summary and results files that gain runs, two C3D files from
+commercial systems in ``shared/data/c3d`` (skipped when absent, never copied into the project),
+and truncated trials: a C3D cut anywhere (header, parameters, data; Intel, DEC and MIPS; float
+and integer data; analog channels; more than 65535 frames) or a TRC short of NumFrames is one
+line naming both frame counts, or with ``--accept-truncated`` the frames present and a warning.
 """
 
 from __future__ import annotations
