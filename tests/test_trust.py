@@ -14,6 +14,7 @@ from the flags' own code.
 
 from __future__ import annotations
 
+import re
 from functools import cache
 from pathlib import Path
 
@@ -191,3 +192,30 @@ def test_the_classical_analysis_is_not_judged_on_jumps():
                      run.markers_input) & JUMP).any()
     assert not (flags_of("ad", run.result.converged, run.result.phi_top_max, points,
                          run.markers_input) & JUMP).any()
+
+
+def test_flags_reach_the_summary_and_the_results_file(tmp_path: Path) -> None:
+    """Through the command line: the summary counts the flagged frames, stderr and the HDF5's
+    ``warnings`` say why, and ``converged`` is false exactly where ``flags`` is set."""
+    import h5py
+    from cli_helpers import run_cli
+
+    out = tmp_path / "r.h5"
+    result = run_cli("solve", MODEL, TRIAL, "--method", "mo-ed", "--perturb", 7.5, "-o", out)
+    assert result.exit_code == 0, result.output
+    header, values = (re.split(r"\s{2,}", line.strip())
+                      for line in result.stdout.splitlines()[:2])
+    row = dict(zip(header, values, strict=True))
+    with h5py.File(out) as h5:
+        g = h5["runs/mo-ed-P7.5"]
+        flags, converged = g["flags"][()], g["converged"][()]
+        solver = g["solver_converged"][()]
+        warnings = list(g.attrs["warnings"])
+        bits = dict(g["flags"].attrs)
+    assert bits == {"unconverged": 1, "topology": 2, "jump": 4}
+    assert solver.all() and (flags & 4).sum() > 250
+    assert (converged == (flags == 0)).all()
+    assert int(row["flagged"]) == int((flags != 0).sum()) and int(row["failed"]) == 0
+    assert any("not to be trusted" in w for w in warnings)
+    assert any("cno-sqp or nrm-wls" in w for w in warnings)
+    assert all(f"fccgrb: warning: {w}" in result.stderr for w in warnings)

@@ -13,8 +13,8 @@ Contract (SI units: m, rad, s):
                        ``wall_s`` (the solve's wall-clock time in parallel mode, else NaN),
                        ``filter_cutoff_hz`` (the angles' low-pass, NaN when unfiltered: the
                        AD baseline's drivers, and the angles converted for the dynamics),
-                       ``warnings`` (the run's warnings, also printed: e.g. a truncated trial
-                       accepted; empty when none)
+                       ``warnings`` (every warning the run printed: frames flagged or not
+                       converged and why, a truncated trial accepted, …; empty when none)
       q, qd, qdd                 frames × nq
       theta, theta_d, theta_dd   frames × angles; attribute ``names``
       model_points               frames × markers × 3, same marker order as /reference/markers
@@ -134,7 +134,7 @@ def write_run(path: str | Path, run: Run, command: str, cell: dict | None = None
                 "ad_drivers": run.ad_drivers, "command": command, "wall_s": r.wall_s,
                 "filter_cutoff_hz": np.nan if run.filter_cutoff is None else run.filter_cutoff,
             })
-            g.attrs.create("warnings", list(run.warnings),
+            g.attrs.create("warnings", [*r.messages, *run.warnings],
                            dtype=h5py.string_dtype(encoding="utf-8"))
             for key in ("q", "qd", "qdd", "iterations", "time_s", "phi_norm", "phi_top_max"):
                 g.create_dataset(key, data=getattr(r, key), compression="gzip")
