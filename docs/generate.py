@@ -1,0 +1,693 @@
+"""Regenerate every figure of README.md and docs/ by running the commands, as a user would.
+
+    python docs/generate.py --part cheap|tables|benchmarks|figures|all [--check]
+    python docs/generate.py --block example-session [--block gait-trial ...] [--check]
+
+Every command runs through the installed ``fccgrb`` (or ``python benchmarks/...``) in a
+temporary folder laid out like the repository (``configs`` linked to the repository's, and
+``../shared`` to the shared data folder when it exists), so each console block shows exactly
+what the command it names prints. The README's generated blocks sit between
+``<!-- generated: NAME -->`` and ``<!-- /generated -->``; only their content is rewritten.
+
+Parts and their blocks:
+
+* ``cheap`` (seconds): ``example-session`` (the five-bar session), ``gait-trial`` (calibrate,
+  solve and plot the walking trial of ../shared/data/c3d/Qualisys.c3d, and docs/gait_qualisys.png;
+  skipped when the trial is absent), ``table-subset`` (check only: the AD and NRM rows of
+  docs/table1.md and docs/table2.md against a sweep of just those cells).
+* ``tables`` (minutes): ``sweeps`` (configs/sweeps/table1.yaml and table2.yaml → docs/table1.md,
+  docs/table2.md and the README's sweep paragraph), ``gait-methods`` (CNO-SQP against NRM-WLS on
+  the walking trial).
+* ``benchmarks`` (minutes): ``bench-kinematics``, ``bench-optimization``, ``bench-gait``: the
+  performance tables from benchmarks/*.py.
+* ``figures``: ``figures`` (the Figure 8 case: docs/point_P6.png, ed_P6.png, angle_J4_uv.png,
+  velocity_P6_x.png via ``fccgrb plot``, and the commands that make them) and ``figure8-seeds``
+  (the end point's distance to the truth over three seeds).
+
+``--check`` writes nothing: it compares and exits with status 1 naming the blocks that differ.
+Timing figures change from run to run, so the comparison replaces them by a placeholder first:
+a number followed by ``ms/frame``, ``ms``, ``s``, ``min`` or ``frames/s`` in running text; in a
+console table, the values under a ``ms/frame``, ``frames/s`` or ``x real time`` header; in a
+markdown table, the cells of a column whose header names ``ms/frame``, ``frames/s``, ``real
+time`` or ``total ms`` (not the paper's column), and the level columns of a table whose caption
+names ``ms/frame`` (there only our figure; the paper's, in brackets, is kept). Spacing is
+ignored. Every other number must match as printed. Images are compared pixel by pixel (with
+matplotlib's RMS tolerance when the PNG was written by another matplotlib version).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import difflib
+import os
+import re
+import shlex
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+SHARED = ROOT.parent / "shared"
+QUALISYS = SHARED / "data" / "c3d" / "Qualisys.c3d"
+PAPER_TABLES = ROOT / "configs" / "reference" / "paper_tables.csv"
+FIVE_BAR = "configs/models/five_bar.yaml"
+GAIT_TRIAL = "../shared/data/c3d/Qualisys.c3d"
+
+# ---------------------------------------------------------------------------------------------
+# What a block produces
+
+
+@dataclass(frozen=True)
+class ReadmeBlock:
+    """The content between ``<!-- generated: NAME -->`` and ``<!-- /generated -->``."""
+
+    name: str
+    text: str
+
+
+@dataclass(frozen=True)
+class TextFile:
+    """A whole generated file of docs/ (path relative to the repository)."""
+
+    path: str
+    text: str
+
+
+@dataclass(frozen=True)
+class Image:
+    """A figure (PNG bytes) for ``path`` (relative to the repository)."""
+
+    path: str
+    data: bytes
+
+    @classmethod
+    def made(cls, path: str, ws: Workspace) -> Image:
+        return cls(path, (ws.dir / path).read_bytes())
+
+
+@dataclass(frozen=True)
+class RowCheck:
+    """Check only: every row of ``text`` (markdown tables) must be in the file at ``path``."""
+
+    path: str
+    text: str
+
+
+Artifact = ReadmeBlock | TextFile | Image | RowCheck
+
+
+class Skip(Exception):
+    """A block that cannot be made here (say, the shared data folder is absent)."""
+
+
+# ---------------------------------------------------------------------------------------------
+# Running commands
+
+
+def _executable(name: str) -> str:
+    beside = Path(sys.executable).parent / name
+    return str(beside) if beside.exists() else (shutil.which(name) or name)
+
+
+PROGRESS = re.compile(r"^([\w -]+: frame \d+/\d+ \([\d.]+ s\)|sweep: \d+/\d+ cells \(.*)$")
+
+
+class Workspace:
+    """A temporary folder laid out like the repository; runs each command once (cached)."""
+
+    def __init__(self, keep: bool = False):
+        self.top = Path(tempfile.mkdtemp(prefix="fccgrb-docs-"))
+        self.dir = self.top / "work"
+        self.dir.mkdir()
+        (self.dir / "configs").symlink_to(ROOT / "configs")
+        (self.dir / "docs").mkdir()
+        if SHARED.is_dir():
+            (self.top / "shared").symlink_to(SHARED)
+        self.keep = keep
+        self.outputs: dict[str, str] = {}
+        self.seconds: dict[str, float] = {}
+
+    def __enter__(self) -> Workspace:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if not self.keep:
+            shutil.rmtree(self.top, ignore_errors=True)
+
+    def run(self, command: str, cwd: Path | None = None) -> str:
+        """stdout and stderr of ``command`` in order, without progress lines; exit status 0
+        required. ``fccgrb`` and ``python`` are this interpreter's."""
+        if command in self.outputs:
+            return self.outputs[command]
+        argv = shlex.split(command)
+        argv[0] = {"fccgrb": _executable("fccgrb"), "python": sys.executable}.get(argv[0],
+                                                                                  argv[0])
+        env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONHASHSEED="0")
+        started = time.perf_counter()
+        done = subprocess.run(argv, cwd=cwd or self.dir, env=env, stdout=subprocess.PIPE,
+                              stderr=subprocess.STDOUT, check=False)
+        self.seconds[command] = time.perf_counter() - started
+        # bytes, not text mode: universal newlines would turn progress's '\r' into new lines
+        lines = [line.split("\r")[-1]
+                 for line in done.stdout.decode("utf-8", "replace").split("\n")]
+        while lines and not lines[-1]:
+            lines.pop()
+        text = "\n".join(line for line in lines if not PROGRESS.match(line))
+        if done.returncode != 0:
+            raise RuntimeError(f"`{command}` exited with status {done.returncode}:\n{text}")
+        self.outputs[command] = text
+        return text
+
+    def console(self, commands: list[str]) -> str:
+        """A console block: each command after a ``$`` prompt, then what it printed."""
+        parts = []
+        for command in commands:
+            parts.append(f"$ {command}")
+            out = self.run(command)
+            if out:
+                parts.append(out)
+        return "```console\n" + "\n".join(parts) + "\n```"
+
+
+# ---------------------------------------------------------------------------------------------
+# The blocks
+
+SESSION = [
+    f"fccgrb synth {FIVE_BAR} -o trial.c3d",
+    f"fccgrb solve {FIVE_BAR} trial.c3d --method nrm-ls --perturb 30",
+    f"fccgrb solve {FIVE_BAR} trial.c3d --method nrm-wls --perturb 30",
+    f"fccgrb solve {FIVE_BAR} trial.c3d --method nrm-wls --perturb 30 --hessian gauss-newton "
+    "--name nrm-wls-gauss-newton-P30",
+    f"fccgrb solve {FIVE_BAR} trial.c3d --method cno-sqp --perturb 30",
+    f"fccgrb solve {FIVE_BAR} trial.c3d --method ad --filter-cutoff 6 --perturb 30 "
+    "--perturb-markers P4,P9",
+    f"fccgrb solve {FIVE_BAR} trial.c3d --method nrm-wls --perturb 30 --perturb-markers P4,P9",
+]
+
+
+def example_session(ws: Workspace) -> list[Artifact]:
+    return [ReadmeBlock("example-session", ws.console(SESSION))]
+
+
+GAIT = [
+    f"fccgrb calibrate configs/models/lower_limb.yaml {GAIT_TRIAL} --mass 67 -o personal.yaml",
+    f"fccgrb solve personal.yaml {GAIT_TRIAL} --method nrm-wls --filter-cutoff 6 -o gait.h5",
+    "fccgrb plot gait.h5 --kind clinical -o docs/gait_qualisys.png",
+]
+
+
+def _need_gait_trial() -> None:
+    if not QUALISYS.exists():
+        raise Skip(f"{QUALISYS} is absent")
+
+
+def gait_trial(ws: Workspace) -> list[Artifact]:
+    _need_gait_trial()
+    return [ReadmeBlock("gait-trial", ws.console(GAIT)),
+            Image.made("docs/gait_qualisys.png", ws)]
+
+
+def gait_methods(ws: Workspace) -> list[Artifact]:
+    """CNO-SQP against NRM-WLS on the walking trial: clinical angles and moments."""
+    import h5py
+    import numpy as np
+
+    _need_gait_trial()
+    for command in GAIT[:2]:
+        ws.run(command)
+    sqp = f"fccgrb solve personal.yaml {GAIT_TRIAL} --method cno-sqp --filter-cutoff 6 -o gait.h5"
+    ws.run(sqp)
+    with h5py.File(ws.dir / "gait.h5", "r") as h5:
+        a, b = (h5[f"runs/{name}/clinical"] for name in ("nrm-wls-f6Hz", "cno-sqp-f6Hz"))
+        names = [str(n) for n in a["angles"].attrs["names"]]
+        sagittal = np.array(["flexion" in n for n in names])
+        angles = np.abs(a["angles"][()] - b["angles"][()])
+        moments = np.abs(a["moments_per_kg"][()] - b["moments_per_kg"][()])
+    text = (f"* **Methods agree**: CNO-SQP (`--method cno-sqp`) on the same trial gives the "
+            f"clinical angles within {angles.max():.2g}° (sagittal "
+            f"{angles[:, sagittal].max():.2g}°) of NRM-WLS and the moments within "
+            f"{moments.max():.2g} N·m/kg.")
+    return [ReadmeBlock("gait-methods", text)]
+
+
+def _sweep_subset(config: Path, target: Path) -> None:
+    """A copy of a sweep config keeping only its cells of the fast methods (AD, NRM)."""
+    import yaml
+
+    doc = yaml.safe_load(config.read_text(encoding="utf-8"))
+    doc["model"] = str((config.parent / doc["model"]).resolve())
+    fast = {"ad", "nrm-ls", "nrm-wls"}
+
+    def methods(cell: dict) -> set:
+        m = cell["method"]
+        return set(m if isinstance(m, list) else [m])
+
+    doc["cells"] = [c for c in doc["cells"] if methods(c) <= fast and not c.get("parallel")]
+    target.write_text(yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")
+
+
+def table_subset(ws: Workspace) -> list[Artifact]:
+    out: list[Artifact] = []
+    for name in ("table1", "table2"):
+        subset = ws.dir / f"{name}_subset.yaml"
+        _sweep_subset(ROOT / "configs" / "sweeps" / f"{name}.yaml", subset)
+        ws.run(f"fccgrb sweep {subset.name} --workers 2 -o {name}_subset.h5")
+        out.append(RowCheck(f"docs/{name}.md",
+                            ws.run(f"fccgrb report {name}_subset.h5 --format markdown")))
+    return out
+
+
+TABLE_TITLES = {"table1": "Table 1 — pendulum", "table2": "Table 2 — five-bar"}
+CELLS_RUN = re.compile(r"wrote \S+: (\d+) cells run, \d+ already done \((\d+) s\)")
+
+
+def sweeps(ws: Workspace) -> list[Artifact]:
+    out: list[Artifact] = []
+    facts = {}
+    for name in ("table1", "table2"):
+        command = f"fccgrb sweep configs/sweeps/{name}.yaml --workers 2"
+        match = CELLS_RUN.search(ws.run(command))
+        if match is None:
+            raise RuntimeError(f"`{command}`: no 'cells run' line in its output")
+        cells, seconds = match.groups()
+        facts[name] = (cells, seconds)
+        tables = ws.run(f"fccgrb report {name}.h5 --format markdown").rstrip("\n")
+        out.append(TextFile(f"docs/{name}.md", (
+            f"<!-- generated by `python docs/generate.py --part tables`: do not edit -->\n"
+            f"# {TABLE_TITLES[name]}\n\n"
+            f"`{command}`: {cells} cells, {seconds} s on this project's 2-core machine. Ours, "
+            f"the paper's figure in brackets; the tables are `fccgrb report {name}.h5 "
+            f"--format markdown`.\n\n{tables}\n")))
+    (c1, s1), (c2, s2) = facts["table1"], facts["table2"]
+    out.append(ReadmeBlock("sweep-times", (
+        f"The full grids: `fccgrb sweep configs/sweeps/table1.yaml --workers 2` ({c1} cells, "
+        f"{s1} s) and `configs/sweeps/table2.yaml` ({c2} cells, {s2} s); their tables, ours "
+        f"beside the paper's, are in [docs/table1.md](docs/table1.md) and "
+        f"[docs/table2.md](docs/table2.md).")))
+    return out
+
+
+FIGURE_RUNS = [  # the paper's Figure 8 case: only P4 and P9 perturbed at 30 mm
+    ("AD", "--method ad"),
+    ("AD-6Hz", "--method ad --filter-cutoff 6"),
+    ("NRM-WLS", "--method nrm-wls"),
+    ("CNO-SQP", "--method cno-sqp"),
+]
+FIGURE_PLOTS = [
+    ("point_P6.png", "--kind point --marker P6"),
+    ("ed_P6.png", "--kind ed --marker P6"),
+    ("angle_J4_uv.png", "--kind angle --angle J4_uv"),
+    ("velocity_P6_x.png", "--kind velocity --marker P6 --axis x"),
+]
+
+
+def _figure_commands(seed: int, output: str, names: list[str]) -> list[str]:
+    return [f"fccgrb solve {FIVE_BAR} trial.c3d {options} --perturb 30 --perturb-markers P4,P9"
+            + (f" --seed {seed}" if seed else "") + f" --name {name} -o {output}"
+            for name, options in FIGURE_RUNS if name in names]
+
+
+def figures(ws: Workspace) -> list[Artifact]:
+    commands = [SESSION[0], *_figure_commands(0, "figure8.h5", [n for n, _ in FIGURE_RUNS])]
+    commands += [f"fccgrb plot figure8.h5 {options} -o docs/{png}" for png, options in FIGURE_PLOTS]
+    for command in commands:
+        ws.run(command)
+    text = "```bash\n" + "\n".join(commands) + "\n```"
+    return [ReadmeBlock("figure-commands", text),
+            *(Image.made(f"docs/{png}", ws) for png, _ in FIGURE_PLOTS)]
+
+
+def figure8_seeds(ws: Workspace) -> list[Artifact]:
+    """Mean distance of the chain's end point P6 to the truth, per seed and method."""
+    import h5py
+    import numpy as np
+
+    names = ["AD", "AD-6Hz", "NRM-WLS"]
+    ws.run(SESSION[0])
+    rows = []
+    for seed in (0, 1, 2):
+        output = f"seed{seed}.h5"
+        for command in _figure_commands(seed, output, names):
+            ws.run(command)
+        with h5py.File(ws.dir / output, "r") as h5:
+            labels = [str(x) for x in h5["reference/markers"].attrs["labels"]]
+            k = labels.index("P6")
+            means = [1e3 * float(np.mean(h5[f"runs/{n}/ed"][:, k])) for n in names]
+        rows.append(f"| {seed} | " + " | ".join(f"{m:.1f}" for m in means) + " |")
+    head = ("| seed | AD | AD, 6 Hz filter | NRM-WLS |\n"
+            "|---|---|---|---|")
+    caption = ("Mean distance (mm) of the end point P6 to the truth, P4 and P9 perturbed at "
+               "30 mm (the figure's commands with `--seed`):")
+    return [ReadmeBlock("figure8-seeds", caption + "\n\n" + head + "\n" + "\n".join(rows))]
+
+
+def _paper(table: str, method: str, variant: str, points: tuple[str, ...]) -> str:
+    rows = list(csv.DictReader(line for line in PAPER_TABLES.read_text(encoding="utf-8")
+                               .splitlines() if line and not line.startswith("#")))
+    for p in points:
+        for r in rows:
+            if (r["table"], r["method"], r["variant"], r["ref_points"], float(r["tol"]),
+                    r["level"]) == (table, method, variant, p, 1e-10, "P0"):
+                value = f"{float(r['time_ms_per_frame']):.4g}"
+                return value if p in (points[0], "") else f"{value} ({p} points)"
+    return "–"
+
+
+def _fields(output: str, width: int) -> list[list[str]]:
+    return [line.split() for line in output.splitlines()[1:] if len(line.split()) == width]
+
+
+def bench_kinematics(ws: Workspace) -> list[Artifact]:
+    command = "python benchmarks/kinematics.py --forms full"
+    rows = _fields(ws.run(command, cwd=ROOT), 10)
+    by = {(r[0], r[2], float(r[3]), float(r[4])): r for r in rows}
+    lines = [f"`{command}`, its tol 1e-10 rows:", "",
+             "| model (full form), tol 1e-10 | P0 ms/frame | P0 total ms/frame | iterations "
+             "| P30 ms/frame | iterations | failed (P0, P30) | paper P0 ms/frame |",
+             "|---|---|---|---|---|---|---|---|"]
+    models = {"pendulum": ("pendulum", "table1", ("",)),
+              "five_bar": ("five-bar", "table2", ("9", "8", ""))}
+    for model, (label, table, points) in models.items():
+        for method, (family, variant) in (("ad", ("KA", "AD")), ("nrm-ls", ("NRM", "LS")),
+                                          ("nrm-wls", ("NRM", "WLS"))):
+            p0 = by[(model, method, 1e-10, 0.0)]
+            p30 = by.get((model, method, 1e-10, 30.0))
+            failed = int(p0[9]) + (int(p30[9]) if p30 else 0)
+            lines.append(
+                f"| {label}, {method.upper()} | {p0[5]} | {p0[6]} | {p0[7]} | "
+                f"{p30[5] if p30 else '–'} | {p30[7] if p30 else '–'} | {failed} | "
+                f"{_paper(table, family, variant, points)} |")
+    return [ReadmeBlock("bench-kinematics", "\n".join(lines))]
+
+
+def bench_optimization(ws: Workspace) -> list[Artifact]:
+    command = "python benchmarks/optimization.py"
+    rows = _fields(ws.run(command, cwd=ROOT), 9)
+    lines = [f"`{command}` (9 points; max \\|Φ_top\\| and failed frames over P0, P7.5 and "
+             "P30):", "",
+             "| five-bar, tol 1e-10 | P0 ms/frame | iterations | P30 ms/frame | iterations "
+             "| max \\|Φ_top\\| | failed (solver's verdict) | paper P0 ms/frame |",
+             "|---|---|---|---|---|---|---|---|"]
+    paper = {("cno-sqp", "tc"): ("CNO", "SQP"), ("mo-tc", "tc"): ("MO", "TC"),
+             ("mo-ed", "ed"): ("MO", "ED")}
+    seen: list[tuple[str, str]] = []
+    for r in rows:
+        if (r[0], r[1]) not in seen:
+            seen.append((r[0], r[1]))
+    for method, objective in seen:
+        by = {float(r[2]): r for r in rows if (r[0], r[1]) == (method, objective)}
+        p0, p30 = by[0.0], by[30.0]
+        top = max(float(r[6]) for r in by.values())
+        failed = sum(int(r[8]) for r in by.values())
+        family_variant = paper.get((method, objective))
+        ref = _paper("table2", *family_variant, ("9", "8")) if family_variant else "–"
+        name = method.upper() + (f" ({objective})" if method.startswith("cno") else "")
+        lines.append(f"| {name} | {p0[4]} | {p0[5]} | {p30[4]} | {p30[5]} | {top:.2g} | "
+                     f"{failed} | {ref} |")
+    return [ReadmeBlock("bench-optimization", "\n".join(lines))]
+
+
+def bench_gait(ws: Workspace) -> list[Artifact]:
+    _need_gait_trial()
+    command = "python benchmarks/gait.py"
+    out = ws.run(command, cwd=ROOT)
+    return [ReadmeBlock("bench-gait", f"```console\n$ {command}\n{out}\n```")]
+
+
+@dataclass(frozen=True)
+class Block:
+    name: str
+    part: str
+    make: Callable[[Workspace], list[Artifact]]
+    what: str = field(default="")
+
+
+BLOCKS = {b.name: b for b in (
+    Block("example-session", "cheap", example_session, "README: the five-bar session"),
+    Block("gait-trial", "cheap", gait_trial, "README and docs/gait_qualisys.png"),
+    Block("table-subset", "cheap", table_subset, "check only: docs tables' AD and NRM rows"),
+    Block("sweeps", "tables", sweeps, "docs/table1.md, docs/table2.md, README sweep line"),
+    Block("gait-methods", "tables", gait_methods, "README: CNO-SQP against NRM-WLS on gait"),
+    Block("bench-kinematics", "benchmarks", bench_kinematics, "README performance table"),
+    Block("bench-optimization", "benchmarks", bench_optimization, "README performance table"),
+    Block("bench-gait", "benchmarks", bench_gait, "README gait speed"),
+    Block("figures", "figures", figures, "docs/*.png of the Figure 8 case and their commands"),
+    Block("figure8-seeds", "figures", figure8_seeds, "README: P6's distance over seeds"),
+)}
+PARTS = ("cheap", "tables", "benchmarks", "figures")
+
+# ---------------------------------------------------------------------------------------------
+# Comparing without the timing figures
+
+T = "‹t›"
+NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+FREE_TIMING = re.compile(rf"(?<![\w.]){NUMBER}(?=\s*(?:ms/frame|ms|s|min|frames/s)\b)")
+CONSOLE_TIMING = ("ms/frame", "frames/s", "x real time")
+MARKDOWN_TIMING = ("ms/frame", "frames/s", "real time", "total ms")
+
+
+def _cells(row: str) -> list[str]:
+    return [c.strip() for c in row.strip().strip("|").split("|")]
+
+
+def _markdown_table(rows: list[str], caption: str) -> list[str]:
+    header = _cells(rows[0])
+    timing = {k for k, h in enumerate(header)
+              if any(w in h for w in MARKDOWN_TIMING) and "paper" not in h}
+    if "ms/frame" in caption:
+        timing |= {k for k, h in enumerate(header) if re.fullmatch(r"P[\d.]+", h)}
+    out = []
+    for row in rows:
+        cells = _cells(row.replace("\\|", "¦"))
+        for k in timing:
+            if k < len(cells) and not set(cells[k]) <= set("-:"):
+                ours, bracket, rest = cells[k].partition("[")
+                cells[k] = re.sub(NUMBER, T, ours).strip() + (f" [{rest}" if bracket else "")
+        out.append("| " + " | ".join(FREE_TIMING.sub(T, c) for c in cells) + " |")
+    return out
+
+
+def _timing_spans(header: str) -> list[tuple[int, int]]:
+    return [(m.start(), m.end()) for w in CONSOLE_TIMING for m in re.finditer(re.escape(w), header)]
+
+
+def _timing_tokens(row: str, spans: list[tuple[int, int]]) -> list[tuple[bool, str]]:
+    """The row's tokens, each with whether it lies under a timing header."""
+    return [(any(m.start() < b and a < m.end() for a, b in spans), m.group())
+            for m in re.finditer(r"\S+", row)]
+
+
+def _is_row(row: str, width: int, spans: list[tuple[int, int]]) -> bool:
+    """A data row of the table: as many fields as the first, numbers under the timing headers."""
+    tokens = _timing_tokens(row, spans)
+    return (len(tokens) == width and not row.startswith("$")
+            and all(re.fullmatch(NUMBER + "|nan", t) for timing, t in tokens if timing))
+
+
+def _console_table(header: str, rows: list[str]) -> list[str]:
+    spans = _timing_spans(header)
+    out = [" ".join(header.split())]
+    for row in rows:
+        out.append(" ".join(T if timing else t for timing, t in _timing_tokens(row, spans)))
+    return out
+
+
+def normalize(text: str) -> list[str]:
+    """The lines of a block with its timing figures replaced by a placeholder, spacing
+    collapsed (see the module's docstring)."""
+    lines = text.splitlines()
+    out: list[str] = []
+    caption = ""
+    i = 0
+    while i < len(lines):
+        line = lines[i]
+        if line.lstrip().startswith("|"):
+            j = i
+            while j < len(lines) and lines[j].lstrip().startswith("|"):
+                j += 1
+            out.extend(_markdown_table(lines[i:j], caption))
+            i = j
+            continue
+        following = lines[i + 1] if i + 1 < len(lines) else ""
+        if (any(w in line for w in CONSOLE_TIMING) and not line.startswith("$")
+                and following.strip() and not following.startswith("$")
+                and not FREE_TIMING.search(line)):
+            width, spans = len(following.split()), _timing_spans(line)
+            j = i + 1
+            while j < len(lines) and _is_row(lines[j], width, spans):
+                j += 1
+            out.extend(_console_table(line, lines[i + 1:j]))
+            i = j
+            continue
+        if line.strip():
+            caption = line
+        out.append(" ".join(FREE_TIMING.sub(T, line).split()))
+        i += 1
+    return out
+
+
+def readme_blocks(text: str) -> dict[str, str]:
+    """NAME → content of every generated block of a README text."""
+    return {m.group(1): m.group(2) for m in BLOCK_RE.finditer(text)}
+
+
+BLOCK_RE = re.compile(r"<!-- generated: ([\w-]+) -->\n(.*?)\n?<!-- /generated -->", re.S)
+
+
+def _diff(old: str, new: str, label: str) -> list[str]:
+    a, b = normalize(old), normalize(new)
+    if a == b:
+        return []
+    return list(difflib.unified_diff(a, b, f"{label} (now)", f"{label} (fresh run)",
+                                     lineterm="", n=1))
+
+
+def _table_rows(text: str) -> dict[tuple, str]:
+    """(caption, key cells) → the normalized row, for every row of the markdown tables."""
+    rows: dict[tuple, str] = {}
+    caption = ""
+    for line in normalize(text):
+        if line.startswith("|"):
+            cells = _cells(line)
+            if not set("".join(cells)) <= set("-:"):
+                rows[(caption, *cells[:4])] = line
+        elif line.strip():
+            caption = line
+    return rows
+
+
+def _same_image(old: Path, new: bytes) -> str | None:
+    """None when the figures agree, else why not."""
+    import io
+
+    import numpy as np
+    from matplotlib import __version__ as mpl
+    from matplotlib.image import imread
+    from PIL import Image as PILImage
+
+    if not old.exists():
+        return "missing"
+    a, b = imread(old), imread(io.BytesIO(new), format="png")
+    if a.shape == b.shape and np.array_equal(a, b):
+        return None
+    software = PILImage.open(old).info.get("Software", "")
+    if mpl not in software:  # another matplotlib drew it: compare loosely
+        from matplotlib.testing.compare import compare_images
+
+        with tempfile.TemporaryDirectory() as tmp:
+            fresh = Path(tmp) / old.name
+            fresh.write_bytes(new)
+            result = compare_images(str(old), str(fresh), tol=2.0, in_decorator=True)
+        return None if result is None else f"RMS {result['rms']:.2f} (written by {software})"
+    if a.shape != b.shape:
+        return f"size {a.shape[1]}×{a.shape[0]} now, {b.shape[1]}×{b.shape[0]} fresh"
+    return f"{int(np.any(a != b, axis=-1).sum())} pixels differ"
+
+
+def differences(artifact: Artifact, readme: str, root: Path = ROOT) -> list[str]:
+    """Why ``artifact`` disagrees with the repository (an empty list when it agrees)."""
+    if isinstance(artifact, ReadmeBlock):
+        blocks = readme_blocks(readme)
+        if artifact.name not in blocks:
+            return [f"README.md has no block <!-- generated: {artifact.name} -->"]
+        return _diff(blocks[artifact.name], artifact.text, f"README.md:{artifact.name}")
+    path = root / artifact.path
+    if isinstance(artifact, Image):
+        why = _same_image(path, artifact.data)
+        return [] if why is None else [f"{artifact.path}: {why}"]
+    if not path.exists():
+        return [f"{artifact.path}: missing"]
+    current = path.read_text(encoding="utf-8")
+    if isinstance(artifact, TextFile):
+        return _diff(current, artifact.text, artifact.path)
+    have, fresh = _table_rows(current), _table_rows(artifact.text)
+    out = []
+    for key, row in fresh.items():
+        if have.get(key) != row:
+            out += [f"{artifact.path}: row {' / '.join(key[1:])} under {key[0]}",
+                    f"  now:   {have.get(key, '(missing)')}", f"  fresh: {row}"]
+    return out
+
+
+def write(artifact: Artifact, root: Path = ROOT) -> None:
+    """Write one artifact; a README block is replaced in the README as it is now."""
+    if isinstance(artifact, RowCheck):
+        return
+    if isinstance(artifact, ReadmeBlock):
+        path = root / "README.md"
+        text = path.read_text(encoding="utf-8")
+        start = f"<!-- generated: {artifact.name} -->"
+        if start not in text:
+            raise RuntimeError(f"README.md: no {start} to fill")
+        pattern = re.compile(re.escape(start) + r"\n.*?\n?<!-- /generated -->", re.S)
+        new = pattern.sub(lambda _: f"{start}\n{artifact.text}\n<!-- /generated -->", text,
+                          count=1)
+        _replace(path, new.encode("utf-8"))
+    elif isinstance(artifact, TextFile):
+        _replace(root / artifact.path, artifact.text.encode("utf-8"))
+    else:
+        _replace(root / artifact.path, artifact.data)
+
+
+def _replace(path: Path, data: bytes) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--part", choices=[*PARTS, "all"], default=None)
+    parser.add_argument("--block", action="append", choices=sorted(BLOCKS), default=[],
+                        help="Only this block (repeatable); instead of --part.")
+    parser.add_argument("--check", action="store_true",
+                        help="Compare with README.md and docs/ instead of writing; exit 1 "
+                             "naming the blocks that differ.")
+    parser.add_argument("--keep", action="store_true", help="Keep the temporary folder.")
+    args = parser.parse_args(argv)
+    if args.part is None and not args.block:
+        parser.error("expected --part or --block")
+    names = list(args.block) + [b.name for b in BLOCKS.values()
+                                if args.part in (b.part, "all")]
+    differing: list[str] = []
+    with Workspace(keep=args.keep) as ws:
+        if args.keep:
+            print(f"workspace: {ws.dir}", file=sys.stderr)
+        for name in dict.fromkeys(names):
+            started = time.perf_counter()
+            try:
+                artifacts = BLOCKS[name].make(ws)
+            except Skip as why:
+                print(f"{name}: skipped ({why})", file=sys.stderr)
+                continue
+            seconds = time.perf_counter() - started
+            if args.check:
+                readme = README.read_text(encoding="utf-8")
+                found = [line for a in artifacts for line in differences(a, readme)]
+                if found:
+                    differing.append(name)
+                    print("\n".join(found))
+                status = "differs" if found else "agrees"
+            else:
+                for artifact in artifacts:
+                    write(artifact)
+                status = "written"
+            print(f"{name}: {status} ({seconds:.0f} s)", file=sys.stderr)
+    if differing:
+        print(f"differ from a fresh run: {', '.join(differing)}")
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
