@@ -20,6 +20,7 @@ import numpy as np
 from fccgrb_cli.anatomy.calibrate import calibrate
 from fccgrb_cli.io.trial import read_trial
 from fccgrb_cli.model import load_model, parse_model
+from fccgrb_cli.options import SolveOptions
 from fccgrb_cli.pipeline import solve_trial
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -53,7 +54,8 @@ def main() -> None:
     for method, repeat in (("nrm-wls", args.repeat), ("cno-sqp", 1)):
         for dynamics in (False, True):
             seconds, run = timed(repeat, lambda m=method, d=dynamics: solve_trial(
-                model, trial, method=m, dynamics=d, filter_cutoff=6.0 if d else None))
+                model, trial, SolveOptions(method=m, dynamics=d,
+                                           filter_cutoff=6.0 if d else None)))
             fps = n / seconds
             print(f"{method:>8} {'yes' if dynamics else 'no':>9} {1e3 * seconds / n:9.2f} "
                   f"{fps:9.0f} {fps / trial.rate:12.1f} "

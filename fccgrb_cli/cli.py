@@ -7,6 +7,7 @@ import functools
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import click
 import numpy as np
@@ -14,6 +15,7 @@ import numpy as np
 from fccgrb_cli import __version__
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.model import Model, load_model
+from fccgrb_cli.options import click_options, from_cli
 from fccgrb_cli.progress import Progress
 from fccgrb_cli.system.structure import analyse
 
@@ -125,17 +127,6 @@ def _split(text: str | None) -> tuple[str, ...]:
     return tuple(part.strip() for part in (text or "").split(",") if part.strip())
 
 
-def _mapping(pairs: tuple[str, ...]) -> dict[str, str]:
-    out = {}
-    for item in pairs:
-        for pair in _split(item):
-            if pair.count("=") != 1:
-                raise InputError(f"--map: expected MODEL_NAME=FILE_LABEL, got {pair!r}")
-            name, label = (p.strip() for p in pair.split("="))
-            out[name] = label
-    return out
-
-
 def format_summary(row: dict) -> str:
     """A two-line table: header and values, numbers in a compact engineering form."""
     def fmt(value) -> str:
@@ -155,100 +146,19 @@ def format_summary(row: dict) -> str:
 @main.command()
 @click.argument("model")
 @click.argument("trial")
-@click.option("--method",
-              type=click.Choice(["ad", "nrm-ls", "nrm-wls", "cno-sqp", "cno-ip", "mo-tc",
-                                 "mo-ed"]), default="nrm-wls", show_default=True,
-              help="ad: the classical kinematic analysis with angular drivers computed from the "
-                   "markers (segment frames fitted, then the angles; see --filter-cutoff); "
-                   "nrm-ls / nrm-wls: mixed coordinates by Newton–Raphson on least squares / "
-                   "weighted least squares; cno-sqp / cno-ip: min of the tracking objective "
-                   "(--objective) subject to the topological equations, by SQP (SLSQP) or "
-                   "scipy's trust-constr; mo-tc / mo-ed: goal attainment over each tracking "
-                   "component / each point's Euclidean distance.")
-@click.option("--objective", type=click.Choice(["tc", "ed"]), default="tc", show_default=True,
-              help="CNO objective: weighted sum of squared tracking residuals (tc, m²) or of "
-                   "Euclidean distances (ed, m).")
-@click.option("--max-iter", type=click.IntRange(min=1), default=None,
-              help="Iteration cap per frame [default: 50 for NRM, 500 for the optimizers].")
-@click.option("--parallel", is_flag=True,
-              help="Optimizers only: solve frames independently over a process pool (the "
-                   "paper's parallel mode; see --parallel-init).")
-@click.option("--workers", type=click.IntRange(min=1), default=None,
-              help="Processes for --parallel [default: the number of CPUs].")
-@click.option("--parallel-init", type=click.Choice(["same", "chunks", "nrm"]), default="nrm",
-              show_default=True,
-              help="With --parallel: NRM-WLS positions as each frame's guess (nrm), or "
-                   "contiguous chunks solved sequentially within each worker (chunks); both "
-                   "then re-solve, in order from a trusted neighbour, every frame that failed, "
-                   "jumped or left its neighbours' assembly branch, and give the sequential "
-                   "answer. 'same' is the paper's parallel mode: every frame from the same guess, "
-                   "no re-solve (its wrong frames are flagged).")
-@click.option("--ad-drivers", type=click.Choice(["markers", "truth"]), default="markers",
-              show_default=True,
-              help="With --method ad: angles from the markers, or the true angles of a trial "
-                   "made by 'fccgrb synth' (its TRIAL.truth.h5).")
-@click.option("--filter-cutoff", type=click.FloatRange(min=0, min_open=True), default=None,
-              metavar="HZ",
-              help="Low-pass the angles (zero-lag Butterworth, forward and backward) before they "
-                   "drive the classical model: the AD baseline's drivers, and the solved angles "
-                   "converted for inverse dynamics. Off by default; 6 Hz is the gait standard.")
-@click.option("--filter-order", type=click.IntRange(min=1, max=8), default=2, show_default=True,
-              help="Order of that Butterworth filter (each pass).")
-@click.option("--dynamics/--no-dynamics", default=None,
-              help="Inverse dynamics (joint moments in N·m, multipliers, energies) on the "
-                   "classical model driven by the solved angles [default: on when every body "
-                   "has mass and inertia].")
 @click.option("-o", "--output", default="results.h5", show_default=True,
               type=click.Path(dir_okay=False),
               help="HDF5 results file; an existing one gains (or replaces) this run.")
-@click.option("--name", default=None,
-              help="Run name inside the results file [default: the method, then -truth, "
-                   "-f<cutoff>Hz and -P<mm> where they apply, e.g. ad-f6Hz-P30].")
-@click.option("--tol", type=click.FloatRange(min=0, min_open=True), default=1e-10,
-              show_default=True, help="Newton–Raphson tolerance on ‖Δq‖∞ (m and rad).")
-@click.option("--tracking-weight", type=click.FloatRange(min=0, min_open=True), default=1e-3,
-              show_default=True,
-              help="WLS weight of the tracking equations (topological equations weigh 1); a "
-                   "tracked point's own 'weight' in the model overrides it.")
-@click.option("--form", type=FORM, default="model", show_default=True,
-              help="Body form for every body (fully-defined or reduced), or as the model says.")
-@click.option("--track", default=None, metavar="NAMES",
-              help="Comma-separated model marker names to track [default: all the model's].")
-@click.option("--map", "maps", multiple=True, metavar="NAME=LABEL",
-              help="Map a model marker name to a file label (repeatable, or comma-separated).")
-@click.option("--perturb", "perturb_mm", type=click.FloatRange(min=0), default=0.0,
-              show_default=True,
-              help="Soft-tissue-artefact level in mm: the largest deviation per axis.")
-@click.option("--perturb-markers", default=None, metavar="NAMES",
-              help="Comma-separated model marker names to perturb [default: all tracked].")
-@click.option("--seed", type=int, default=0, show_default=True,
-              help="Seed of the perturbation (same seed, same artefact).")
-@click.option("--warm-start", type=click.Choice(["extrapolate", "previous"]),
-              default="extrapolate", show_default=True,
-              help="Each frame starts from a quadratic extrapolation of the last three "
-                   "solutions, or from the previous solution (the paper's choice).")
-@click.option("--hessian", type=click.Choice(["auto", "gauss-newton", "exact"]), default="auto",
-              show_default=True,
-              help="NRM iteration matrix: gauss-newton (Φ_qᵀWΦ_q, the paper's NRM), exact "
-                   "(adds Σ wΦ∇²Φ: Newton on the weighted least squares), or auto: "
-                   "Gauss–Newton until it converges only linearly (noisy markers), then exact.")
-@click.option("--skip-unsolvable", is_flag=True,
-              help="Report frames whose remaining markers cannot determine the model as "
-                   "unsolved and go on, instead of stopping with an error.")
+@click_options
 @ACCEPT_TRUNCATED
 @reports_input_errors
-def solve(model: str, trial: str, method: str, objective: str, max_iter: int | None,
-          parallel: bool, workers: int | None, parallel_init: str, ad_drivers: str,
-          filter_cutoff: float | None,
-          filter_order: int, dynamics: bool | None, output: str, name: str | None, tol: float,
-          tracking_weight: float, form: str, track: str | None, maps: tuple[str, ...],
-          perturb_mm: float, perturb_markers: str | None, seed: int, warm_start: str,
-          hessian: str, skip_unsolvable: bool, accept_truncated: bool) -> None:
+def solve(model: str, trial: str, output: str, accept_truncated: bool, **options: Any) -> None:
     """Solve the kinematics of MODEL (YAML) over TRIAL (C3D or TRC markers) and write HDF5.
 
     Prints a one-row summary: ms/frame (positions), iterations/frame, mean ‖Φ‖ over the active
     equations, max |topological Φ|, mean and max Euclidean distance (mm) between each tracked
-    model point and its reference marker, and the number of frames that did not converge.
+    model point and its reference marker, the frames that did not converge (failed) and those
+    the quality checks flagged (a jump, another assembly branch, a broken topology).
     """
     from fccgrb_cli.clinical import clinical_table
     from fccgrb_cli.io.results import write_run
@@ -256,28 +166,14 @@ def solve(model: str, trial: str, method: str, objective: str, max_iter: int | N
     from fccgrb_cli.io.truth import truth_path
     from fccgrb_cli.pipeline import solve_trial, summary
 
+    chosen = from_cli(options)
     inputs = {Path(p).resolve() for p in (model, trial, truth_path(trial))}
     if Path(output).resolve() in inputs:
         raise InputError(f"{output}: expected a results file other than the model, the trial or "
                          "its truth file (inputs are never modified)")
-    loaded = load_checked(model, form)
-    if track is not None:
-        wanted = _split(track)
-        unknown = sorted(set(wanted) - set(loaded.marker_labels))
-        if unknown:
-            raise InputError(f"--track: expected marker names of {model} "
-                             f"({', '.join(loaded.marker_labels)}), got {', '.join(unknown)}")
-        loaded = loaded.with_tracked(wanted)
-    data = read_trial(trial, accept_truncated)
-    run = solve_trial(loaded, data, method=method, tol=tol, mapping=_mapping(maps),
-                      perturb_level_m=perturb_mm * 1e-3, perturb_markers=_split(perturb_markers),
-                      seed=seed, tracking_weight=tracking_weight, warm_start=warm_start,
-                      hessian=hessian, skip_unsolvable=skip_unsolvable, name=name,
-                      ad_drivers=ad_drivers, filter_cutoff=filter_cutoff,
-                      filter_order=filter_order, dynamics=dynamics, objective=objective,
-                      max_iter=max_iter, parallel=parallel, workers=workers,
-                      parallel_init=parallel_init,
-                      progress=Progress(f"solve {method}"))
+    loaded = load_checked(model, chosen.form)
+    run = solve_trial(loaded, read_trial(trial, accept_truncated), chosen,
+                      progress=Progress(f"solve {chosen.method}"))
     write_run(output, run, " ".join(["fccgrb", *sys.argv[1:]]))
     for message in (*run.result.messages, *run.warnings):
         click.echo(f"fccgrb: warning: {message}", err=True)

@@ -1,9 +1,12 @@
-"""One solve: trial markers → (perturbation) → kinematic method → per-frame statistics."""
+"""One solve, as the design's steps: load (labels, truth) → perturb → kinematic solve → quality
+assessment → angular drivers (filtered) → inverse dynamics → a Run, whatever asked for it (the
+CLI, a sweep cell or the Python API), every option coming in one ``SolveOptions``."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +19,8 @@ from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.io.truth import Truth, read_truth, truth_path
 from fccgrb_cli.model import Model
+from fccgrb_cli.named import NamedArray
+from fccgrb_cli.options import METHODS, SolveOptions
 from fccgrb_cli.perturb import perturb
 from fccgrb_cli.solvers import KinematicResult, solve_ad
 from fccgrb_cli.solvers.baseline import solve_baseline
@@ -24,14 +29,18 @@ from fccgrb_cli.solvers.optimize import Settings, solve_optimization
 from fccgrb_cli.solvers.quality import JUMP, assessed
 from fccgrb_cli.system import System, compile_system
 
-METHODS = ("ad", "nrm-ls", "nrm-wls", "cno-sqp", "cno-ip", "mo-tc", "mo-ed")
+__all__ = ["METHODS", "Run", "solve_trial", "summary"]
+
+Progress = Callable[[int, int], None] | None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class Run:
-    """A solved trial with everything the results file and the summary need."""
+    """A solved trial: the options it was solved with, the kinematic result (with each frame's
+    quality flags), the markers it saw, the model points it reached, and the inverse dynamics."""
 
     name: str
+    options: SolveOptions
     result: KinematicResult
     labels: tuple[str, ...]
     rate: float
@@ -41,21 +50,167 @@ class Run:
     ed: np.ndarray
     ed_input: np.ndarray
     truth_theta: np.ndarray | None
-    perturb_level_m: float
-    perturb_markers: tuple[str, ...]
-    perturb_seed: int
-    tracking_weight: float | None
-    warm_start: str
-    hessian: str
     form: str
     model_text: str
     trial_path: str
-    ad_drivers: str = ""
-    filter_cutoff: float | None = None
     dynamics: Dynamics | None = None
     warnings: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
     clinical: ClinicalResults | None = None
+
+    def __repr__(self) -> str:
+        r = self.result
+        return (f"Run({self.name!r}: {self.options.method}, {len(r.time)} frames, "
+                f"{int((~r.converged).sum())} failed, {int((~r.trusted).sum())} not trusted, "
+                f"dynamics {'on' if self.dynamics is not None else 'off'})")
+
+    # --- what the results file records of the options, as they applied to this run -------
+    @property
+    def perturb_level_m(self) -> float:
+        return self.options.perturb_level_m
+
+    @property
+    def perturb_markers(self) -> tuple[str, ...]:
+        """The perturbed markers: those named, else every tracked one when perturbed."""
+        return self.options.perturb_markers or (self.labels if self.perturb_level_m > 0 else ())
+
+    @property
+    def perturb_seed(self) -> int:
+        return self.options.seed
+
+    @property
+    def tracking_weight(self) -> float | None:
+        return None if self.options.method == "nrm-ls" else self.options.tracking_weight
+
+    @property
+    def warm_start(self) -> str:
+        return self.options.warm_start
+
+    @property
+    def hessian(self) -> str:
+        return "" if self.options.method == "ad" else self.options.hessian
+
+    @property
+    def ad_drivers(self) -> str:
+        return self.options.ad_drivers if self.options.method == "ad" else ""
+
+    @property
+    def filter_cutoff(self) -> float | None:
+        return self.options.filter_cutoff
+
+    # --- the Python API's view: named arrays with units ------------------------------------
+    @cached_property
+    def model(self) -> Model:
+        """The model as solved (the run's YAML with the options' form and tracked markers)."""
+        from fccgrb_cli.model import parse_model
+
+        return prepared(parse_model(self.model_text, self.trial_path), self.options)
+
+    def _named(self, values: np.ndarray, names: tuple[str, ...], units: tuple[str, ...]
+               ) -> NamedArray:
+        return NamedArray(values, names, units, self.result.time)
+
+    @property
+    def _angle_units(self) -> tuple[str, ...]:
+        return tuple("m" if getattr(a, "kind", "angle") == "distance" else "rad"
+                     for a in self.model.angles)
+
+    @property
+    def angles(self) -> NamedArray:
+        """Every joint angle (rad; a distance coordinate in m) per frame."""
+        return self._named(self.result.theta, self.result.angle_names, self._angle_units)
+
+    @property
+    def angular_velocities(self) -> NamedArray:
+        """θ̇ (rad/s; m/s for distances), by central differences of the solved θ."""
+        return self._named(self.result.theta_d, self.result.angle_names,
+                           tuple(f"{u}/s" for u in self._angle_units))
+
+    @property
+    def angular_accelerations(self) -> NamedArray:
+        """θ̈ (rad/s²; m/s² for distances)."""
+        return self._named(self.result.theta_dd, self.result.angle_names,
+                           tuple(f"{u}/s²" for u in self._angle_units))
+
+    def _coordinates(self, values: np.ndarray, per: str) -> NamedArray:
+        names, units = [], []
+        for body in self.model.bodies:
+            for vector in ("r", "u", "v", "w")[: 4 if body.form == "full" else 3]:
+                names += [f"{body.name}.{vector}.{axis}" for axis in "xyz"]
+                units += [("m" if vector == "r" else "1") + per] * 3
+        if values.shape[1] > len(names):  # mixed coordinates: the angles follow
+            names += list(self.result.angle_names)
+            units += [u + per for u in self._angle_units]
+        return self._named(values, tuple(names), tuple(units))
+
+    @property
+    def q(self) -> NamedArray:
+        """The system coordinates per frame (Eq. 9): each body's r (m) and unit vectors, then
+        the mixed coordinates (rad, m)."""
+        return self._coordinates(self.result.q, "")
+
+    @property
+    def qd(self) -> NamedArray:
+        """q̇, consistent with the topological equations (per s)."""
+        return self._coordinates(self.result.qd, "/s")
+
+    @property
+    def qdd(self) -> NamedArray:
+        """q̈, consistent with the topological equations (per s²)."""
+        return self._coordinates(self.result.qdd, "/s²")
+
+    @property
+    def moments(self) -> NamedArray | None:
+        """Joint moments conjugate to the angles (N·m; N for distances), None without the
+        dynamics."""
+        if self.dynamics is None:
+            return None
+        return self._named(self.dynamics.inverse.joint_moments, self.result.angle_names,
+                           tuple("N" if u == "m" else "N·m" for u in self._angle_units))
+
+    @property
+    def clinical_angles(self) -> NamedArray | None:
+        """Clinical angles (deg) of the angles that declare a clinical sign."""
+        c = self.clinical
+        return None if c is None else self._named(c.angles, c.names, ("deg",) * len(c.names))
+
+    @property
+    def clinical_moments(self) -> NamedArray | None:
+        """Their conjugate moments, N·m/kg when the subject's mass is known, else N·m."""
+        c = self.clinical
+        if c is None or c.moments is None:
+            return None
+        per_kg = c.moments_per_kg
+        values, unit = (per_kg, "N·m/kg") if per_kg is not None else (c.moments, "N·m")
+        return self._named(values, c.names, (unit,) * len(c.names))
+
+    @property
+    def trusted(self) -> np.ndarray:
+        """Per frame: converged and not flagged by the quality checks."""
+        return self.result.trusted
+
+    def summary(self) -> dict[str, float | str | int]:
+        """The one-row summary the command line prints."""
+        return summary(self)
+
+    def to_hdf5(self, path: str | Path, command: str = "fccgrb_cli.solve (Python API)") -> None:
+        """Add this run to a results file (created when absent), atomically."""
+        from fccgrb_cli.io.results import write_run
+
+        write_run(path, self, command)
+
+    def to_dataframe(self):
+        """One row per frame: time, trusted, the angles, their moments and the clinical curves
+        (columns 'name [unit]'); needs pandas."""
+        import pandas as pd
+
+        parts = [self.angles.to_dataframe()]
+        parts += [a.to_dataframe().add_prefix(prefix) for prefix, a in (
+            ("moment ", self.moments), ("clinical ", self.clinical_angles),
+            ("clinical moment ", self.clinical_moments)) if a is not None]
+        frame = pd.concat(parts, axis=1)
+        frame.insert(0, "trusted", self.trusted)
+        return frame
 
 
 def match_labels(model: Model, trial: Trial, mapping: dict[str, str]) -> list[str]:
@@ -95,110 +250,132 @@ def _vector_targets(model: Model, trial: Trial, markers: dict[str, np.ndarray]) 
     return np.stack(out, axis=1) if out else np.zeros((trial.n_frames, 0, 3))
 
 
-def solve_trial(model: Model, trial: Trial, *, method: str = "nrm-wls", tol: float = 1e-10,
-                mapping: dict[str, str] | None = None, perturb_level_m: float = 0.0,
-                perturb_markers: tuple[str, ...] = (), seed: int = 0,
-                tracking_weight: float = 1e-3, warm_start: str = "extrapolate",
-                hessian: str = "auto", skip_unsolvable: bool = False, name: str | None = None,
-                ad_drivers: str = "markers", filter_cutoff: float | None = None,
-                filter_order: int = 2, dynamics: bool | None = None, objective: str = "tc",
-                max_iter: int | None = None, parallel: bool = False, workers: int | None = None,
-                parallel_init: str = "nrm", truth: Truth | None = None,
-                progress: Callable[[int, int], None] | None = None) -> Run:
+def prepared(model: Model, options: SolveOptions) -> Model:
+    """The model as the options ask: every body in one form, only some markers tracked."""
+    if options.form != "model":
+        model = model.with_form(options.form)
+    if options.track:
+        unknown = sorted(set(options.track) - set(model.marker_labels))
+        if unknown:
+            raise InputError(f"--track: expected marker names of {model.source} "
+                             f"({', '.join(model.marker_labels)}), got {', '.join(unknown)}")
+        model = model.with_tracked(options.track)
+    return model
+
+
+def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None, *,
+                truth: Truth | None = None, progress: Progress = None) -> Run:
     """Solve a trial with one method, then (when the model has inertia, or ``dynamics``) its
-    inverse dynamics on the classical model driven by the solved angles."""
-    if method not in METHODS:
-        raise InputError(f"--method: expected one of {', '.join(METHODS)}, got {method!r}")
-    labels = match_labels(model, trial, mapping or {})
-    unknown = sorted(set(perturb_markers) - set(model.marker_labels))
+    inverse dynamics on the classical model driven by the solved angles; ``truth``: the exact
+    motion of a synthesized trial (read from its sidecar when None)."""
+    options = options or SolveOptions()
+    model = prepared(model, options)
+    labels = match_labels(model, trial, dict(options.mapping))
+    unknown = sorted(set(options.perturb_markers) - set(model.marker_labels))
     if unknown:
         raise InputError(f"--perturb-markers: expected marker names of the model "
                          f"({', '.join(model.marker_labels)}), got {', '.join(unknown)}")
     measured = trial.select(labels)
     truth = _truth_for(trial, model) if truth is None else truth
-    reference = measured
-    if truth is not None:
-        index = {label: k for k, label in enumerate(truth.labels)}
-        if all(label in index for label in labels) and len(truth.time) == trial.n_frames:
-            reference = truth.markers[:, [index[label] for label in labels]]
-    inputs = perturb(measured, model.marker_labels, trial.rate, perturb_level_m, seed,
-                     only=perturb_markers or None)
-    time = trial.time
-    if method == "ad":
-        system = compile_system(model, angles="driver")
-        if ad_drivers == "truth":
-            result = _solve_with_true_angles(system, trial, truth, tol, progress)
-        else:
-            result = solve_baseline(model, time, inputs, cutoff=filter_cutoff,
-                                    order=filter_order, tol=tol, progress=progress)
-    else:
-        system = compile_system(model, angles="coordinate", track=True)
-        by_label = dict(zip(model.marker_labels, np.moveaxis(inputs, 1, 0), strict=True))
-        targets = np.concatenate([inputs, _vector_targets(model, trial, by_label)], axis=1)
-        if method.startswith("nrm"):
-            result = solve_nrm(
-                system, time, targets,
-                tracking_weight=None if method == "nrm-ls" else tracking_weight, tol=tol,
-                max_iter=max_iter or 50, warm_start=warm_start, hessian=hessian,
-                skip_unsolvable=skip_unsolvable,
-                target_labels=model.marker_labels + tuple(
-                    tv.marker for tv in model.tracked_vectors),
-                method=method, source=trial.path, progress=progress)
-        else:
-            settings = Settings(method, objective, tol, max_iter or 500)
-            result = solve_optimization(system, time, targets, settings, parallel=parallel,
-                                        workers=workers, init=parallel_init,
-                                        warm_start=warm_start, nrm_weight=tracking_weight,
-                                        progress=progress)
+    reference = _reference(measured, labels, trial, truth)
+    inputs = perturb(measured, model.marker_labels, trial.rate, options.perturb_level_m,
+                     options.seed, only=options.perturb_markers or None)
+    system, result = _kinematics(model, trial, inputs, options, truth, progress)
     which = [(tp.body, tp.point) for tp in model.tracked_points]
     points = np.array([system.point_positions(q, which) for q in result.q])
     result = assessed(result, points, inputs)
     warnings: list[str] = [*trial.warnings, *_quality_advice(result)]
     notes: list[str] = []
     stance: dict[str, np.ndarray] = {}
-    solved_dynamics = None
-    failed = len(result.failed_frames)
-    if dynamics is None and not model.has_inertia:
-        warnings.append(f"{model.source}: no mass and inertia on every body; inverse dynamics "
-                        "skipped")
-    elif dynamics is None and failed:
-        warnings.append(f"{trial.path}: {failed} frames not solved (first: frame index "
-                        f"{int(result.failed_frames[0])}); inverse dynamics skipped")
-    elif dynamics is not False:
-        if failed:
-            raise InputError(f"{trial.path}: {failed} frames were not solved (first: frame "
-                             f"index {int(result.failed_frames[0])}); inverse dynamics needs "
-                             "every frame")
-        baseline = method == "ad" and ad_drivers == "markers"
-        contact_points = {body: _body_points(system, result.q, body)
-                          for body in model.contact_bodies}
-        loads = plate_loads(model, trial, warnings, contact_points, notes)
-        for load in loads:
-            on = np.abs(load.force).any(axis=1)
-            stance[load.body] = stance.get(load.body, np.zeros_like(on)) | on
-        if filter_cutoff is not None:
-            loads = [load.lowpassed(trial.rate, filter_cutoff, filter_order) for load in loads]
-        solved_dynamics = classical_dynamics(
-            model, result, cutoff=None if baseline else filter_cutoff, order=filter_order,
-            loads=loads, tol=tol)
+    solved_dynamics = _dynamics(model, trial, system, result, options, warnings, notes, stance)
     return Run(
-        name=name or run_name(result.method, ad_drivers, filter_cutoff, perturb_level_m,
-                              perturb_markers),
-        result=result, labels=model.marker_labels,
-        rate=trial.rate, reference=reference, markers_input=inputs, model_points=points,
+        name=options.name or run_name(result.method, options.ad_drivers,
+                                      options.filter_cutoff, options.perturb_level_m,
+                                      options.perturb_markers),
+        options=options, result=result, labels=model.marker_labels, rate=trial.rate,
+        reference=reference, markers_input=inputs, model_points=points,
         ed=np.linalg.norm(points - reference, axis=2),
         ed_input=np.linalg.norm(points - inputs, axis=2),
-        truth_theta=truth.theta if truth is not None else None, perturb_level_m=perturb_level_m,
-        perturb_markers=perturb_markers or (model.marker_labels if perturb_level_m > 0 else ()),
-        perturb_seed=seed, tracking_weight=None if method == "nrm-ls" else tracking_weight,
-        warm_start=warm_start, hessian=hessian if method != "ad" else "",
+        truth_theta=truth.theta if truth is not None else None,
         form=",".join(sorted({b.form for b in model.bodies})),
         model_text=model.text, trial_path=trial.path,
-        ad_drivers=ad_drivers if method == "ad" else "", filter_cutoff=filter_cutoff,
         dynamics=solved_dynamics, warnings=tuple(warnings), notes=tuple(notes),
         clinical=clinical_results(
             model, result.theta,
             None if solved_dynamics is None else solved_dynamics.inverse.joint_moments, stance))
+
+
+def _reference(measured: np.ndarray, labels: list[str], trial: Trial,
+               truth: Truth | None) -> np.ndarray:
+    """The markers errors are measured against: a synthesized trial's exact ones, else the
+    trial's own."""
+    if truth is not None:
+        index = {label: k for k, label in enumerate(truth.labels)}
+        if all(label in index for label in labels) and len(truth.time) == trial.n_frames:
+            return truth.markers[:, [index[label] for label in labels]]
+    return measured
+
+
+def _kinematics(model: Model, trial: Trial, inputs: np.ndarray, options: SolveOptions,
+                truth: Truth | None, progress: Progress) -> tuple[System, KinematicResult]:
+    """The kinematic solve by the chosen method (FORMULATION §3)."""
+    o, time = options, trial.time
+    if o.method == "ad":
+        system = compile_system(model, angles="driver")
+        if o.ad_drivers == "truth":
+            return system, _solve_with_true_angles(system, trial, truth, o.tol, progress)
+        return system, solve_baseline(model, time, inputs, cutoff=o.filter_cutoff,
+                                      order=o.filter_order, tol=o.tol, progress=progress)
+    system = compile_system(model, angles="coordinate", track=True)
+    by_label = dict(zip(model.marker_labels, np.moveaxis(inputs, 1, 0), strict=True))
+    targets = np.concatenate([inputs, _vector_targets(model, trial, by_label)], axis=1)
+    if o.method.startswith("nrm"):
+        return system, solve_nrm(
+            system, time, targets,
+            tracking_weight=None if o.method == "nrm-ls" else o.tracking_weight, tol=o.tol,
+            max_iter=o.max_iter or 50, warm_start=o.warm_start, hessian=o.hessian,
+            skip_unsolvable=o.skip_unsolvable,
+            target_labels=model.marker_labels + tuple(tv.marker for tv in model.tracked_vectors),
+            method=o.method, source=trial.path, progress=progress)
+    settings = Settings(o.method, o.objective, o.tol, o.max_iter or 500)
+    return system, solve_optimization(system, time, targets, settings, parallel=o.parallel,
+                                      workers=o.workers, init=o.parallel_init,
+                                      warm_start=o.warm_start, nrm_weight=o.tracking_weight,
+                                      progress=progress)
+
+
+def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResult,
+              options: SolveOptions, warnings: list[str], notes: list[str],
+              stance: dict[str, np.ndarray]) -> Dynamics | None:
+    """The inverse dynamics of the classical model driven by the run's angles (FORMULATION §4),
+    with the trial's force plates; None, with a warning, when it cannot or need not run."""
+    failed = len(result.failed_frames)
+    if options.dynamics is None and not model.has_inertia:
+        warnings.append(f"{model.source}: no mass and inertia on every body; inverse dynamics "
+                        "skipped")
+        return None
+    if options.dynamics is None and failed:
+        warnings.append(f"{trial.path}: {failed} frames not solved (first: frame index "
+                        f"{int(result.failed_frames[0])}); inverse dynamics skipped")
+        return None
+    if options.dynamics is False:
+        return None
+    if failed:
+        raise InputError(f"{trial.path}: {failed} frames were not solved (first: frame "
+                         f"index {int(result.failed_frames[0])}); inverse dynamics needs "
+                         "every frame")
+    baseline = options.method == "ad" and options.ad_drivers == "markers"
+    contact_points = {body: _body_points(system, result.q, body)
+                      for body in model.contact_bodies}
+    loads = plate_loads(model, trial, warnings, contact_points, notes)
+    for load in loads:
+        on = np.abs(load.force).any(axis=1)
+        stance[load.body] = stance.get(load.body, np.zeros_like(on)) | on
+    cutoff = options.filter_cutoff
+    if cutoff is not None:
+        loads = [load.lowpassed(trial.rate, cutoff, options.filter_order) for load in loads]
+    return classical_dynamics(model, result, cutoff=None if baseline else cutoff,
+                              order=options.filter_order, loads=loads, tol=options.tol)
 
 
 def _quality_advice(result: KinematicResult) -> list[str]:

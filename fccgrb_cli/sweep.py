@@ -25,10 +25,10 @@ import yaml
 
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.atomic import atomic_path
+from fccgrb_cli.options import SWEEP_KEYS, SolveOptions
 
-CELL_KEYS = {"method", "tol", "level", "perturb_markers", "seed", "points", "parallel",
-             "parallel_init", "workers", "objective", "form", "ad_drivers", "filter_cutoff",
-             "tracking_weight", "warm_start", "hessian", "dynamics"}
+# every solve option by its sweep key (``level``: the perturbation in mm), and ``points``
+CELL_KEYS = set(SWEEP_KEYS) - {"name", "map", "track"} | {"points"}
 TOP_KEYS = {"name", "table", "model", "trial", "seed", "variants", "cells"}
 
 
@@ -182,12 +182,6 @@ def run_cell(sweep: Sweep, cell: Cell, store: Path) -> Path:
     from fccgrb_cli.pipeline import solve_trial
 
     target = store / f"{cell.key}.h5"
-    p = dict(cell.params)
-    model = load_model(sweep.model)
-    if p.get("form"):
-        model = model.with_form(p["form"])
-    if p.get("points") is not None:
-        model = model.with_tracked(tuple(sweep.variants["points"][p["points"]]))
     truth = None
     if "synth" in sweep.trial:
         spec = sweep.trial["synth"]
@@ -195,18 +189,22 @@ def run_cell(sweep: Sweep, cell: Cell, store: Path) -> Path:
                                     float(spec.get("rate", 100.0)), 1e-12)
     else:
         trial = read_trial(sweep.trial["file"], sweep.trial.get("accept_truncated", False))
-    run = solve_trial(
-        model, trial, method=p["method"], tol=p["tol"], perturb_level_m=p["level"] * 1e-3,
-        perturb_markers=tuple(p.get("perturb_markers") or ()), seed=int(p.get("seed", 0)),
-        tracking_weight=float(p.get("tracking_weight", 1e-3)),
-        warm_start=p.get("warm_start", "extrapolate"), hessian=p.get("hessian", "auto"),
-        ad_drivers=p.get("ad_drivers", "markers"), filter_cutoff=p.get("filter_cutoff"),
-        dynamics=p.get("dynamics", False), objective=p.get("objective", "tc"),
-        parallel=bool(p.get("parallel", False)), workers=p.get("workers"),
-        parallel_init=p.get("parallel_init", "nrm"), name="run", truth=truth)
+    run = solve_trial(load_model(sweep.model), trial, cell_options(sweep, cell), truth=truth)
     write_run(target, run, f"fccgrb sweep {sweep.source} (cell {cell.key})",
               cell=dict(cell.params) | {"sweep": sweep.name, "table": sweep.table})
     return target
+
+
+def cell_options(sweep: Sweep, cell: Cell) -> SolveOptions:
+    """A cell's solve options: its keys are the options' (``level`` in mm for ``perturb_mm``),
+    ``points`` names a variant of tracked markers, ``form`` falls back on the model's, and the
+    inverse dynamics runs only where the cell asks for it."""
+    p = dict(cell.params)
+    values = {k: v for k, v in p.items() if k != "points" and v is not None}
+    if p.get("points") is not None:
+        values["track"] = tuple(sweep.variants["points"][p["points"]])
+    values["dynamics"] = bool(p.get("dynamics", False))
+    return SolveOptions.from_mapping(values | {"name": "run"}, where=f"{sweep.source}: cell")
 
 
 def run_sweep(sweep: Sweep, output: Path, *, workers: int = 1, executor: Executor | None = None,

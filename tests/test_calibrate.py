@@ -30,6 +30,7 @@ from fccgrb_cli.anatomy.frames import (
 )
 from fccgrb_cli.io.trial import Trial, write_trial
 from fccgrb_cli.model import load_model, parse_model
+from fccgrb_cli.options import SolveOptions
 from fccgrb_cli.pipeline import solve_trial
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -325,7 +326,7 @@ def walking(template):
 def walking_solved(walking):
     _, trial, cal, _ = walking
     personal = parse_model(cal.text, "personal.yaml")
-    run = solve_trial(personal, trial, method="nrm-wls", dynamics=False)
+    run = solve_trial(personal, trial, SolveOptions(method="nrm-wls", dynamics=False))
     clinical = {a.name: a.clinical(run.result.theta[:, k]) for k, a in enumerate(personal.angles)}
     return personal, run, clinical
 
@@ -542,7 +543,7 @@ def test_clinical_angle_signs(template, name: str, value: float, side: str) -> N
     trial = subject.trial(template.marker_labels)
     cal = calibrate(template, trial, frames=(0, 6))  # the static, neutral frames
     personal = parse_model(cal.text, "personal.yaml")
-    run = solve_trial(personal, trial, method="nrm-wls", dynamics=False)
+    run = solve_trial(personal, trial, SolveOptions(method="nrm-wls", dynamics=False))
     assert run.ed.mean() < 1e-6
     last = {a.name: float(a.clinical(run.result.theta[-1, k]))
             for k, a in enumerate(personal.angles)}

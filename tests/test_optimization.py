@@ -64,6 +64,7 @@ from fccgrb_cli.cli import main
 from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.model import load_model
 from fccgrb_cli.model.elements import FrozenMap
+from fccgrb_cli.options import SolveOptions
 from fccgrb_cli.perturb import perturb
 from fccgrb_cli.pipeline import mean_jump, solve_trial, summary
 from fccgrb_cli.solvers.frame_problem import ED_SMOOTHING, FrameProblem
@@ -255,8 +256,8 @@ def test_capped_frames_counted_in_the_summary():
     t = truth()
     trial = Trial(path="in-memory.c3d", labels=t.labels, markers=t.markers[frames(FAIL_WINDOW)],
                   rate=t.rate)
-    run = solve_trial(model(), trial, method="cno-sqp", perturb_level_m=LEVELS["P30"],
-                      max_iter=1, dynamics=False)
+    run = solve_trial(model(), trial, SolveOptions(
+        method="cno-sqp", perturb_mm=1e3 * LEVELS["P30"], max_iter=1, dynamics=False))
     row = summary(run)
     assert row["failed"] == int((~run.result.converged).sum()) > 0
     assert failed_in_messages(run.result.messages) == list(run.result.failed_frames)

@@ -23,6 +23,7 @@ import pytest
 
 from fccgrb_cli.io.trial import read_trial
 from fccgrb_cli.model import load_model
+from fccgrb_cli.options import SolveOptions
 from fccgrb_cli.perturb import perturb
 from fccgrb_cli.pipeline import Run, solve_trial, summary
 from fccgrb_cli.solvers import optimize
@@ -41,15 +42,14 @@ TOPOLOGY_PROMISE = 1e-6
 @cache
 def solved(method: str, level_mm: float, parallel: bool = False, init: str = "nrm") -> Run:
     """A run with its inverse dynamics (skipped, with a warning, where frames failed)."""
-    return solve_trial(load_model(MODEL), read_trial(str(TRIAL)), method=method,
-                       perturb_level_m=level_mm * 1e-3, dynamics=None, parallel=parallel,
-                       workers=2, parallel_init=init)
+    return solve_trial(load_model(MODEL), read_trial(str(TRIAL)), SolveOptions(
+        method=method, perturb_mm=level_mm, parallel=parallel, workers=2, parallel_init=init))
 
 
 @cache
 def true_moments() -> np.ndarray:
-    run = solve_trial(load_model(MODEL), read_trial(str(TRIAL)), method="ad",
-                      ad_drivers="truth", dynamics=True)
+    run = solve_trial(load_model(MODEL), read_trial(str(TRIAL)),
+                      SolveOptions(method="ad", ad_drivers="truth", dynamics=True))
     return run.dynamics.inverse.joint_moments
 
 
@@ -161,8 +161,8 @@ def test_parallel_default_gives_the_sequential_answer():
 
 
 def test_unconverged_frames_are_flagged_as_such():
-    run = solve_trial(load_model(MODEL), read_trial(str(TRIAL)), method="mo-tc", max_iter=1,
-                      perturb_level_m=0.03, dynamics=False)
+    run = solve_trial(load_model(MODEL), read_trial(str(TRIAL)),
+                      SolveOptions(method="mo-tc", max_iter=1, perturb_mm=30, dynamics=False))
     failed = ~run.result.converged
     assert failed.any()
     assert ((run.result.flags & UNCONVERGED) > 0).tolist() == failed.tolist()

@@ -57,10 +57,16 @@ from pathlib import Path
 import numpy as np
 
 from fccgrb_cli.clinical import ClinicalResults
+from fccgrb_cli.dynamics.convert import Dynamics
+from fccgrb_cli.dynamics.inverse import InverseDynamics
+from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.atomic import atomic_path
 from fccgrb_cli.pipeline import Run
 from fccgrb_cli.solvers.quality import BITS
+from fccgrb_cli.solvers.result import KinematicResult
+
+FORMAT_VERSION = 2
 
 
 def open_results(path: str | Path):
@@ -104,6 +110,11 @@ def write_run(path: str | Path, run: Run, command: str, cell: dict | None = None
                                  "choose another output") from None
             shutil.copyfile(path, tmp)
         with h5py.File(tmp, "a") as h5:
+            if h5.attrs.get("format_version", FORMAT_VERSION) != FORMAT_VERSION:
+                raise InputError(f"{path}: written in results format "
+                                 f"{h5.attrs['format_version']}, this fccgrb writes format "
+                                 f"{FORMAT_VERSION}; choose another output")
+            h5.attrs["format_version"] = FORMAT_VERSION
             h5.attrs["model"] = run.model_text
             h5.attrs["command"] = command
             h5.attrs["versions"] = json.dumps(_versions())
@@ -134,8 +145,17 @@ def write_run(path: str | Path, run: Run, command: str, cell: dict | None = None
                 "ad_drivers": run.ad_drivers, "command": command, "wall_s": r.wall_s,
                 "filter_cutoff_hz": np.nan if run.filter_cutoff is None else run.filter_cutoff,
             })
-            g.attrs.create("warnings", [*r.messages, *run.warnings],
-                           dtype=h5py.string_dtype(encoding="utf-8"))
+            text = h5py.string_dtype(encoding="utf-8")
+            g.attrs.create("warnings", [*r.messages, *run.warnings], dtype=text)
+            g.attrs.create("messages", list(r.messages), dtype=text)
+            g.attrs.create("notes", list(run.notes), dtype=text)
+            g.attrs.update({"options": run.options.to_json(), "model": run.model_text,
+                            "trial": run.trial_path, "rate": run.rate,
+                            "labels": list(run.labels)})
+            g["time"] = r.time
+            g.create_dataset("reference", data=run.reference, compression="gzip")
+            if run.truth_theta is not None:
+                g["truth_theta"] = run.truth_theta
             for key in ("q", "qd", "qdd", "iterations", "time_s", "phi_norm", "phi_top_max"):
                 g.create_dataset(key, data=getattr(r, key), compression="gzip")
             g["converged"] = r.trusted
@@ -181,8 +201,12 @@ def _write_dynamics(g, run: Run) -> None:
     g["joint_moments"].attrs["units"] = "N·m"
     g.create_dataset("lambda", data=inverse.lam, compression="gzip")
     g["lambda"].attrs["labels"] = list(inverse.row_labels)
+    g["joint_residual"] = inverse.residual
     classical = g.create_group("classical")
-    for key in ("q", "qd", "qdd", "theta", "theta_d", "theta_dd"):
+    classical.attrs.update({"method": kin.method, "tol": kin.tol,
+                            "cutoff_hz": np.nan if d.cutoff is None else d.cutoff})
+    for key in ("q", "qd", "qdd", "theta", "theta_d", "theta_dd", "iterations", "time_s",
+                "phi_norm", "phi_top_max", "converged"):
         classical.create_dataset(key, data=getattr(kin, key), compression="gzip")
     if inverse.base_names:
         for key in ("residual_force", "residual_moment"):
@@ -199,3 +223,84 @@ def _write_dynamics(g, run: Run) -> None:
         item.attrs["body"] = load.body
         for key in ("force", "point", "moment"):
             item.create_dataset(key, data=getattr(load, key), compression="gzip")
+
+
+def read_runs(path: str | Path) -> dict[str, Run]:
+    """Every run of a results file as the Run that wrote it (see ``fccgrb_cli.read_results``);
+    a file of another format version, or a sweep file, is a one-line error."""
+    with open_results(path) as h5:
+        version = h5.attrs.get("format_version")
+        if version != FORMAT_VERSION:
+            raise InputError(f"{path}: results format {version or 1} (written by an older "
+                             f"fccgrb); this one reads format {FORMAT_VERSION}: solve the "
+                             "trial again to read it here")
+        if "runs" not in h5:
+            raise InputError(f"{path}: expected /runs in a results file (a sweep file's cells "
+                             "are read by 'fccgrb report')")
+        return {name: _read_run(name, g) for name, g in h5["runs"].items()}
+
+
+def _strings(values) -> tuple[str, ...]:
+    return tuple(v.decode() if isinstance(v, bytes) else str(v) for v in values)
+
+
+def _read_result(g, angle_names: tuple[str, ...], time: np.ndarray, attrs: dict,
+                 converged: np.ndarray, extra: dict) -> KinematicResult:
+    return KinematicResult(
+        method=str(attrs["method"]), tol=float(attrs["tol"]), time=time,
+        **{key: g[key][()] for key in ("q", "qd", "qdd", "theta", "theta_d", "theta_dd",
+                                       "iterations", "time_s", "phi_norm", "phi_top_max")},
+        angle_names=angle_names, converged=converged, **extra)
+
+
+def _read_run(name: str, g) -> Run:
+    from fccgrb_cli.options import SolveOptions
+
+    a = dict(g.attrs)
+    names = _strings(g["theta"].attrs["names"])
+    time = g["time"][()]
+    messages = _strings(a["messages"])
+    warnings = _strings(a["warnings"])[len(messages):]
+    result = _read_result(g, names, time, a, g["solver_converged"][()], {
+        "messages": messages, "wall_s": float(a["wall_s"]), "flags": g["flags"][()],
+        "status": _strings(g["status"][()]) if "status" in g else ()})
+    return Run(
+        name=name, options=SolveOptions.from_json(str(a["options"])), result=result,
+        labels=_strings(a["labels"]), rate=float(a["rate"]), reference=g["reference"][()],
+        markers_input=g["markers_input"][()], model_points=g["model_points"][()],
+        ed=g["ed"][()], ed_input=g["ed_input"][()],
+        truth_theta=g["truth_theta"][()] if "truth_theta" in g else None, form=str(a["form"]),
+        model_text=str(a["model"]), trial_path=str(a["trial"]),
+        dynamics=_read_dynamics(g, names, time) if "joint_moments" in g else None,
+        warnings=warnings, notes=_strings(a["notes"]),
+        clinical=_read_clinical(g["clinical"]) if "clinical" in g else None)
+
+
+def _read_dynamics(g, names: tuple[str, ...], time: np.ndarray) -> Dynamics:
+    c = g["classical"]
+    cutoff = float(c.attrs["cutoff_hz"])
+    kinematics = _read_result(c, names, time, dict(c.attrs), c["converged"][()], {})
+    bases = _strings(g["residual_force"].attrs["bases"]) if "residual_force" in g else ()
+    inverse = InverseDynamics(
+        angle_names=names, row_labels=_strings(g["lambda"].attrs["labels"]),
+        lam=g["lambda"][()], joint_moments=g["joint_moments"][()],
+        kinetic=g["energy/kinetic"][()], potential=g["energy/potential"][()],
+        external_power=g["energy/external_power"][()], residual=g["joint_residual"][()],
+        base_names=bases,
+        residual_force=g["residual_force"][()] if bases else None,
+        residual_moment=g["residual_moment"][()] if bases else None)
+    loads = tuple(ExternalLoad(load_name, str(item.attrs["body"]), item["force"][()],
+                               item["point"][()], item["moment"][()])
+                  for load_name, item in g["loads"].items())
+    return Dynamics(kinematics, inverse, loads, None if np.isnan(cutoff) else cutoff)
+
+
+def _read_clinical(c) -> ClinicalResults:
+    angles = c["angles"]
+    mass = c["moments_per_kg"].attrs["mass"] if "moments_per_kg" in c else None
+    return ClinicalResults(
+        names=_strings(angles.attrs["names"]), angles=angles[()],
+        moments=c["moments"][()] if "moments" in c else None,
+        mass=None if mass is None else float(mass),
+        stance={body: frames[()] for body, frames in c["stance"].items()},
+        contact=tuple(b or None for b in _strings(angles.attrs["contact"])))

@@ -1,0 +1,105 @@
+"""The Python API: a model, a trial, options in, a Run out, as the command line does it.
+
+    >>> import fccgrb_cli as fc
+    >>> model = fc.load_model("configs/models/five_bar.yaml")
+    >>> trial = fc.read_trial("sample_data/five_bar.c3d")
+    >>> run = fc.solve(model, trial, method="cno-sqp", perturb_mm=30)
+    >>> run.angles["J3_w"]          # rad, one value per frame
+    >>> run.to_hdf5("results.h5")
+    >>> fc.read_results("results.h5")[run.name].summary()
+
+Like scipy.optimize's ``minimize`` there is one call and one result type (:class:`Run`), and
+like Pinocchio the model is immutable and the algorithms are functions over it. Every option
+of :func:`solve` is a field of :class:`SolveOptions`, documented there with its unit.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from fccgrb_cli.errors import InputError
+from fccgrb_cli.io.trial import Trial
+from fccgrb_cli.model import Model
+from fccgrb_cli.options import SolveOptions, describe
+from fccgrb_cli.pipeline import Run
+
+
+def load_model(source: str | Path | Mapping[str, Any]) -> Model:
+    """A validated, immutable model from a YAML file's path, or from the mapping such a file
+    holds (``yaml.safe_load`` of one; the README's "The model file" documents the keys).
+    The structure is checked too: the joints must leave as many degrees of freedom as there
+    are angles and distances (plus 6 per floating base)."""
+    import yaml
+
+    from fccgrb_cli.model import load_model as load_file
+    from fccgrb_cli.model import parse_model
+    from fccgrb_cli.system.structure import analyse
+
+    if isinstance(source, Mapping):
+        model = parse_model(yaml.safe_dump(dict(source), sort_keys=False), "<model mapping>")
+    else:
+        model = load_file(source)
+    analyse(model)
+    return model
+
+
+def read_trial(path: str | Path, *, accept_truncated: bool = False) -> Trial:
+    """A marker trial from a C3D or TRC file (lengths converted to metres from its units).
+    A file whose data end before its header's last frame is an error unless
+    ``accept_truncated`` (then the trial carries a warning)."""
+    from fccgrb_cli.io.trial import read_trial as read
+
+    return read(str(path), accept_truncated)
+
+
+def solve(model: Model, trial: Trial, options: SolveOptions | None = None,
+          **changes: Any) -> Run:
+    """Solve ``trial`` with ``model``: the kinematics by the chosen method, each frame's quality
+    checks, then (when the model has inertia) the inverse dynamics. ``options`` (default
+    :class:`SolveOptions`) with any field replaced by a keyword, e.g.
+    ``solve(model, trial, method="cno-sqp", perturb_mm=30)``.
+
+    The options (name [unit] (default): meaning):
+
+    {options}
+    """
+    from fccgrb_cli.pipeline import solve_trial
+
+    chosen = options or SolveOptions()
+    if changes:
+        known = {name for name in SolveOptions.__dataclass_fields__}
+        unknown = sorted(set(changes) - known)
+        if unknown:
+            raise InputError(f"{unknown[0]}: expected one of {', '.join(sorted(known))}")
+        chosen = SolveOptions.from_mapping({**_as_mapping(chosen), **changes}, "solve")
+    return solve_trial(model, trial, chosen)
+
+
+def _as_mapping(options: SolveOptions) -> dict[str, Any]:
+    return {name: getattr(options, name) for name in SolveOptions.__dataclass_fields__}
+
+
+def calibrate(template: Model, trial: Trial, *, mass: float | None = None,
+              frames: tuple[int, int] | None = None) -> Model:
+    """A lower-limb ``template`` personalized from a static trial or a stretch of a walking
+    trial (frame indices [A, B), default all), as ``fccgrb calibrate`` does: segment frames,
+    joint centres, marker positions and, with the subject's ``mass`` (kg), de Leva inertia."""
+    from fccgrb_cli.anatomy.calibrate import calibrate as personalize
+    from fccgrb_cli.model import parse_model
+
+    return parse_model(personalize(template, trial, frames, mass).text,
+                       f"{template.source} calibrated on {trial.path}")
+
+
+def read_results(path: str | Path) -> dict[str, Run]:
+    """Every run of a results file written by ``fccgrb solve`` or :meth:`Run.to_hdf5`, by
+    name, as the same Run objects :func:`solve` returns (arrays, options, warnings, dynamics)."""
+    from fccgrb_cli.io.results import read_runs
+
+    return read_runs(path)
+
+
+solve.__doc__ = (solve.__doc__ or "").replace(
+    "{options}", describe().replace("\n", "\n    "))

@@ -1,0 +1,59 @@
+"""Arrays that carry their column names, units and time: what the Python API hands out."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True, eq=False)
+class NamedArray:
+    """A frames × columns array with the name and unit of every column and the frame times.
+
+    ``a["knee_flexion_r"]`` is one column (a 1-D array over frames); ``a.values`` the whole
+    array; ``a.to_dataframe()`` a pandas DataFrame indexed by time (pandas is optional).
+    """
+
+    values: np.ndarray
+    names: tuple[str, ...]
+    units: tuple[str, ...]
+    time: np.ndarray
+
+    def __post_init__(self) -> None:
+        if self.values.ndim != 2 or self.values.shape[1] != len(self.names) or \
+                len(self.units) != len(self.names) or len(self.time) != len(self.values):
+            raise ValueError(f"NamedArray: values {self.values.shape} do not match "
+                             f"{len(self.names)} names, {len(self.units)} units and "
+                             f"{len(self.time)} times")
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        try:
+            return self.values[:, self.names.index(name)]
+        except ValueError:
+            raise KeyError(f"{name!r}: expected one of {', '.join(self.names)}") from None
+
+    def __len__(self) -> int:
+        return len(self.values)
+
+    def __repr__(self) -> str:
+        units = sorted(set(self.units))
+        return (f"NamedArray({len(self.time)} frames × {len(self.names)}: "
+                f"{', '.join(self.names[:4])}{' …' if len(self.names) > 4 else ''}; "
+                f"{', '.join(units)})")
+
+    @property
+    def unit(self) -> dict[str, str]:
+        """Column name → unit."""
+        return dict(zip(self.names, self.units, strict=True))
+
+    def to_dataframe(self):
+        """A pandas DataFrame (index: time in s; columns 'name [unit]')."""
+        try:
+            import pandas as pd
+        except ImportError:
+            raise ImportError("to_dataframe needs pandas: pip install 'fccgrb-cli[pandas]'") \
+                from None
+        columns = [f"{n} [{u}]" for n, u in zip(self.names, self.units, strict=True)]
+        return pd.DataFrame(self.values, index=pd.Index(self.time, name="time [s]"),
+                            columns=columns)

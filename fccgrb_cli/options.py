@@ -1,0 +1,305 @@
+"""Every option of a solve, in one place: its default, unit, allowed values and help text.
+
+``SolveOptions`` is frozen and validated; the command line (``fccgrb solve``), the sweep cells
+and the Python API (``fccgrb_cli.solve``) all build one and hand it, unchanged, to
+``pipeline.solve_trial``. The command-line flags (:func:`click_options`), the sweep keys
+(:meth:`SolveOptions.from_mapping`) and the API's documentation (:func:`describe`) are generated
+from the fields below, so an option added here reaches all three.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
+
+from fccgrb_cli.errors import InputError
+
+METHODS = ("ad", "nrm-ls", "nrm-wls", "cno-sqp", "cno-ip", "mo-tc", "mo-ed")
+
+
+def _option(default: Any, help: str, *, flag: str | None = None, unit: str = "",
+            choices: tuple[str, ...] = (), low: float | None = None, low_open: bool = False,
+            high: float | None = None, sweep: str | None = None, names: bool = False,
+            cli: bool = True, metavar: str | None = None) -> Any:
+    """A field with the metadata the CLI, the sweep and the docs read (``flag``: the CLI
+    spelling when it differs from the field's; ``sweep``: the sweep key when it differs;
+    ``names``: a comma-separated list of names on the CLI, a list in a sweep)."""
+    meta = {"help": help, "flag": flag, "unit": unit, "choices": choices, "low": low,
+            "low_open": low_open, "high": high, "sweep": sweep, "names": names, "cli": cli,
+            "metavar": metavar}
+    return field(default=default, metadata=meta)
+
+
+@dataclass(frozen=True)
+class SolveOptions:
+    """The options of one solve (SI inside; the perturbation level in mm as users state it)."""
+
+    # --- kinematics ------------------------------------------------------------------------
+    method: str = _option(
+        "nrm-wls", choices=METHODS,
+        help="ad: the classical kinematic analysis with angular drivers computed from the "
+             "markers (segment frames fitted, then the angles; see {filter_cutoff}); nrm-ls / "
+             "nrm-wls: mixed coordinates by Newton–Raphson on least squares / weighted least "
+             "squares; cno-sqp / cno-ip: min of the tracking objective ({objective}) subject to "
+             "the topological equations, by SQP (SLSQP) or scipy's trust-constr; mo-tc / "
+             "mo-ed: goal attainment over each tracking component / each point's Euclidean "
+             "distance.")
+    objective: str = _option(
+        "tc", choices=("tc", "ed"),
+        help="CNO objective: weighted sum of squared tracking residuals (tc, m²) or of "
+             "Euclidean distances (ed, m).")
+    tol: float = _option(1e-10, unit="m and rad", low=0.0, low_open=True,
+                         help="Newton–Raphson tolerance on ‖Δq‖∞; the optimizers' tolerance.")
+    max_iter: int | None = _option(
+        None, low=1, help="Iteration cap per frame [default: 50 for NRM, 500 for the "
+                          "optimizers].")
+    tracking_weight: float = _option(
+        1e-3, low=0.0, low_open=True,
+        help="WLS weight of the tracking equations (topological equations weigh 1); a tracked "
+             "point's own 'weight' in the model overrides it.")
+    warm_start: str = _option(
+        "extrapolate", choices=("extrapolate", "previous"),
+        help="Each frame starts from a polynomial extrapolation of the last solutions, or from "
+             "the previous solution (the paper's choice).")
+    hessian: str = _option(
+        "auto", choices=("auto", "gauss-newton", "exact"),
+        help="NRM iteration matrix: gauss-newton (Φ_qᵀWΦ_q, the paper's NRM), exact (adds "
+             "Σ wΦ∇²Φ: Newton on the weighted least squares), or auto: Gauss–Newton until it "
+             "converges only linearly (noisy markers), then exact.")
+    skip_unsolvable: bool = _option(
+        False, help="Report frames whose remaining markers cannot determine the model as "
+                    "unsolved and go on, instead of stopping with an error.")
+    parallel: bool = _option(
+        False, help="Optimizers only: solve frames independently over a process pool (the "
+                    "paper's parallel mode; see {parallel_init}).")
+    workers: int | None = _option(None, low=1,
+                                  help="Processes for {parallel} [default: the number of CPUs].")
+    parallel_init: str = _option(
+        "nrm", choices=("same", "chunks", "nrm"),
+        help="With {parallel}: NRM-WLS positions as each frame's guess (nrm), or contiguous "
+             "chunks solved sequentially within each worker (chunks); both then re-solve, in "
+             "order from a trusted neighbour, every frame that failed, jumped or left its "
+             "neighbours' assembly branch, and give the sequential answer. 'same' is the "
+             "paper's parallel mode: every frame from the same guess, no re-solve (its wrong "
+             "frames are flagged).")
+    ad_drivers: str = _option(
+        "markers", choices=("markers", "truth"),
+        help="With {method} ad: angles from the markers, or the true angles of a trial made by "
+             "'fccgrb synth' (its TRIAL.truth.h5).")
+    form: str = _option("model", choices=("model", "full", "reduced"),
+                        help="Body form for every body (fully-defined or reduced), or as the "
+                             "model says.")
+    track: tuple[str, ...] = _option(
+        (), names=True, metavar="NAMES", sweep="track",
+        help="Model marker names to track [default: all the model's].")
+    mapping: tuple[tuple[str, str], ...] = _option(
+        (), flag="map", metavar="NAME=LABEL", sweep="map",
+        help="Model marker name → trial label, where they differ (CLI: repeatable NAME=LABEL, "
+             "or comma-separated).")
+    # --- perturbation ----------------------------------------------------------------------
+    perturb_mm: float = _option(
+        0.0, flag="perturb", unit="mm", low=0.0, sweep="level",
+        help="Soft-tissue-artefact level: the largest deviation per axis (0: none).")
+    perturb_markers: tuple[str, ...] = _option(
+        (), names=True, metavar="NAMES",
+        help="Model marker names to perturb [default: all tracked].")
+    seed: int = _option(0, help="Seed of the perturbation (same seed, same artefact).")
+    # --- filtering -------------------------------------------------------------------------
+    filter_cutoff: float | None = _option(
+        None, unit="Hz", low=0.0, low_open=True, metavar="HZ",
+        help="Low-pass the angles (zero-lag Butterworth, forward and backward) before they "
+             "drive the classical model: the AD baseline's drivers, and the solved angles "
+             "converted for inverse dynamics. Off by default; 6 Hz is the gait standard.")
+    filter_order: int = _option(2, low=1, high=8,
+                                help="Order of that Butterworth filter (each pass).")
+    # --- dynamics --------------------------------------------------------------------------
+    dynamics: bool | None = _option(
+        None, help="Inverse dynamics (joint moments in N·m, multipliers, energies) on the "
+                   "classical model driven by the solved angles [default: on when every body "
+                   "has mass and inertia].")
+    name: str | None = _option(
+        None, help="Run name inside the results file [default: the method, then -truth, "
+                   "-f<cutoff>Hz and -P<mm> where they apply, e.g. ad-f6Hz-P30].")
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            _check(f.name, getattr(self, f.name), f.metadata)
+
+    @property
+    def perturb_level_m(self) -> float:
+        return self.perturb_mm * 1e-3
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any], where: str = "options") -> SolveOptions:
+        """Options from a mapping keyed by field names or sweep keys (e.g. ``level`` for
+        ``perturb_mm``); lists become tuples; an unknown key is an InputError naming it."""
+        by_key = {f.metadata["sweep"] or f.name: f for f in fields(cls)}
+        by_key |= {f.name: f for f in fields(cls)}
+        out: dict[str, Any] = {}
+        for key, value in values.items():
+            if key not in by_key:
+                raise InputError(f"{where}.{key}: expected one of {', '.join(sorted(by_key))}")
+            f = by_key[key]
+            out[f.name] = _coerce(f.name, value, f.metadata)
+        try:
+            return cls(**out)
+        except InputError as error:
+            raise InputError(f"{where}.{error}") from None
+
+    def to_json(self) -> str:
+        """The options as JSON (the results file keeps them with each run)."""
+        import json
+
+        return json.dumps({f.name: getattr(self, f.name) for f in fields(self)})
+
+    @classmethod
+    def from_json(cls, text: str) -> SolveOptions:
+        import json
+
+        return cls.from_mapping(json.loads(text), "options")
+
+    def with_(self, **changes: Any) -> SolveOptions:
+        """A copy with some options changed (validated)."""
+        return replace(self, **changes)
+
+
+def _coerce(name: str, value: Any, meta: Mapping[str, Any]) -> Any:
+    if name == "mapping" and isinstance(value, Mapping):
+        return tuple((str(k), str(v)) for k, v in value.items())
+    if isinstance(value, list):
+        if name == "mapping":
+            return tuple(tuple(pair) for pair in value)
+        return tuple(str(v) for v in value)
+    if meta["names"] and isinstance(value, str):
+        return tuple(part.strip() for part in value.split(",") if part.strip())
+    return value
+
+
+def _kind(name: str) -> type:
+    """The type a field holds, from its annotation (``int | None`` → int)."""
+    annotation = next(f.type for f in fields(SolveOptions) if f.name == name)
+    return {"bool": bool, "int": int, "float": float, "str": str,
+            "tuple": tuple}[annotation.split("[")[0].split(" ")[0]]
+
+
+def _check(name: str, value: Any, meta: Mapping[str, Any]) -> None:
+    """A one-line InputError naming the option and what it expects."""
+    default = next(f.default for f in fields(SolveOptions) if f.name == name)
+    if value is None and default is None:
+        return
+    if meta["choices"]:
+        if value not in meta["choices"]:
+            raise InputError(f"{name}: expected one of {', '.join(meta['choices'])}, "
+                             f"got {value!r}")
+        return
+    kind = _kind(name)
+    if kind is tuple:
+        if not isinstance(value, tuple):
+            raise InputError(f"{name}: expected a list, got {value!r}")
+        return
+    if kind is bool:
+        if not isinstance(value, bool):
+            raise InputError(f"{name}: expected true or false, got {value!r}")
+        return
+    if kind is str:
+        if not isinstance(value, str):
+            raise InputError(f"{name}: expected a text, got {value!r}")
+        return
+    number = (int,) if kind is int else (int, float)
+    if isinstance(value, bool) or not isinstance(value, number):
+        raise InputError(f"{name}: expected {'an integer' if kind is int else 'a number'}, "
+                         f"got {value!r}")
+    low, high = meta["low"], meta["high"]
+    if low is not None and (value < low or (meta["low_open"] and value == low)):
+        raise InputError(f"{name}: expected a value {'>' if meta['low_open'] else '≥'} {low:g}"
+                         f"{' ' + meta['unit'] if meta['unit'] else ''}, got {value!r}")
+    if high is not None and value > high:
+        raise InputError(f"{name}: expected a value ≤ {high:g}, got {value!r}")
+
+
+def _help(meta: Mapping[str, Any], spell: Callable[[str], str]) -> str:
+    """A field's help with its references to other options ({name}) spelt for the reader."""
+    return meta["help"].format(**{f.name: spell(f) for f in fields(SolveOptions)})
+
+
+def _flag(f) -> str:
+    return "--" + (f.metadata["flag"] or f.name).replace("_", "-")
+
+
+def describe() -> str:
+    """Every option with its default, unit and help: the docs of the API's ``solve``."""
+    lines = []
+    for f in fields(SolveOptions):
+        meta = f.metadata
+        unit = f" [{meta['unit']}]" if meta["unit"] else ""
+        choices = f" One of: {', '.join(meta['choices'])}." if meta["choices"] else ""
+        text = _help(meta, lambda g: g.name)
+        lines.append(f"{f.name}{unit} (default {f.default!r}): {text}{choices}")
+    return "\n".join(lines)
+
+
+def click_options(command: Callable) -> Callable:
+    """Decorate a click command with one CLI option per field (``--method``, ``--perturb``, …);
+    the command receives them as keyword arguments named after the fields, which
+    :func:`from_cli` turns into a SolveOptions."""
+    import click
+
+    for f in reversed(fields(SolveOptions)):
+        meta = f.metadata
+        if not meta["cli"]:
+            continue
+        unit = f" Unit: {meta['unit']}." if meta["unit"] else ""
+        kwargs: dict[str, Any] = {"help": _help(meta, _flag) + unit, "metavar": meta["metavar"]}
+        decls = [_flag(f), f.name]
+        if meta["choices"]:
+            kwargs |= {"type": click.Choice(list(meta["choices"])), "default": f.default,
+                       "show_default": True}
+        elif _kind(f.name) is bool and f.default is None:
+            decls = [f"{_flag(f)}/--no-{_flag(f)[2:]}", f.name]
+            kwargs["default"] = None
+        elif _kind(f.name) is bool:
+            kwargs |= {"is_flag": True, "default": False}
+        elif f.name == "mapping":
+            kwargs |= {"multiple": True}
+        elif _kind(f.name) in (tuple, str):
+            kwargs["default"] = None
+        elif _kind(f.name) is int:
+            low = meta["low"]
+            kwargs |= {"type": click.IntRange(min=low, max=meta["high"]) if low is not None
+                       else int, "default": f.default,
+                       "show_default": f.default is not None}
+        else:
+            kwargs |= {"type": click.FloatRange(min=meta["low"], min_open=meta["low_open"]),
+                       "default": f.default, "show_default": f.default is not None}
+        command = click.option(*decls, **kwargs)(command)
+    return command
+
+
+def from_cli(values: Mapping[str, Any]) -> SolveOptions:
+    """The options from the keyword arguments :func:`click_options` gave a command."""
+    out: dict[str, Any] = {}
+    for f in fields(SolveOptions):
+        if not f.metadata["cli"] or f.name not in values:
+            continue
+        value = values[f.name]
+        if f.name == "mapping":
+            value = _pairs(value)
+        elif isinstance(f.default, tuple):
+            value = _coerce(f.name, value or "", f.metadata)
+        out[f.name] = value
+    return SolveOptions(**out)
+
+
+def _pairs(items: tuple[str, ...]) -> tuple[tuple[str, str], ...]:
+    out = []
+    for item in items:
+        for pair in (p.strip() for p in item.split(",") if p.strip()):
+            if pair.count("=") != 1:
+                raise InputError(f"--map: expected MODEL_NAME=FILE_LABEL, got {pair!r}")
+            name, label = (p.strip() for p in pair.split("="))
+            out.append((name, label))
+    return tuple(out)
+
+
+SWEEP_KEYS = tuple(f.metadata["sweep"] or f.name for f in fields(SolveOptions))
