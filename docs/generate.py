@@ -56,7 +56,7 @@ ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 SHARED = ROOT.parent / "shared"
 QUALISYS = SHARED / "data" / "c3d" / "Qualisys.c3d"
-PAPER_TABLES = ROOT / "configs" / "reference" / "paper_tables.csv"
+PAPER_TABLES = ROOT / "fccgrb_cli" / "data" / "paper_tables.csv"
 FIVE_BAR = "configs/models/five_bar.yaml"
 GAIT_TRIAL = "../shared/data/c3d/Qualisys.c3d"
 

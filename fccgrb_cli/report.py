@@ -3,7 +3,7 @@
 Rows are method / variant / tracked points / tolerance; for each metric (ms/frame, iterations,
 mean ‖Φ‖, max topological Φ, mean and max ED) the columns are the perturbation levels P0, P7.5
 and P30, with the paper's figure in brackets where a row and level match
-(``configs/reference/paper_tables.csv``).
+(``fccgrb_cli/data/paper_tables.csv``, shipped with the package).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import numpy as np
 
 from fccgrb_cli.errors import InputError
 
-PAPER_TABLES = Path(__file__).resolve().parents[1] / "configs" / "reference" / "paper_tables.csv"
+PAPER_TABLES = Path(__file__).resolve().parent / "data" / "paper_tables.csv"
 LEVELS = ("P0", "P7.5", "P30")
 METRICS = (
     ("ms/frame", "time_ms_per_frame", "{:.3g}"),

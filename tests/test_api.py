@@ -198,3 +198,12 @@ def test_public_names_are_exactly_those_listed():
         assert getattr(fc, name) is not None
     with pytest.raises(AttributeError):
         _ = fc.solve_trial
+
+
+def test_the_installed_package_carries_the_paper_tables():
+    """`fccgrb report` puts the paper's figures beside ours from a wheel install too: the table
+    lives inside the package, not beside it in the repository."""
+    from fccgrb_cli.report import PAPER_TABLES, paper_figures
+
+    assert PAPER_TABLES.is_relative_to(Path(fc.__file__).parent) and PAPER_TABLES.is_file()
+    assert len(paper_figures("table1")) > 10 and len(paper_figures("table2")) > 10

@@ -7,7 +7,7 @@ keys; resumability (a rerun does nothing and leaves the merged file's content un
 killed with SIGKILL halfway leaves only complete cell files and a rerun runs only the missing
 cells); ``--fresh``; ``--workers 2`` and a Dask ``LocalCluster`` giving the same numbers as one
 local worker; an unreachable scheduler; the text / csv / markdown tables with the paper's figures
-(checked against ``configs/reference/paper_tables.csv`` read independently); every plot kind as
+(checked against ``fccgrb_cli/data/paper_tables.csv`` read independently); every plot kind as
 PNG or PDF; and that ``configs/sweeps/table1.yaml`` and ``table2.yaml`` cover every row of the
 paper's tables they claim (without running them).
 
@@ -45,7 +45,7 @@ from fccgrb_cli.sweep import Cell, cells_folder, load_sweep
 ROOT = Path(__file__).resolve().parents[1]
 PENDULUM = ROOT / "configs" / "models" / "pendulum.yaml"
 SWEEPS = ROOT / "configs" / "sweeps"
-PAPER_CSV = ROOT / "configs" / "reference" / "paper_tables.csv"
+PAPER_CSV = ROOT / "fccgrb_cli" / "data" / "paper_tables.csv"
 FCCGRB = shutil.which("fccgrb") or str(Path(sys.executable).with_name("fccgrb"))
 SYNTH = {"synth": {"duration": 0.3, "rate": 100}}
 FINAL_LINE = re.compile(r"^wrote (?P<out>.+): (?P<ran>\d+) cells run, (?P<kept>\d+) already done")
@@ -147,7 +147,7 @@ def numbers_but_time(path: Path) -> list[tuple[str, ...]]:
 
 
 def paper_rows() -> list[dict[str, str]]:
-    """configs/reference/paper_tables.csv read independently of fccgrb_cli.report."""
+    """fccgrb_cli/data/paper_tables.csv read independently of fccgrb_cli.report."""
     lines = [line for line in PAPER_CSV.read_text(encoding="utf-8").splitlines()
              if line.strip() and not line.startswith("#")]
     return list(csv.DictReader(lines))
