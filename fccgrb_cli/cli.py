@@ -399,3 +399,46 @@ def plot(results: str, kind: str, marker: str | None, angle: str | None, axis: s
     series = load_series(Path(results), _split(runs))
     save(draw(series, kind, marker, angle, axis), output)
     click.echo(f"wrote {output}: {kind} for {len(series)} runs")
+
+
+@main.command()
+@click.argument("results")
+@click.option("--format", "fmt", type=click.Choice(["mot", "sto", "csv", "c3d"]), required=True,
+              help="mot: the angles as an OpenSim motion file (deg, inDegrees=yes); sto: the "
+                   "joint moments as an OpenSim storage file (N·m, as OpenSim's inverse "
+                   "dynamics writes them); csv: one row per frame, time (s), trusted, every "
+                   "angle (deg) and moment (N·m) with its unit in the header; c3d: the trial's "
+                   "C3D with its markers, analogs and events, the angles and moments added as "
+                   "points (POINT:ANGLES, POINT:MOMENTS). Clinical curves where the model "
+                   "declares them, else every joint angle (a distance in m, its force in N).")
+@click.option("--run", "run_name", default=None, metavar="NAME",
+              help="The run to export [default: the file's only run].")
+@click.option("--trial", default=None, type=click.Path(dir_okay=False),
+              help="For --format c3d: the C3D the run was solved from [default: the path "
+                   "recorded in the results file].")
+@click.option("-o", "--output", default=None, type=click.Path(dir_okay=False),
+              help="The file to write [default: RESULTS with the format's suffix, "
+                   "RESULTS.<run>.<format> when the file holds several runs].")
+@reports_input_errors
+def export(results: str, fmt: str, run_name: str | None, trial: str | None,
+           output: str | None) -> None:
+    """Export a run of a results file for OpenSim, pandas, spreadsheets, Mokka, Nexus or
+    Visual3D. Frames the quality checks do not trust keep their values and are counted (the
+    CSV's trusted column, the header's untrustedFrames, the C3D's FCCGRB:UNTRUSTED)."""
+    from fccgrb_cli.io.export import choose_run, default_output
+    from fccgrb_cli.io.export import export as write
+    from fccgrb_cli.io.results import read_runs
+
+    runs = read_runs(results)
+    run = choose_run(runs, run_name, results)
+    target = Path(output) if output is not None else default_output(results, run, fmt, list(runs))
+    if target.resolve() in {Path(results).resolve(), Path(trial or run.trial_path).resolve()}:
+        raise InputError(f"{target}: expected an output other than the results file or the "
+                         "trial (inputs are never modified)")
+    write(run, fmt, target, trial)
+    untrusted = int((~run.trusted).sum())
+    if untrusted:
+        click.echo(f"fccgrb: warning: {untrusted} of {len(run.trusted)} frames of run "
+                   f"{run.name!r} are not trusted (exported with their values, marked)",
+                   err=True)
+    click.echo(f"wrote {target}: run {run.name!r}, {len(run.trusted)} frames, {fmt}")

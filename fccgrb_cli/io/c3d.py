@@ -28,6 +28,11 @@ def write_markers(path: str | Path, labels: list[str], markers_m: np.ndarray, ra
     c3d["data"]["points"] = points
     if description:
         c3d.add_parameter("FCCGRB", "SOURCE", [description])
+    save(c3d, path)
+
+
+def save(c3d, path: str | Path) -> None:
+    """Write an ezc3d object to ``path`` atomically."""
     with atomic_path(path) as tmp:
         # ezc3d picks the format from the name: give the temporary file a .c3d ending
         staged = tmp.with_suffix(".c3d")
