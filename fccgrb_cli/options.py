@@ -94,9 +94,9 @@ class SolveOptions:
         (), names=True, metavar="NAMES", sweep="track",
         help="Model marker names to track [default: all the model's].")
     mapping: tuple[tuple[str, str], ...] = _option(
-        (), flag="map", metavar="NAME=LABEL", sweep="map",
+        (), flag="map", metavar="NAME=LABEL|FILE", sweep="map",
         help="Model marker name → trial label, where they differ (CLI: repeatable NAME=LABEL, "
-             "or comma-separated).")
+             "comma-separated pairs, or a YAML file of NAME: LABEL lines).")
     # --- perturbation ----------------------------------------------------------------------
     perturb_mm: float = _option(
         0.0, flag="perturb", unit="mm", low=0.0, sweep="level",
@@ -167,6 +167,8 @@ class SolveOptions:
 def _coerce(name: str, value: Any, meta: Mapping[str, Any]) -> Any:
     if name == "mapping" and isinstance(value, Mapping):
         return tuple((str(k), str(v)) for k, v in value.items())
+    if name == "mapping" and isinstance(value, str):
+        return _pairs((value,))
     if isinstance(value, list):
         if name == "mapping":
             return tuple(tuple(pair) for pair in value)
@@ -292,14 +294,42 @@ def from_cli(values: Mapping[str, Any]) -> SolveOptions:
 
 
 def _pairs(items: tuple[str, ...]) -> tuple[tuple[str, str], ...]:
-    out = []
+    """``--map`` values: NAME=LABEL pairs (repeatable, comma-separated) or a YAML file of them."""
+    out: list[tuple[str, str]] = []
     for item in items:
+        if item.strip().lower().endswith((".yaml", ".yml")) and "=" not in item:
+            out += label_map_file(item.strip())
+            continue
         for pair in (p.strip() for p in item.split(",") if p.strip()):
             if pair.count("=") != 1:
-                raise InputError(f"--map: expected MODEL_NAME=FILE_LABEL, got {pair!r}")
+                raise InputError(f"--map: expected MODEL_NAME=FILE_LABEL or a FILE.yaml, got "
+                                 f"{pair!r}")
             name, label = (p.strip() for p in pair.split("="))
             out.append((name, label))
     return tuple(out)
+
+
+def label_map_file(path: str) -> list[tuple[str, str]]:
+    """A lab's naming written once: a YAML mapping ``model marker name: trial label``."""
+    from pathlib import Path
+
+    import yaml
+
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as error:
+        raise InputError(f"{path}: cannot read the label map ({error.strerror})") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None)
+        where = f"line {mark.line + 1}: " if mark is not None else ""
+        raise InputError(f"{path}: {where}invalid YAML") from None
+    if not isinstance(data, dict) or not all(
+            isinstance(k, str) and isinstance(v, str) for k, v in data.items()):
+        raise InputError(f"{path}: expected a mapping of model marker names to trial labels "
+                         "(NAME: LABEL per line)")
+    return list(data.items())
 
 
 SWEEP_KEYS = tuple(f.metadata["sweep"] or f.name for f in fields(SolveOptions))

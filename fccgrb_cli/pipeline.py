@@ -215,11 +215,13 @@ class Run:
 
 def match_labels(model: Model, trial: Trial, mapping: dict[str, str]) -> list[str]:
     """The file label each tracked marker follows: the CLI mapping, else the YAML's marker name;
-    a file label 'Subject:NAME' matches NAME when NAME itself is absent."""
+    a file label 'Subject:NAME' matches NAME when NAME itself is absent. A label not found is an
+    error naming, for each, the file's closest labels."""
     unknown = sorted(set(mapping) - set(model.marker_labels))
     if unknown:
         raise InputError(f"--map: expected marker names of the model "
-                         f"({', '.join(model.marker_labels)}), got {', '.join(unknown)}")
+                         f"({', '.join(model.marker_labels)}), got "
+                         f"{_with_closest(unknown, model.marker_labels)}")
     out, missing = [], []
     for name in model.marker_labels:
         wanted = mapping.get(name, name)
@@ -228,10 +230,25 @@ def match_labels(model: Model, trial: Trial, mapping: dict[str, str]) -> list[st
             missing.append(wanted)
         out.append(label)
     if missing:
-        shown = ", ".join(trial.labels[:12]) + (" …" if len(trial.labels) > 12 else "")
-        raise InputError(f"{trial.path}: expected the labels {', '.join(missing)} tracked by "
-                         f"{model.source}, the file has: {shown} (map names with --map)")
+        free = [label for label in trial.labels if label not in out]
+        shown = ", ".join(free[:12]) + (" …" if len(free) > 12 else "")
+        raise InputError(f"{trial.path}: expected the labels tracked by {model.source}; not "
+                         f"found: {_with_closest(missing, free)}; the file's labels no marker "
+                         f"follows: {shown or 'none'} (map names with --map NAME=LABEL or "
+                         "--map FILE.yaml)")
     return out
+
+
+def _with_closest(names: list[str], known: tuple[str, ...] | list[str]) -> str:
+    """'A (closest: B, C), D (closest: none)': each name with the nearest of ``known``."""
+    from difflib import get_close_matches
+
+    bare = {k.split(":")[-1].lower(): k for k in known}
+    parts = []
+    for name in names:
+        near = get_close_matches(name.split(":")[-1].lower(), list(bare), n=3, cutoff=0.4)
+        parts.append(f"{name} (closest: {', '.join(bare[n] for n in near) or 'none'})")
+    return ", ".join(parts)
 
 
 def _vector_targets(model: Model, trial: Trial, markers: dict[str, np.ndarray]) -> np.ndarray:

@@ -222,10 +222,11 @@ CASES = [
     Case("unknown-ending", PENDULUM, c3d_as_txt, ("expected a .c3d or .trc trial file",)),
     Case("c3d-other-labels", PENDULUM,
          written("other.c3d", "pendulum", labels=lambda s: ["A", "B", "C"]),
-         ("expected the labels P1, P2, P3", "the file has: A, B, C", "--map")),
+         ("not found: P1 (closest: none), P2 (closest: none), P3 (closest: none)",
+          "no marker follows: A, B, C", "--map")),
     Case("trc-other-labels", PENDULUM,
          written("other.trc", "pendulum", labels=lambda s: ["P1", "X2", "P3"]),
-         ("expected the labels P2 ", "the file has: P1, X2, P3")),
+         ("not found: P2 (closest: X2)", "no marker follows: X2 (")),
     Case("c3d-body-B5-missing", FIVE_BAR, written("b5.c3d", "five_bar", markers=with_b5_gap),
          (f"frame index {GAP_FRAME} ", "t = 0.500 s", "cannot determine", "missing: P6)"),
          names_file=False),
@@ -298,7 +299,7 @@ def test_map_with_an_unknown_model_name_is_one_line(trials: dict[str, Synth],
     names = listing(tmp_path)
     result = run_cli("solve", PENDULUM, trial, "-o", tmp_path / "out.h5",
                      "--map", "P1=M1,P2=M2,P3=M3,Q7=M4")
-    one_error_line(result, "--map", "Q7", "P1, P2, P3")
+    one_error_line(result, "--map", "(P1, P2, P3)", "Q7 (closest: none)")
     result = run_cli("solve", PENDULUM, trial, "-o", tmp_path / "out.h5", "--map", "P1")
     one_error_line(result, "--map", "MODEL_NAME=FILE_LABEL", "'P1'")
     assert listing(tmp_path) == names
