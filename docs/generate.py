@@ -12,9 +12,10 @@ what the command it names prints. The README's generated blocks sit between
 Parts and their blocks:
 
 * ``cheap`` (seconds): ``example-session`` (the five-bar session), ``gait-trial`` (calibrate,
-  solve and plot the walking trial of ../shared/data/c3d/Qualisys.c3d, and docs/gait_qualisys.png;
-  skipped when the trial is absent), ``table-subset`` (check only: the AD and NRM rows of
-  docs/table1.md and docs/table2.md against a sweep of just those cells).
+  solve, plot and export the walking trial of ../shared/data/c3d/Qualisys.c3d, and
+  docs/gait_qualisys.png and docs/gait_cycles.png; skipped when the trial is absent),
+  ``table-subset`` (check only: the AD and NRM rows of docs/table1.md and docs/table2.md
+  against a sweep of just those cells).
 * ``tables`` (minutes): ``sweeps`` (configs/sweeps/table1.yaml and table2.yaml → docs/table1.md,
   docs/table2.md and the README's sweep paragraph), ``gait-methods`` (CNO-SQP against NRM-WLS on
   the walking trial).
@@ -200,6 +201,9 @@ GAIT = [
     f"fccgrb calibrate configs/models/lower_limb.yaml {GAIT_TRIAL} --mass 67 -o personal.yaml",
     f"fccgrb solve personal.yaml {GAIT_TRIAL} --method nrm-wls --filter-cutoff 6 -o gait.h5",
     "fccgrb plot gait.h5 --kind clinical -o docs/gait_qualisys.png",
+    "fccgrb plot gait.h5 --kind cycles -o docs/gait_cycles.png",
+    "fccgrb export gait.h5 --format mot -o gait.mot",
+    "fccgrb export gait.h5 --format c3d -o gait.c3d",
 ]
 
 
@@ -211,7 +215,7 @@ def _need_gait_trial() -> None:
 def gait_trial(ws: Workspace) -> list[Artifact]:
     _need_gait_trial()
     return [ReadmeBlock("gait-trial", ws.console(GAIT)),
-            Image.made("docs/gait_qualisys.png", ws)]
+            Image.made("docs/gait_qualisys.png", ws), Image.made("docs/gait_cycles.png", ws)]
 
 
 def gait_methods(ws: Workspace) -> list[Artifact]:

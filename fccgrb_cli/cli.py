@@ -182,6 +182,10 @@ def solve(model: str, trial: str, output: str, accept_truncated: bool, **options
     click.echo(format_summary(summary(run)))
     if run.clinical is not None:
         click.echo(clinical_table(run.clinical))
+    if run.gait is not None:
+        from fccgrb_cli.gait.report import gait_report
+
+        click.echo(gait_report(run.gait))
     click.echo(f"wrote run {run.name!r} ({run.result.n_frames} frames) to {output}")
 
 
@@ -361,22 +365,35 @@ def report(results: str, fmt: str, table: str | None) -> None:
 
     own, rows = collect(results)
     click.echo(render(table if table is not None else own, rows, fmt=fmt), nl=False)
+    if fmt == "text":
+        from fccgrb_cli.gait.report import gait_report
+        from fccgrb_cli.io.gait_results import read_all_gait
+
+        for name, gait in read_all_gait(results).items():
+            click.echo(f"\nrun {name}: {gait_report(gait)}")
 
 
 @main.command()
 @click.argument("results")
-@click.option("--kind", type=click.Choice(["point", "ed", "angle", "velocity", "clinical"]),
+@click.option("--kind", type=click.Choice(["point", "ed", "angle", "velocity", "clinical",
+                                          "cycles"]),
               default="point", show_default=True,
               help="point: x, y, z of a marker's model point against the reference (m); ed: its "
                    "Euclidean distance to the reference over time (mm); angle: a joint angle "
                    "against the truth (deg); velocity: a component of the point's velocity "
                    "(m/s, central differences); clinical: clinical angles (deg) and joint "
-                   "moments (N·m/kg) of both legs, force-plate stances shaded.")
+                   "moments (N·m/kg) of both legs, force-plate stances shaded; cycles: each "
+                   "side's mean ± SD gait cycle (0–100 %) of the clinical angles and moments, "
+                   "toe-off dashed.")
 @click.option("--marker", default=None, help="Model marker name [default: the last tracked].")
 @click.option("--angle", default=None,
               help="Angle name for --kind angle [default: the first]; for --kind clinical, "
                    "comma-separated parts of clinical angle names, e.g. 'hip,knee_flexion' "
                    "[default: 'flexion', the sagittal angles].")
+@click.option("--normative", default=None, type=click.Path(dir_okay=False),
+              help="For --kind cycles: a CSV of normative curves (columns variable, percent, "
+                   "mean, sd; variable as the clinical name without _l/_r, e.g. knee_flexion), "
+                   "drawn as a grey mean ± sd band.")
 @click.option("--axis", type=click.Choice(["x", "y", "z"]), default="x", show_default=True,
               help="Velocity component for --kind velocity.")
 @click.option("--runs", default=None, metavar="NAMES",
@@ -385,8 +402,8 @@ def report(results: str, fmt: str, table: str | None) -> None:
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
               help="Figure file, .png or .pdf.")
 @reports_input_errors
-def plot(results: str, kind: str, marker: str | None, angle: str | None, axis: str,
-         runs: str | None, output: str) -> None:
+def plot(results: str, kind: str, marker: str | None, angle: str | None,
+         normative: str | None, axis: str, runs: str | None, output: str) -> None:
     """Draw one of the paper's figure kinds from a results or sweep file (needs the 'plots'
     extra: pip install 'fccgrb-cli[plots]')."""
     try:
@@ -396,6 +413,17 @@ def plot(results: str, kind: str, marker: str | None, angle: str | None, axis: s
                          "(pip install 'fccgrb-cli[plots]')") from None
     from fccgrb_cli.plot import draw, load_series, save
 
+    if kind == "cycles":
+        from fccgrb_cli.gait.plot import draw_cycles, read_normative
+        from fccgrb_cli.io.gait_results import read_all_gait
+
+        wanted = _split(runs)
+        gaits = {k: g for k, g in read_all_gait(results).items()
+                 if not wanted or k in wanted}
+        save(draw_cycles(gaits, tuple(a for a in (angle or "").split(",") if a),
+                         read_normative(normative) if normative else None), output)
+        click.echo(f"wrote {output}: cycles for {len(gaits)} runs")
+        return
     series = load_series(Path(results), _split(runs))
     save(draw(series, kind, marker, angle, axis), output)
     click.echo(f"wrote {output}: {kind} for {len(series)} runs")

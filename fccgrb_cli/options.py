@@ -113,6 +113,14 @@ class SolveOptions:
              "converted for inverse dynamics. Off by default; 6 Hz is the gait standard.")
     filter_order: int = _option(2, low=1, high=8,
                                 help="Order of that Butterworth filter (each pass).")
+    # --- gait ----------------------------------------------------------------------------
+    events: str = _option(
+        "auto", choices=("auto", "c3d", "plates", "kinematic", "none"),
+        help="Gait events (foot strike, foot off) for the cycles and spatiotemporal parameters "
+             "of a lower-limb model: the C3D's EVENT section, force plates (normal force "
+             "above 20 N, edges moved to the plate's noise level), or the markers (Zeni et al. "
+             "2008); auto: the file's, else the plates' when both feet have a stride, else the "
+             "markers'. Every source found is stored beside the one used.")
     # --- dynamics --------------------------------------------------------------------------
     dynamics: bool | None = _option(
         None, help="Inverse dynamics (joint moments in N·m, multipliers, energies) on the "

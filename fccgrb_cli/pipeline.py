@@ -16,6 +16,7 @@ from fccgrb_cli.dynamics.contact import MAX_DISTANCE, assign
 from fccgrb_cli.dynamics.convert import Dynamics, classical_dynamics
 from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.errors import InputError
+from fccgrb_cli.gait.analysis import GaitResults, analyse_gait
 from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.io.truth import Truth, read_truth, truth_path
 from fccgrb_cli.model import Model
@@ -57,6 +58,7 @@ class Run:
     warnings: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
     clinical: ClinicalResults | None = None
+    gait: GaitResults | None = None
 
     def __repr__(self) -> str:
         r = self.result
@@ -305,6 +307,11 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
     notes: list[str] = []
     stance: dict[str, np.ndarray] = {}
     solved_dynamics = _dynamics(model, trial, system, result, options, warnings, notes, stance)
+    clinical = clinical_results(
+        model, result.theta,
+        None if solved_dynamics is None else solved_dynamics.inverse.joint_moments, stance)
+    gait = None if options.events == "none" else \
+        analyse_gait(model, trial, clinical, result.trusted, options.events)
     return Run(
         name=options.name or run_name(result.method, options.ad_drivers,
                                       options.filter_cutoff, options.perturb_level_m,
@@ -317,9 +324,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
         form=",".join(sorted({b.form for b in model.bodies})),
         model_text=model.text, trial_path=trial.path,
         dynamics=solved_dynamics, warnings=tuple(warnings), notes=tuple(notes),
-        clinical=clinical_results(
-            model, result.theta,
-            None if solved_dynamics is None else solved_dynamics.inverse.joint_moments, stance))
+        clinical=clinical, gait=gait)
 
 
 def _reference(measured: np.ndarray, labels: list[str], trial: Trial,

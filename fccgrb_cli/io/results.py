@@ -62,6 +62,7 @@ from fccgrb_cli.dynamics.inverse import InverseDynamics
 from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.atomic import atomic_path
+from fccgrb_cli.io.gait_results import read_gait, write_gait
 from fccgrb_cli.pipeline import Run
 from fccgrb_cli.solvers.quality import BITS
 from fccgrb_cli.solvers.result import KinematicResult
@@ -174,6 +175,8 @@ def write_run(path: str | Path, run: Run, command: str, cell: dict | None = None
                 _write_dynamics(g, run)
             if run.clinical is not None:
                 _write_clinical(g, run.clinical)
+            if run.gait is not None:
+                write_gait(g, run.gait)
 
 
 def _write_clinical(g, c: ClinicalResults) -> None:
@@ -273,7 +276,8 @@ def _read_run(name: str, g) -> Run:
         model_text=str(a["model"]), trial_path=str(a["trial"]),
         dynamics=_read_dynamics(g, names, time) if "joint_moments" in g else None,
         warnings=warnings, notes=_strings(a["notes"]),
-        clinical=_read_clinical(g["clinical"]) if "clinical" in g else None)
+        clinical=_read_clinical(g["clinical"]) if "clinical" in g else None,
+        gait=read_gait(g["gait"]) if "gait" in g else None)
 
 
 def _read_dynamics(g, names: tuple[str, ...], time: np.ndarray) -> Dynamics:

@@ -1,0 +1,1 @@
+"""Gait analysis of a solved walking trial: events, normalized cycles, spatiotemporal parameters."""

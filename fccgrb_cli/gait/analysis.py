@@ -1,0 +1,167 @@
+"""A solved walking trial's gait analysis: its events (from the chosen source, the other sources
+beside them), each side's normalized cycles of the clinical curves, and the spatiotemporal
+parameters. Runs where the model reports clinical curves of both sides (lower-limb models)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fccgrb_cli.clinical import ClinicalResults
+from fccgrb_cli.errors import InputError
+from fccgrb_cli.gait.cycles import SUFFIX, SideCycles, side_cycles
+from fccgrb_cli.gait.events import (
+    SIDES,
+    SOURCES,
+    Events,
+    c3d_events,
+    kinematic_events,
+    plate_events,
+)
+from fccgrb_cli.io.trial import Trial
+from fccgrb_cli.model import Model
+
+CHOICES = ("auto", *SOURCES)
+PELVIS = ("right_asis", "left_asis", "right_psis", "left_psis", "sacrum")
+TOES = ("second_metatarsal", "first_metatarsal", "fifth_metatarsal", "toe")
+
+
+@dataclass(frozen=True)
+class GaitResults:
+    """``events``: the events used (their ``source`` says which); ``found``: every source's
+    events that could be found; ``cycles``: side → SideCycles; ``forward``: the direction of
+    walking (unit vector); ``notes``: why a source was not available."""
+
+    events: Events
+    found: dict[str, Events]
+    cycles: dict[str, SideCycles]
+    forward: np.ndarray
+    notes: tuple[str, ...] = ()
+
+
+def _landmark_markers(model: Model, trial: Trial) -> dict[str, np.ndarray]:
+    """Pelvis centre, heels and toes (frames × 3, m) from the model's calibration landmarks."""
+    labels = dict(model.landmarks)
+
+    def seen(landmark: str) -> np.ndarray | None:
+        label = labels.get(landmark)
+        found = trial.find(label) if label is not None else None
+        return trial.select([found])[:, 0] if found is not None else None
+
+    out: dict[str, np.ndarray] = {}
+    pelvis = [m for m in (seen(name) for name in PELVIS) if m is not None]
+    if pelvis:
+        stacked = np.stack(pelvis)
+        with np.errstate(invalid="ignore"):
+            counts = np.isfinite(stacked).sum(axis=0)
+            out["pelvis"] = np.where(counts > 0, np.nansum(stacked, axis=0) /
+                                     np.maximum(counts, 1), np.nan)
+    for side in SIDES:
+        heel = seen(f"{side}_heel")
+        if heel is not None:
+            out[f"{side}_heel"] = heel
+        toe = next((m for m in (seen(f"{side}_{name}") for name in TOES) if m is not None), None)
+        if toe is not None:
+            out[f"{side}_toe"] = toe
+    return out
+
+
+def _curves(clinical: ClinicalResults) -> tuple[tuple[str, ...], tuple[str, ...], np.ndarray]:
+    """Every clinical angle (deg) and, with the dynamics, its moment (N·m/kg, else N·m)."""
+    names, units, columns = list(clinical.names), ["deg"] * len(clinical.names), \
+        [clinical.angles]
+    moments = clinical.moments_per_kg if clinical.moments_per_kg is not None else \
+        clinical.moments
+    if moments is not None:
+        unit = "N·m/kg" if clinical.moments_per_kg is not None else "N·m"
+        # the side suffix stays last so each side's strides pick their own moments
+        names += [_moment_name(n) for n in clinical.names]
+        units += [unit] * len(clinical.names)
+        columns.append(moments)
+    return tuple(names), tuple(units), np.column_stack(columns)
+
+
+def _moment_name(name: str) -> str:
+    for suffix in SUFFIX.values():
+        if name.endswith(suffix):
+            return f"{name[: -len(suffix)]}_moment{suffix}"
+    return f"{name}_moment"
+
+
+def analyse_gait(model: Model, trial: Trial, clinical: ClinicalResults | None,
+                 trusted: np.ndarray, choice: str = "auto") -> GaitResults | None:
+    """The gait analysis of a solved trial, or None when the model has no clinical curves of
+    both sides (not a lower-limb model) — unless ``choice`` names a source, then that is an
+    error saying why."""
+    if clinical is None or not all(any(n.endswith(SUFFIX[s]) for n in clinical.names)
+                                   for s in SIDES):
+        if choice != "auto":
+            raise InputError(f"{model.source}: --events {choice}: expected a model with "
+                             "clinical angles of both legs (names ending _l and _r)")
+        return None
+    vertical = -np.asarray(model.gravity, dtype=float)
+    vertical = vertical / np.linalg.norm(vertical) if np.linalg.norm(vertical) else \
+        np.array([0.0, 0.0, 1.0])
+    markers = _landmark_markers(model, trial)
+    found: dict[str, Events] = {}
+    notes: list[str] = []
+    if trial.path.lower().endswith(".c3d"):
+        events = c3d_events(trial.path, trial.n_frames, trial.rate)
+        if events is not None:
+            found["c3d"] = events
+        else:
+            notes.append("c3d: the file has no foot events")
+        events = plate_events(trial.path, trial.rate, clinical.stance)
+        if events is not None:
+            found["plates"] = events
+        else:
+            notes.append("plates: no force plate loaded a foot (or the dynamics did not run)")
+    try:
+        found["kinematic"] = kinematic_events(markers, trial.rate, vertical,
+                                              f"{trial.path} with {model.source}")
+    except InputError as error:
+        notes.append(f"kinematic: {str(error).split(': ', 2)[-1]}")
+    chosen = _choose(found, choice, trial.path, notes)
+    if chosen is None:
+        return None
+    forward = _forward(markers, vertical)
+    heels = {side: markers[f"{side}_heel"] for side in SIDES if f"{side}_heel" in markers}
+    curves = _curves(clinical)
+    cycles = {side: side_cycles(side, chosen, trial.time, trusted, curves,
+                                {k: _filled(v) for k, v in heels.items()}, forward, vertical)
+              for side in SIDES}
+    return GaitResults(chosen, found, cycles, forward, tuple(notes))
+
+
+def _choose(found: dict[str, Events], choice: str, path: str, notes: list[str]
+            ) -> Events | None:
+    if choice != "auto":
+        if choice not in found:
+            why = next((n for n in notes if n.startswith(choice)), f"{choice}: none found")
+            raise InputError(f"{path}: --events {choice}: expected events from that source; "
+                             f"{why}")
+        return found[choice]
+    for source in SOURCES:
+        if source in found and (source == "c3d" or found[source].has_strides()):
+            return found[source]
+    return next(iter(found.values()), None)
+
+
+def _forward(markers: dict[str, np.ndarray], vertical: np.ndarray) -> np.ndarray:
+    """The direction of walking: the pelvis's horizontal travel (x when it is unknown)."""
+    pelvis = _filled(markers["pelvis"]) if "pelvis" in markers else None
+    if pelvis is None:
+        return np.array([1.0, 0.0, 0.0])
+    travel = pelvis[-1] - pelvis[0]
+    travel -= (travel @ vertical) * vertical
+    norm = np.linalg.norm(travel)
+    return travel / norm if norm > 0 else np.array([1.0, 0.0, 0.0])
+
+
+def _filled(xyz: np.ndarray) -> np.ndarray:
+    seen = np.isfinite(xyz).all(axis=1)
+    if not seen.any():
+        return xyz
+    frames = np.arange(len(xyz))
+    return np.column_stack([np.interp(frames, frames[seen], xyz[seen, k]) for k in range(3)])

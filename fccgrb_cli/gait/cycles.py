@@ -1,0 +1,127 @@
+"""Strides cut at the events, time-normalized to 0–100 % of the gait cycle (101 samples), and the
+spatiotemporal parameters of each stride.
+
+A stride of one foot runs from its strike to its next strike. Each clinical curve of that side
+(names ending ``_r`` / ``_l``) is sampled at 101 equally spaced instants over the stride, by
+linear interpolation between frames. A stride that contains a frame the quality checks do not
+trust is kept but marked, and left out of the mean ± SD (which says over how many strides).
+
+Spatiotemporal parameters of a stride (per side, from the heel markers and the events): stride
+time (s); cadence 120 / stride time (steps/min); stride length, the heel's displacement along the
+direction of walking from strike to strike (m); walking speed, stride length / stride time
+(m/s); step length, how far this heel is ahead of the other heel along the direction of walking
+at this foot's strike (m); step width, their distance across it then (m); stance and swing, the
+time from strike to this foot's off and from off to the next strike (% of the stride); double
+support, the time both feet are down (from this strike to the other foot's off, and from the
+other foot's strike to this foot's off; % of the stride).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from fccgrb_cli.gait.events import Events
+
+SAMPLES = 101
+PARAMETERS = (("stride_time", "s"), ("cadence", "steps/min"), ("stride_length", "m"),
+              ("walking_speed", "m/s"), ("step_length", "m"), ("step_width", "m"),
+              ("stance", "%"), ("swing", "%"), ("double_support", "%"))
+SUFFIX = {"left": "_l", "right": "_r"}
+
+
+@dataclass(frozen=True)
+class SideCycles:
+    """One side's strides: start and end times (s); ``trusted`` per stride; ``curves``
+    (strides × 101 × variables) of ``names`` in ``units``; the spatiotemporal ``parameters``
+    (strides × PARAMETERS, NaN where an event is missing)."""
+
+    side: str
+    start: np.ndarray
+    stop: np.ndarray
+    trusted: np.ndarray
+    names: tuple[str, ...]
+    units: tuple[str, ...]
+    curves: np.ndarray
+    parameters: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return len(self.start)
+
+    def mean(self) -> np.ndarray:
+        """101 × variables over the trusted strides (NaN when there are none)."""
+        chosen = self.curves[self.trusted]
+        return chosen.mean(axis=0) if len(chosen) else np.full(self.curves.shape[1:], np.nan)
+
+    def sd(self) -> np.ndarray:
+        """Sample standard deviation over the trusted strides (NaN with fewer than two)."""
+        chosen = self.curves[self.trusted]
+        return chosen.std(axis=0, ddof=1) if len(chosen) > 1 else \
+            np.full(self.curves.shape[1:], np.nan)
+
+    def parameter(self, name: str) -> np.ndarray:
+        return self.parameters[:, [p for p, _ in PARAMETERS].index(name)]
+
+
+def normalized(time: np.ndarray, values: np.ndarray, start: float, stop: float) -> np.ndarray:
+    """values (frames × n) at 101 instants from ``start`` to ``stop`` (linear in time)."""
+    at = np.linspace(start, stop, SAMPLES)
+    return np.column_stack([np.interp(at, time, values[:, k]) for k in range(values.shape[1])])
+
+
+def side_cycles(side: str, events: Events, time: np.ndarray, trusted: np.ndarray,
+                curves: tuple[tuple[str, ...], tuple[str, ...], np.ndarray],
+                heels: dict[str, np.ndarray], forward: np.ndarray,
+                vertical: np.ndarray) -> SideCycles:
+    """The strides of ``side`` (``curves``: every clinical name, unit and frames × n values;
+    ``heels``: side → heel trajectory, frames × 3 m; ``forward``/``vertical``: unit vectors)."""
+    names, units, values = curves
+    mine = [k for k, n in enumerate(names) if n.endswith(SUFFIX[side])]
+    strikes = events.of(side, "strike")
+    other = "left" if side == "right" else "right"
+    rate = 1.0 / float(time[1] - time[0]) if len(time) > 1 else 1.0
+    starts, stops, ok, cycles, params = [], [], [], [], []
+    for a, b in itertools.pairwise(strikes):
+        first, last = int(np.floor(a * rate)), int(np.ceil(b * rate))
+        starts.append(a)
+        stops.append(b)
+        ok.append(bool(trusted[max(first, 0):min(last, len(time) - 1) + 1].all()))
+        cycles.append(normalized(time, values[:, mine], a, b))
+        params.append(_parameters(side, other, events, a, b, heels, forward, vertical, time))
+    return SideCycles(side, np.array(starts), np.array(stops), np.array(ok, dtype=bool),
+                      tuple(names[k] for k in mine), tuple(units[k] for k in mine),
+                      np.array(cycles).reshape(len(cycles), SAMPLES, len(mine)),
+                      np.array(params).reshape(len(params), len(PARAMETERS)))
+
+
+def _first_in(times: np.ndarray, a: float, b: float) -> float:
+    inside = times[(times > a) & (times < b)]
+    return float(inside[0]) if len(inside) else np.nan
+
+
+def _at(trajectory: np.ndarray, time: np.ndarray, t: float) -> np.ndarray:
+    return np.array([np.interp(t, time, trajectory[:, k]) for k in range(3)])
+
+
+def _parameters(side: str, other: str, events: Events, a: float, b: float,
+                heels: dict[str, np.ndarray], forward: np.ndarray, vertical: np.ndarray,
+                time: np.ndarray) -> list[float]:
+    stride = b - a
+    off = _first_in(events.of(side, "off"), a, b)
+    other_off = _first_in(events.of(other, "off"), a, b)
+    other_strike = _first_in(events.of(other, "strike"), a, b)
+    across = np.cross(vertical, forward)
+    if side in heels and other in heels:
+        here, there = _at(heels[side], time, a), _at(heels[other], time, a)
+        length = float((_at(heels[side], time, b) - here) @ forward)
+        step = float((here - there) @ forward)
+        width = float(abs((here - there) @ across))
+    else:
+        length = step = width = np.nan
+    double = ((other_off - a) + (off - other_strike)) / stride * 100.0
+    stance = (off - a) / stride * 100.0
+    return [stride, 120.0 / stride, length, length / stride, step, width, stance,
+            100.0 - stance, double]

@@ -1,0 +1,69 @@
+"""A run's gait analysis in the results file, under ``/runs/<name>/gait/``:
+
+* ``events/<source>/time`` (s from the trial's first frame), ``side``, ``kind`` — every source
+  found (c3d, plates, kinematic); the group's attribute ``used`` names the one the cycles use;
+* ``cycles/<side>/curves`` (strides × 101 × variables; attributes ``names``, ``units``),
+  ``start``, ``stop`` (s), ``trusted`` (per stride), ``mean`` and ``sd`` (101 × variables over
+  the trusted strides), ``parameters`` (strides × parameters; attributes ``names``, ``units``);
+* attributes ``forward`` (the direction of walking) and ``notes``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fccgrb_cli.gait.analysis import GaitResults
+from fccgrb_cli.gait.cycles import PARAMETERS, SideCycles
+from fccgrb_cli.gait.events import Events
+
+
+def _strings(values) -> tuple[str, ...]:
+    return tuple(v.decode() if isinstance(v, bytes) else str(v) for v in values)
+
+
+def write_gait(g, gait: GaitResults) -> None:
+    import h5py
+
+    text = h5py.string_dtype(encoding="utf-8")
+    out = g.create_group("gait")
+    out.attrs["forward"] = gait.forward
+    out.attrs.create("notes", list(gait.notes), dtype=text)
+    events = out.create_group("events")
+    events.attrs["used"] = gait.events.source
+    for source, found in gait.found.items():
+        e = events.create_group(source)
+        e["time"] = found.time
+        e.create_dataset("side", data=list(found.side), dtype=text)
+        e.create_dataset("kind", data=list(found.kind), dtype=text)
+    cycles = out.create_group("cycles")
+    for side, c in gait.cycles.items():
+        s = cycles.create_group(side)
+        s["curves"] = c.curves
+        for key in ("curves", "mean", "sd"):
+            if key != "curves":
+                s[key] = getattr(c, key)()
+            s[key].attrs.update({"names": list(c.names), "units": list(c.units)})
+        s["start"], s["stop"], s["trusted"] = c.start, c.stop, c.trusted
+        s["parameters"] = c.parameters
+        s["parameters"].attrs.update({"names": [p for p, _ in PARAMETERS],
+                                      "units": [u for _, u in PARAMETERS]})
+
+
+def read_gait(g) -> GaitResults:
+    found = {source: Events(source, e["time"][()], _strings(e["side"][()]),
+                            _strings(e["kind"][()])) for source, e in g["events"].items()}
+    cycles = {side: SideCycles(side, s["start"][()], s["stop"][()], s["trusted"][()],
+                               _strings(s["curves"].attrs["names"]),
+                               _strings(s["curves"].attrs["units"]), s["curves"][()],
+                               s["parameters"][()]) for side, s in g["cycles"].items()}
+    return GaitResults(found[str(g["events"].attrs["used"])], found, cycles,
+                       np.asarray(g.attrs["forward"], dtype=float), _strings(g.attrs["notes"]))
+
+
+def read_all_gait(path) -> dict[str, GaitResults]:
+    """The gait analysis of every run of a results file that has one, by run name."""
+    from fccgrb_cli.io.results import open_results
+
+    with open_results(path) as h5:
+        runs = h5.get("runs", {})
+        return {name: read_gait(g["gait"]) for name, g in runs.items() if "gait" in g}
