@@ -21,7 +21,7 @@ import numpy as np
 from fccgrb_cli.model import load_model
 from fccgrb_cli.perturb import perturb
 from fccgrb_cli.solvers import solve_ad
-from fccgrb_cli.solvers.nrm import solve_nrm
+from fccgrb_cli.solvers.nrm import NrmSettings, solve_nrm
 from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import compile_system
 
@@ -65,7 +65,7 @@ def main() -> None:
                     markers = perturb(truth.markers, truth.labels, truth.rate, level, seed=0)
                     for method, weight in (("nrm-ls", None), ("nrm-wls", 1e-3)):
                         rows.append((method, tol, level, partial(
-                            solve_nrm, mc, r.time, markers, tracking_weight=weight, tol=tol)))
+                            solve_nrm, mc, r.time, markers, NrmSettings(weight, tol))))
             for method, tol, level, run in rows:
                 per_frame, total, result = best_of(args.repeat, run)
                 print(f"{name:9} {form:7} {method:8} {tol:6.0e} {level * 1e3:5.1f} "

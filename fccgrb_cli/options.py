@@ -18,17 +18,20 @@ from fccgrb_cli.errors import InputError
 METHODS = ("ad", "nrm-ls", "nrm-wls", "cno-sqp", "cno-ip", "mo-tc", "mo-ed")
 
 
-def _option(default: Any, help: str, *, flag: str | None = None, unit: str = "",
-            choices: tuple[str, ...] = (), low: float | None = None, low_open: bool = False,
-            high: float | None = None, sweep: str | None = None, names: bool = False,
-            cli: bool = True, metavar: str | None = None) -> Any:
-    """A field with the metadata the CLI, the sweep and the docs read (``flag``: the CLI
-    spelling when it differs from the field's; ``sweep``: the sweep key when it differs;
-    ``names``: a comma-separated list of names on the CLI, a list in a sweep)."""
-    meta = {"help": help, "flag": flag, "unit": unit, "choices": choices, "low": low,
-            "low_open": low_open, "high": high, "sweep": sweep, "names": names, "cli": cli,
-            "metavar": metavar}
-    return field(default=default, metadata=meta)
+_META = {"flag": None, "unit": "", "choices": (), "low": None, "low_open": False, "high": None,
+         "sweep": None, "names": False, "cli": True, "metavar": None}
+
+
+def _option(default: Any, help: str, **meta: Any) -> Any:
+    """A field with the metadata the CLI, the sweep and the docs read: ``flag`` (the CLI
+    spelling when it differs from the field's), ``unit``, ``choices``, ``low``/``high`` (with
+    ``low_open`` for a strict bound), ``sweep`` (the sweep key when it differs), ``names`` (a
+    comma-separated list of names on the CLI, a list in a sweep), ``cli`` (False: API and
+    sweep only) and ``metavar``."""
+    unknown = set(meta) - set(_META)
+    if unknown:
+        raise TypeError(f"_option: unknown metadata {sorted(unknown)}")
+    return field(default=default, metadata={**_META, **meta, "help": help})
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ from fccgrb_cli.options import METHODS, SolveOptions
 from fccgrb_cli.perturb import perturb
 from fccgrb_cli.solvers import KinematicResult, solve_ad
 from fccgrb_cli.solvers.baseline import solve_baseline
-from fccgrb_cli.solvers.nrm import solve_nrm
+from fccgrb_cli.solvers.nrm import NrmSettings, solve_nrm
 from fccgrb_cli.solvers.optimize import Settings, solve_optimization
 from fccgrb_cli.solvers.quality import JUMP, assessed
 from fccgrb_cli.system import System, compile_system
@@ -352,18 +352,11 @@ def _kinematics(model: Model, trial: Trial, inputs: np.ndarray, options: SolveOp
     by_label = dict(zip(model.marker_labels, np.moveaxis(inputs, 1, 0), strict=True))
     targets = np.concatenate([inputs, _vector_targets(model, trial, by_label)], axis=1)
     if o.method.startswith("nrm"):
-        return system, solve_nrm(
-            system, time, targets,
-            tracking_weight=None if o.method == "nrm-ls" else o.tracking_weight, tol=o.tol,
-            max_iter=o.max_iter or 50, warm_start=o.warm_start, hessian=o.hessian,
-            skip_unsolvable=o.skip_unsolvable,
-            target_labels=model.marker_labels + tuple(tv.marker for tv in model.tracked_vectors),
-            method=o.method, source=trial.path, progress=progress)
-    settings = Settings(o.method, o.objective, o.tol, o.max_iter or 500)
-    return system, solve_optimization(system, time, targets, settings, parallel=o.parallel,
-                                      workers=o.workers, init=o.parallel_init,
-                                      warm_start=o.warm_start, nrm_weight=o.tracking_weight,
-                                      progress=progress)
+        labels = model.marker_labels + tuple(tv.marker for tv in model.tracked_vectors)
+        return system, solve_nrm(system, time, targets, NrmSettings.from_options(o),
+                                 labels=labels, source=trial.path, progress=progress)
+    return system, solve_optimization(system, time, targets, Settings.from_options(o),
+                                      progress)
 
 
 def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResult,

@@ -18,7 +18,7 @@ from click.testing import CliRunner
 from fccgrb_cli.cli import main
 from fccgrb_cli.dynamics.convert import classical_dynamics
 from fccgrb_cli.model import parse_model
-from fccgrb_cli.solvers.nrm import solve_nrm
+from fccgrb_cli.solvers.nrm import NrmSettings, solve_nrm
 from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import compile_system
 from fccgrb_cli.system.constraints import floating_bases
@@ -68,7 +68,7 @@ def solved(request):
     model = parse_model(floating_text(), "floating.yaml").with_form(request.param)
     s = synthesize(model, duration=1.0, rate=1000.0)
     system = compile_system(model, angles="coordinate", track=True)
-    result = solve_nrm(system, s.result.time, s.markers, tol=1e-12)
+    result = solve_nrm(system, s.result.time, s.markers, NrmSettings(tol=1e-12))
     return model, s, result, classical_dynamics(model, result, tol=1e-12)
 
 

@@ -12,7 +12,7 @@ import pytest
 from cli_helpers import one_error_line, run_cli
 
 import fccgrb_cli as fc
-from fccgrb_cli.gait.cycles import PARAMETERS, side_cycles
+from fccgrb_cli.gait.cycles import PARAMETERS, Walk, side_cycles
 from fccgrb_cli.gait.events import Events, c3d_events, kinematic_events
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -73,8 +73,8 @@ def test_cycles_are_normalized_and_parameters_follow_from_the_events():
     values = np.column_stack([np.sin(phase), np.cos(phase)])
     curves = (("knee_flexion_r", "knee_flexion_l"), ("deg", "deg"), values)
     heels = _walk(time, 1.2)
-    cycles = side_cycles("right", events, time, np.ones(300, bool), curves, heels,
-                         np.array([1.0, 0, 0]), np.array([0, 0, 1.0]))
+    walk = Walk(time, heels, np.array([1.0, 0, 0]), np.array([0, 0, 1.0]))
+    cycles = side_cycles("right", events, np.ones(300, bool), curves, walk)
     assert cycles.n == 1 and cycles.names == ("knee_flexion_r",)
     percent = np.linspace(0, 1, 101)
     np.testing.assert_allclose(cycles.curves[0, :, 0], np.sin(2 * np.pi * percent), atol=2e-3)
@@ -99,8 +99,8 @@ def test_a_stride_with_an_untrusted_frame_is_marked_and_left_out_of_the_mean():
     values = np.column_stack([np.where(time < 1.2, 10.0, 20.0)])
     trusted = np.ones(400, bool)
     trusted[170] = False  # inside the second stride (1.2–2.2 s)
-    cycles = side_cycles("left", events, time, trusted, (("hip_flexion_l",), ("deg",), values),
-                         {}, np.array([1.0, 0, 0]), np.array([0, 0, 1.0]))
+    walk = Walk(time, {}, np.array([1.0, 0, 0]), np.array([0, 0, 1.0]))
+    cycles = side_cycles("left", events, trusted, (("hip_flexion_l",), ("deg",), values), walk)
     assert list(cycles.trusted) == [True, False, True]
     np.testing.assert_allclose(cycles.mean()[5:95, 0], 15.0)  # strides 1 (10) and 3 (20) only
     assert np.isnan(cycles.parameter("stride_length")).all()  # no heels given

@@ -44,7 +44,7 @@ from fccgrb_cli.model import load_model
 from fccgrb_cli.pipeline import plate_loads
 from fccgrb_cli.solvers import solve_ad
 from fccgrb_cli.solvers.baseline import solve_baseline
-from fccgrb_cli.solvers.nrm import solve_nrm
+from fccgrb_cli.solvers.nrm import NrmSettings, solve_nrm
 from fccgrb_cli.solvers.rates import central_derivatives
 from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import compile_system
@@ -80,7 +80,7 @@ def mc_solution(name: str, form: str = "full", rate: float = RATE):
     """NRM-WLS on the exact (in-memory, float64) markers of the synthesized trial."""
     s = synthesized(name, form, rate)
     system = compile_system(model_of(name, form), angles="coordinate", track=True)
-    return solve_nrm(system, s.result.time, s.markers, tracking_weight=1e-3, tol=1e-12)
+    return solve_nrm(system, s.result.time, s.markers, NrmSettings(tracking_weight=1e-3, tol=1e-12))
 
 
 def relative(a: np.ndarray, b: np.ndarray) -> float:

@@ -16,10 +16,10 @@ What is independent of the code under test:
 * Topological consistency of q̇, q̈ is checked row by row with the Jacobian and γ of the
   constraint library (FORMULATION §2), and determinacy in gaps from the model's joint types.
 
-Package defect found (see ``test_skip_unsolvable_reports_frame``): ``solve_nrm(...,
-skip_unsolvable=True)`` crashes with ``LinAlgError: Singular matrix`` as soon as a frame is
-actually skipped, because the NaN coordinates of that frame are zeroed (``np.nan_to_num``) before
-``consistent_rates`` solves with their (all-zero, singular) Jacobian.
+Package defect found (see ``test_skip_unsolvable_reports_frame``): ``solve_nrm`` with
+``NrmSettings(skip_unsolvable=True)`` crashed with ``LinAlgError: Singular matrix`` as soon as a
+frame was actually skipped, because the NaN coordinates of that frame are zeroed
+(``np.nan_to_num``) before ``consistent_rates`` solves with their (all-zero, singular) Jacobian.
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ from fccgrb_cli.errors import InputError
 from fccgrb_cli.model import load_model
 from fccgrb_cli.perturb import perturb
 from fccgrb_cli.solvers.initial import initial_guess, rigid_fit
-from fccgrb_cli.solvers.nrm import solve_nrm
+from fccgrb_cli.solvers.nrm import NrmSettings, solve_nrm
 from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import Drive, compile_system
 
@@ -145,7 +145,8 @@ def test_recovery_from_exact_markers(name, form, weight):
     model, s = synth(name, form)
     assert s.markers.shape[0] == 300
     system = mc_system(model)
-    result = solve_nrm(system, s.result.time, s.markers, tracking_weight=weight, tol=TOL)
+    result = solve_nrm(system, s.result.time, s.markers,
+                       NrmSettings(tracking_weight=weight, tol=TOL))
     assert result.converged.all(), result.messages
     assert result.method == ("nrm-ls" if weight is None else "nrm-wls")
     angle, dist = assert_recovered(system, model, result, s.result.theta, s.markers)
@@ -276,7 +277,8 @@ def test_wls_keeps_topology_far_better_than_ls_at_30mm():
     worst = {}
     top, tracking = system.masks()["topology"], system.masks()["tracking"]
     for label, weight in (("LS", None), ("WLS", WLS_WEIGHT)):
-        result = solve_nrm(system, s.result.time, noisy, tracking_weight=weight, tol=TOL)
+        result = solve_nrm(system, s.result.time, noisy,
+                           NrmSettings(tracking_weight=weight, tol=TOL))
         assert result.converged.all(), (label, result.messages)
         # each frame is the minimum of ½ΦᵀWΦ with W built here (1 on topological rows, the
         # tracking weight on tracking rows): Φ_qᵀWΦ = 0 to 1e-10 relative (measured ~1e-12),
@@ -390,7 +392,8 @@ def test_rates_against_closed_form_and_topology():
     """
     model, s = synth("five_bar")
     system = mc_system(model)
-    result = solve_nrm(system, s.result.time, s.markers, tracking_weight=WLS_WEIGHT, tol=TOL)
+    result = solve_nrm(system, s.result.time, s.markers,
+                       NrmSettings(tracking_weight=WLS_WEIGHT, tol=TOL))
     assert result.converged.all()
     m3, m4 = derivative_bounds("five_bar", 3), derivative_bounds("five_bar", 4)
     assert m3.max() < 420 and m4.max() < 5.8e3
@@ -434,7 +437,7 @@ def test_initial_guess_leads_to_truth(first):
     assert guess.shape == (system.nq,) and np.isfinite(guess).all()
     window = slice(first, first + 1)
     result = solve_nrm(system, s.result.time[window], s.markers[window],
-                       tracking_weight=WLS_WEIGHT, tol=TOL)
+                       NrmSettings(tracking_weight=WLS_WEIGHT, tol=TOL))
     assert result.converged.all(), result.messages
     assert_recovered(system, model, result, s.result.theta[window], s.markers[window])
     nb = system.layout.n_body_q
@@ -479,8 +482,8 @@ def test_gap_that_leaves_model_determined():
         y[list(frames), labels.index(label)] = np.nan
     system = mc_system(model)
     for weight in (None, WLS_WEIGHT):
-        result = solve_nrm(system, s.result.time, y, tracking_weight=weight, tol=TOL,
-                           target_labels=labels)
+        result = solve_nrm(system, s.result.time, y, NrmSettings(tracking_weight=weight, tol=TOL),
+                           labels=labels)
         assert result.converged.all(), result.messages
         assert not result.messages
         assert_recovered(system, model, result, s.result.theta, s.markers)
@@ -510,7 +513,7 @@ def test_undetermined_frame_raises_input_error():
     model, s, y = undetermined_trial()
     system = mc_system(model)
     with pytest.raises(InputError) as info:
-        solve_nrm(system, s.result.time, y, tol=TOL, target_labels=model.marker_labels)
+        solve_nrm(system, s.result.time, y, NrmSettings(tol=TOL), labels=model.marker_labels)
     text = str(info.value)
     assert f"frame index {GAP_FRAME}" in text
     assert "P6" in text and "P9" in text
@@ -519,14 +522,14 @@ def test_undetermined_frame_raises_input_error():
     z = y.copy()
     k = model.marker_labels.index("P6")
     z[GAP_FRAME, k] = s.markers[GAP_FRAME, k]
-    result = solve_nrm(system, s.result.time, z, tol=TOL, target_labels=model.marker_labels)
+    result = solve_nrm(system, s.result.time, z, NrmSettings(tol=TOL), labels=model.marker_labels)
     assert result.converged.all()
     assert_recovered(system, model, result, s.result.theta, s.markers)
     z = y.copy()
     k = model.marker_labels.index("P9")
     z[GAP_FRAME, k] = s.markers[GAP_FRAME, k]
     with pytest.raises(InputError, match="missing: P6\\)"):
-        solve_nrm(system, s.result.time, z, tol=TOL, target_labels=model.marker_labels)
+        solve_nrm(system, s.result.time, z, NrmSettings(tol=TOL), labels=model.marker_labels)
 
 
 def check_skipped(model, s, result):
@@ -547,8 +550,8 @@ def test_skip_unsolvable_reports_frame():
     """The skipped frame is reported and NaN (rates too, where its neighbours' differences need
     it); every other frame is solved. Once a LinAlgError in the rates step (regression)."""
     model, s, y = undetermined_trial()
-    result = solve_nrm(mc_system(model), s.result.time, y, tol=TOL,
-                       target_labels=model.marker_labels, skip_unsolvable=True)
+    result = solve_nrm(mc_system(model), s.result.time, y,
+                       NrmSettings(tol=TOL, skip_unsolvable=True), labels=model.marker_labels)
     check_skipped(model, s, result)
     assert np.isnan(result.qd[GAP_FRAME]).all()
     # away from the gap the rates are the closed form's, to the stencils' truncation (the
@@ -578,12 +581,13 @@ def test_wrong_target_fails_the_point_check():
     wrong = s.markers.copy()
     wrong[:, model.marker_labels.index("P6"), 0] += 1e-3
     for weight in (None, WLS_WEIGHT):
-        result = solve_nrm(system, s.result.time, wrong, tracking_weight=weight, tol=TOL)
+        result = solve_nrm(system, s.result.time, wrong,
+                           NrmSettings(tracking_weight=weight, tol=TOL))
         assert result.converged.all()
         angle, dist = errors(system, model, result, s.result.theta, s.markers)
         assert dist > 1e-5 and angle > 1e-5, (angle, dist)
         with pytest.raises(AssertionError):
             assert_recovered(system, model, result, s.result.theta, s.markers)
     # and the same check passes on the right targets
-    result = solve_nrm(system, s.result.time, s.markers, tol=TOL)
+    result = solve_nrm(system, s.result.time, s.markers, NrmSettings(tol=TOL))
     assert_recovered(system, model, result, s.result.theta, s.markers)

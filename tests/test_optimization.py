@@ -136,8 +136,8 @@ def solved(method: str, objective: str, level: str, window: tuple[int, int] = SE
            parallel: bool = False, init: str = "same", max_iter: int = 500, form: str = "full"):
     f = frames(window)
     return solve_optimization(system(form), truth().result.time[f], markers(level)[f],
-                              Settings(method, objective, 1e-10, max_iter), parallel=parallel,
-                              workers=2, init=init)
+                              Settings(method, objective, 1e-10, max_iter, parallel=parallel,
+                                       workers=2, init=init))
 
 
 def window_of(method: str) -> tuple[int, int]:
@@ -489,7 +489,7 @@ def run_recorded(monkeypatch, context: str | None, init: str, window: tuple[int,
     monkeypatch.setattr(optimize, "ProcessPoolExecutor", pool)
     targets = markers("P30")[frames(window)]
     result = solve_optimization(system(), truth().result.time[frames(window)], targets,
-                                Settings("cno-sqp"), parallel=True, workers=2, init=init)
+                                Settings("cno-sqp", parallel=True, workers=2, init=init))
     return result, pool.calls, targets
 
 
@@ -504,10 +504,11 @@ def test_workers_receive_the_compiled_system(monkeypatch):
     assert len(calls) == 1
     kwargs = calls[0]
     assert kwargs["initializer"] is optimize._install
-    installed_system, installed_targets, settings, warm_start = kwargs["initargs"]
+    installed_system, installed_targets, settings = kwargs["initargs"]
     assert installed_system is system()
     assert installed_targets is targets
-    assert settings == Settings("cno-sqp") and warm_start == "extrapolate"
+    assert settings == Settings("cno-sqp", parallel=True, workers=2, init="chunks")
+    assert settings.warm_start == "extrapolate"
     assert result.converged.all()
     assert_same_points(result, (0, 12))
 

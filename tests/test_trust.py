@@ -138,12 +138,12 @@ def test_repair_gives_the_sequential_answer():
     settings = Settings("cno-sqp")
     sequential = solve_optimization(system, time, markers, settings)
     first = optimize.initial_guess(system, markers[0])
-    records = optimize._parallel(system, time, markers, settings, 2, "same", "extrapolate",
-                                 1e-3, first, None)
+    paper = Settings("cno-sqp", parallel=True, workers=2, init="same")
+    records = optimize._parallel(system, time, markers, paper, first, None)
     before = np.array([r.q for r in records])
     off = np.abs(before - sequential.q).max(axis=1) > 1e-6
     assert off.sum() >= 5  # the paper's parallel mode is wrong on these frames
-    resolved = optimize.repair(system, settings, markers, records, "extrapolate")
+    resolved = optimize.repair(system, settings, markers, records)
     after = np.array([r.q for r in records])
     print(f"{off.sum()} frames off the sequential answer; {resolved} re-solved")
     assert resolved >= off.sum()

@@ -10,7 +10,7 @@ import numpy as np
 
 from fccgrb_cli.clinical import ClinicalResults
 from fccgrb_cli.errors import InputError
-from fccgrb_cli.gait.cycles import SUFFIX, SideCycles, side_cycles
+from fccgrb_cli.gait.cycles import SUFFIX, SideCycles, Walk, side_cycles
 from fccgrb_cli.gait.events import (
     SIDES,
     SOURCES,
@@ -128,9 +128,8 @@ def analyse_gait(model: Model, trial: Trial, clinical: ClinicalResults | None,
     forward = _forward(markers, vertical)
     heels = {side: markers[f"{side}_heel"] for side in SIDES if f"{side}_heel" in markers}
     curves = _curves(clinical)
-    cycles = {side: side_cycles(side, chosen, trial.time, trusted, curves,
-                                {k: _filled(v) for k, v in heels.items()}, forward, vertical)
-              for side in SIDES}
+    walk = Walk(trial.time, {k: _filled(v) for k, v in heels.items()}, forward, vertical)
+    cycles = {side: side_cycles(side, chosen, trusted, curves, walk) for side in SIDES}
     return GaitResults(chosen, found, cycles, forward, tuple(notes))
 
 

@@ -66,19 +66,31 @@ class SideCycles:
         return self.parameters[:, [p for p, _ in PARAMETERS].index(name)]
 
 
+@dataclass(frozen=True)
+class Walk:
+    """What the spatiotemporal parameters are measured on: the frame times (s), each side's heel
+    trajectory (frames × 3, m; absent sides give NaN lengths), the direction of walking and the
+    vertical (unit vectors)."""
+
+    time: np.ndarray
+    heels: dict[str, np.ndarray]
+    forward: np.ndarray
+    vertical: np.ndarray
+
+
 def normalized(time: np.ndarray, values: np.ndarray, start: float, stop: float) -> np.ndarray:
     """values (frames × n) at 101 instants from ``start`` to ``stop`` (linear in time)."""
     at = np.linspace(start, stop, SAMPLES)
     return np.column_stack([np.interp(at, time, values[:, k]) for k in range(values.shape[1])])
 
 
-def side_cycles(side: str, events: Events, time: np.ndarray, trusted: np.ndarray,
+def side_cycles(side: str, events: Events, trusted: np.ndarray,
                 curves: tuple[tuple[str, ...], tuple[str, ...], np.ndarray],
-                heels: dict[str, np.ndarray], forward: np.ndarray,
-                vertical: np.ndarray) -> SideCycles:
+                walk: Walk) -> SideCycles:
     """The strides of ``side`` (``curves``: every clinical name, unit and frames × n values;
-    ``heels``: side → heel trajectory, frames × 3 m; ``forward``/``vertical``: unit vectors)."""
+    ``trusted``: per frame)."""
     names, units, values = curves
+    time = walk.time
     mine = [k for k, n in enumerate(names) if n.endswith(SUFFIX[side])]
     strikes = events.of(side, "strike")
     other = "left" if side == "right" else "right"
@@ -90,7 +102,7 @@ def side_cycles(side: str, events: Events, time: np.ndarray, trusted: np.ndarray
         stops.append(b)
         ok.append(bool(trusted[max(first, 0):min(last, len(time) - 1) + 1].all()))
         cycles.append(normalized(time, values[:, mine], a, b))
-        params.append(_parameters(side, other, events, a, b, heels, forward, vertical, time))
+        params.append(_parameters(side, other, events, (a, b), walk))
     return SideCycles(side, np.array(starts), np.array(stops), np.array(ok, dtype=bool),
                       tuple(names[k] for k in mine), tuple(units[k] for k in mine),
                       np.array(cycles).reshape(len(cycles), SAMPLES, len(mine)),
@@ -106,14 +118,15 @@ def _at(trajectory: np.ndarray, time: np.ndarray, t: float) -> np.ndarray:
     return np.array([np.interp(t, time, trajectory[:, k]) for k in range(3)])
 
 
-def _parameters(side: str, other: str, events: Events, a: float, b: float,
-                heels: dict[str, np.ndarray], forward: np.ndarray, vertical: np.ndarray,
-                time: np.ndarray) -> list[float]:
+def _parameters(side: str, other: str, events: Events, stride_span: tuple[float, float],
+                walk: Walk) -> list[float]:
+    a, b = stride_span
+    heels, forward, time = walk.heels, walk.forward, walk.time
     stride = b - a
     off = _first_in(events.of(side, "off"), a, b)
     other_off = _first_in(events.of(other, "off"), a, b)
     other_strike = _first_in(events.of(other, "strike"), a, b)
-    across = np.cross(vertical, forward)
+    across = np.cross(walk.vertical, forward)
     if side in heels and other in heels:
         here, there = _at(heels[side], time, a), _at(heels[other], time, a)
         length = float((_at(heels[side], time, b) - here) @ forward)

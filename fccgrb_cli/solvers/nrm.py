@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import time as clock
 from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -18,9 +20,12 @@ from fccgrb_cli.errors import InputError
 from fccgrb_cli.solvers.initial import initial_guess
 from fccgrb_cli.solvers.newton import Iterate, gauss_newton
 from fccgrb_cli.solvers.rates import central_derivatives, consistent_rates
-from fccgrb_cli.solvers.result import KinematicResult
+from fccgrb_cli.solvers.result import FrameStats, KinematicResult
 from fccgrb_cli.system import Drive, System
 from fccgrb_cli.system.constraints import floating_bases
+
+if TYPE_CHECKING:
+    from fccgrb_cli.options import SolveOptions
 
 NEAR_SINGULAR = np.radians(5.0)
 
@@ -72,15 +77,40 @@ def _rank(J: np.ndarray, w: np.ndarray) -> int:
     return int((s > s[0] * max(J.shape) * 1e-10).sum())
 
 
+@dataclass(frozen=True)
+class NrmSettings:
+    """NRM's options (FORMULATION §3.1): the tracking equations' weight (None: plain least
+    squares, NRM-LS; else WLS with the topological equations weighing 1), the tolerance on
+    ‖Δq‖∞ (m and rad), the iteration cap per frame, the warm start ('extrapolate' or
+    'previous'), the iteration matrix ('auto', 'gauss-newton', 'exact'), and whether frames the
+    remaining markers cannot determine are reported and skipped instead of stopping."""
+
+    tracking_weight: float | None = 1e-3
+    tol: float = 1e-10
+    max_iter: int = 50
+    warm_start: str = "extrapolate"
+    hessian: str = "auto"
+    skip_unsolvable: bool = False
+
+    @property
+    def method(self) -> str:
+        return "nrm-ls" if self.tracking_weight is None else "nrm-wls"
+
+    @classmethod
+    def from_options(cls, o: SolveOptions) -> NrmSettings:
+        return cls(None if o.method == "nrm-ls" else o.tracking_weight, o.tol,
+                   o.max_iter or 50, o.warm_start, o.hessian, o.skip_unsolvable)
+
+
 @single_threaded
-def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray, *,
-              tracking_weight: float | None = 1e-3, tol: float = 1e-10, max_iter: int = 50,
-              warm_start: str = "extrapolate", skip_unsolvable: bool = False,
-              hessian: str = "auto",
-              target_labels: tuple[str, ...] = (), method: str | None = None,
-              source: str = "",
-              progress: Callable[[int, int], None] | None = None) -> KinematicResult:
-    """Solve every frame; ``targets`` is (frames × n_targets × 3), metres, NaN in gaps."""
+def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray,
+              settings: NrmSettings = NrmSettings(), *, labels: tuple[str, ...] = (),
+              source: str = "", progress: Callable[[int, int], None] | None = None
+              ) -> KinematicResult:
+    """Solve every frame; ``targets`` is (frames × n_targets × 3), metres, NaN in gaps;
+    ``labels`` name the targets and ``source`` the trial in messages."""
+    tracking_weight, tol, max_iter = settings.tracking_weight, settings.tol, settings.max_iter
+    warm_start, hessian = settings.warm_start, settings.hessian
     if not system.mixed or not system.n_targets:
         raise ValueError("solve_nrm needs angles='coordinate' and track=True")
     n, nq = len(time), system.nq
@@ -96,7 +126,7 @@ def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray, *,
     checked: dict[bytes, bool] = {}
     history: list[np.ndarray] = []
     last_iterations = 0
-    labels = target_labels or tuple(f"target {k}" for k in range(system.n_targets))
+    labels = labels or tuple(f"target {k}" for k in range(system.n_targets))
     for f in range(n):
         started = clock.perf_counter()
         y = targets[f]
@@ -118,7 +148,7 @@ def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray, *,
             where = f"{source}: " if source else ""
             text = (f"{where}frame index {f} (t = {time[f]:.3f} s): the markers left cannot "
                     f"determine the model (missing: {gone or 'none'})")
-            if not skip_unsolvable:
+            if not settings.skip_unsolvable:
                 raise InputError(text)
             messages.append(text + "; frame left unsolved")
             q_all[f] = np.nan
@@ -144,16 +174,14 @@ def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray, *,
         phi_top[f] = np.abs(phi[top]).max()
         if progress is not None:
             progress(f + 1, n)
-    return mixed_result(system, time, q_all, iterations=iterations, seconds=seconds,
-                        phi_norm=phi_norm, phi_top=phi_top, converged=converged,
-                        messages=messages, tol=tol,
-                        method=method or ("nrm-ls" if tracking_weight is None else "nrm-wls"))
+    return mixed_result(system, time, q_all,
+                        FrameStats(iterations, seconds, phi_norm, phi_top, converged),
+                        method=settings.method, tol=tol, messages=messages)
 
 
-def mixed_result(system: System, time: np.ndarray, q_all: np.ndarray, *, iterations: np.ndarray,
-                 seconds: np.ndarray, phi_norm: np.ndarray, phi_top: np.ndarray,
-                 converged: np.ndarray, messages: list[str], tol: float, method: str,
-                 wall_s: float = float("nan"), status: tuple[str, ...] = ()) -> KinematicResult:
+def mixed_result(system: System, time: np.ndarray, q_all: np.ndarray, stats: FrameStats, *,
+                 method: str, tol: float, messages: list[str] | tuple[str, ...] = (),
+                 wall_s: float = float("nan")) -> KinematicResult:
     """The result of any mixed-coordinate method: θ from q, θ̇ and θ̈ by central differences,
     consistent q̇ and q̈, and warnings for angles near 0 or π."""
     n_body = system.layout.n_body_q
@@ -167,9 +195,9 @@ def mixed_result(system: System, time: np.ndarray, q_all: np.ndarray, *, iterati
     return KinematicResult(
         method=method, tol=tol, time=np.asarray(time, dtype=float), q=q_all, qd=qd, qdd=qdd,
         theta=theta, theta_d=theta_d, theta_dd=theta_dd, angle_names=system.layout.angle_names,
-        iterations=iterations, time_s=seconds, phi_norm=phi_norm, phi_top_max=phi_top,
-        converged=converged, messages=tuple(messages + near_singular(
-            theta, system.layout.angle_names, time)), wall_s=wall_s, status=status)
+        iterations=stats.iterations, time_s=stats.seconds, phi_norm=stats.phi_norm,
+        phi_top_max=stats.phi_top, converged=stats.converged, messages=(*messages, *near_singular(
+            theta, system.layout.angle_names, time)), wall_s=wall_s, status=stats.status)
 
 
 def near_singular(theta: np.ndarray, names: tuple[str, ...], time: np.ndarray) -> list[str]:

@@ -18,6 +18,7 @@ from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from itertools import pairwise
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -27,10 +28,20 @@ from fccgrb_cli.solvers.frame_problem import FrameProblem
 from fccgrb_cli.solvers.goal import FrameOutcome, solve_goal_frame
 from fccgrb_cli.solvers.initial import initial_guess
 from fccgrb_cli.solvers.newton import gauss_newton
-from fccgrb_cli.solvers.nrm import mixed_result, predict, row_weights, solve_nrm, without_gaps
+from fccgrb_cli.solvers.nrm import (
+    NrmSettings,
+    mixed_result,
+    predict,
+    row_weights,
+    solve_nrm,
+    without_gaps,
+)
 from fccgrb_cli.solvers.quality import flags_of
-from fccgrb_cli.solvers.result import KinematicResult
+from fccgrb_cli.solvers.result import FrameStats, KinematicResult
 from fccgrb_cli.system import System
+
+if TYPE_CHECKING:
+    from fccgrb_cli.options import SolveOptions
 
 METHODS = ("cno-sqp", "cno-ip", "mo-tc", "mo-ed")
 PARALLEL_INITS = ("same", "chunks", "nrm")
@@ -40,12 +51,24 @@ REJOINED = 1e-6
 @dataclass(frozen=True)
 class Settings:
     """An optimization method: ``method`` (one of METHODS), CNO ``objective`` ('tc' or 'ed'),
-    tolerance and iteration cap per frame."""
+    tolerance and iteration cap per frame, the warm start of each frame; ``parallel``: frames
+    over ``workers`` processes, each from its ``init`` guess (PARALLEL_INITS; 'nrm' solves
+    NRM-WLS first with tracking weight ``nrm_weight``)."""
 
     method: str
     objective: str = "tc"
     tol: float = 1e-10
     max_iter: int = 500
+    warm_start: str = "extrapolate"
+    parallel: bool = False
+    workers: int | None = None
+    init: str = "nrm"
+    nrm_weight: float = 1e-3
+
+    @classmethod
+    def from_options(cls, o: SolveOptions) -> Settings:
+        return cls(o.method, o.objective, o.tol, o.max_iter or 500, o.warm_start, o.parallel,
+                   o.workers, o.parallel_init, o.tracking_weight)
 
 
 @dataclass(frozen=True)
@@ -89,14 +112,15 @@ def solve_frame(system: System, settings: Settings, q0: np.ndarray, y: np.ndarra
 
 
 def _run_frames(system: System, settings: Settings, targets: np.ndarray, frames: list[int],
-                guess: Callable[[int], np.ndarray], chained: bool, warm_start: str,
+                guess: Callable[[int], np.ndarray], chained: bool,
                 progress: Callable[[int, int], None] | None = None) -> list[FrameRecord]:
     """Frames in order; ``chained``: each starts from the previous solution (the first, and any
     after a failure, from ``guess(frame)``), else each from ``guess(frame)``."""
     out: list[FrameRecord] = []
     history: list[np.ndarray] = []
     for f in frames:
-        q0 = predict(history, warm_start, points=3) if (chained and history) else guess(f)
+        q0 = predict(history, settings.warm_start, points=3) if (chained and history) \
+            else guess(f)
         record = solve_frame(system, settings, q0, targets[f])
         out.append(record)
         history = [*history[-2:], record.q] if record.converged else []
@@ -108,23 +132,21 @@ def _run_frames(system: System, settings: Settings, targets: np.ndarray, frames:
 _WORKER: dict = {}
 
 
-def _install(system: System, targets: np.ndarray, settings: Settings, warm_start: str) -> None:
+def _install(system: System, targets: np.ndarray, settings: Settings) -> None:
     limit_this_process()
-    _WORKER.update(system=system, targets=targets, settings=settings, warm_start=warm_start)
+    _WORKER.update(system=system, targets=targets, settings=settings)
 
 
 def _work(frames: list[int], guesses: list[np.ndarray], chained: bool) -> list[FrameRecord]:
     w = _WORKER
     by_frame = dict(zip(frames, guesses, strict=True))
     return _run_frames(w["system"], w["settings"], w["targets"], frames, by_frame.__getitem__,
-                       chained, w["warm_start"])
+                       chained)
 
 
 @single_threaded
 def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
-                       settings: Settings, *, parallel: bool = False, workers: int | None = None,
-                       init: str = "nrm", warm_start: str = "extrapolate",
-                       nrm_weight: float = 1e-3,
+                       settings: Settings,
                        progress: Callable[[int, int], None] | None = None) -> KinematicResult:
     """Every frame (targets: frames × n_targets × 3, m, NaN in gaps) with one optimizer."""
     if settings.method not in METHODS:
@@ -134,45 +156,44 @@ def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
     first = initial_guess(system, targets[0])
     label = settings.method + ("-ed" if settings.method.startswith("cno")
                                and settings.objective == "ed" else "")
-    if not parallel:
+    init = settings.init
+    if not settings.parallel:
         records = _run_frames(
             system, settings, targets, list(range(n)),
-            lambda f: first if f == 0 else initial_guess(system, targets[f]), True, warm_start,
-            progress)
+            lambda f: first if f == 0 else initial_guess(system, targets[f]), True, progress)
         wall = float("nan")
     else:
-        records = _parallel(system, time, targets, settings, workers or os.cpu_count() or 1,
-                            init, warm_start, nrm_weight, first, progress)
-        resolved = 0 if init == "same" else repair(system, settings, targets, records,
-                                                   warm_start)
+        records = _parallel(system, time, targets, settings, first, progress)
+        resolved = 0 if init == "same" else repair(system, settings, targets, records)
         wall = clock.perf_counter() - started
         label += "-parallel" + ("" if init == "same" else f"-{init}")
     messages = [f"frame index {f} (t = {time[f]:.3f} s): {r.message}"
                 for f, r in enumerate(records) if not r.converged]
-    if parallel and init != "same" and resolved:
+    if settings.parallel and init != "same" and resolved:
         messages.append(f"{label}: {resolved} frames re-solved in order from a trusted "
                         "neighbour after the parallel pass (frames that failed, jumped or "
                         "left the branch of their neighbours)")
-    return mixed_result(
-        system, time, np.array([r.q for r in records]),
-        iterations=np.array([r.iterations for r in records]),
-        seconds=np.array([r.seconds for r in records]),
-        phi_norm=np.array([r.phi_norm for r in records]),
-        phi_top=np.array([r.phi_top for r in records]),
-        converged=np.array([r.converged for r in records]), messages=messages,
-        tol=settings.tol, method=label, wall_s=wall,
-        status=tuple(r.message for r in records))
+    stats = FrameStats(np.array([r.iterations for r in records]),
+                       np.array([r.seconds for r in records]),
+                       np.array([r.phi_norm for r in records]),
+                       np.array([r.phi_top for r in records]),
+                       np.array([r.converged for r in records]),
+                       tuple(r.message for r in records))
+    return mixed_result(system, time, np.array([r.q for r in records]), stats, method=label,
+                        tol=settings.tol, messages=messages, wall_s=wall)
 
 
 def _parallel(system: System, time: np.ndarray, targets: np.ndarray, settings: Settings,
-              workers: int, init: str, warm_start: str, nrm_weight: float, first: np.ndarray,
-              progress: Callable[[int, int], None] | None) -> list[FrameRecord]:
+              first: np.ndarray, progress: Callable[[int, int], None] | None
+              ) -> list[FrameRecord]:
+    init = settings.init
     if init not in PARALLEL_INITS:
         raise ValueError(f"unknown parallel initialization {init!r}")
+    workers = settings.workers or os.cpu_count() or 1
     n = len(time)
     if init == "nrm":
-        guesses = list(solve_nrm(system, time, targets, tracking_weight=nrm_weight,
-                                 tol=settings.tol).q)
+        guesses = list(solve_nrm(system, time, targets,
+                                 NrmSettings(settings.nrm_weight, settings.tol)).q)
     else:
         guesses = [first] * n
     pieces = workers if init == "chunks" else max(1, min(n, 4 * workers))
@@ -189,7 +210,7 @@ def _parallel(system: System, time: np.ndarray, targets: np.ndarray, settings: S
     records: list[FrameRecord | None] = [None] * n
     done = 0
     with ProcessPoolExecutor(max_workers=workers, initializer=_install,
-                             initargs=(system, targets, settings, warm_start)) as pool:
+                             initargs=(system, targets, settings)) as pool:
         futures = [(task[0], pool.submit(_work, *task)) for task in tasks]
         for frames, future in futures:
             for f, record in zip(frames, future.result(), strict=True):
@@ -220,7 +241,7 @@ def objective_value(problem: FrameProblem, settings: Settings, q: np.ndarray) ->
 
 
 def repair(system: System, settings: Settings, targets: np.ndarray,
-           records: list[FrameRecord], warm_start: str, passes: int = 2) -> int:
+           records: list[FrameRecord], passes: int = 2) -> int:
     """Re-solve, in place, the frames a parallel pass got wrong, and say how many solves it took.
 
     Frames flagged by the quality checks (solvers/quality.py: unconverged, broken topology,
@@ -245,7 +266,8 @@ def repair(system: System, settings: Settings, targets: np.ndarray,
                     continue
                 history, g = [records[f - step].q], f
                 while 0 <= g < n:
-                    new, old = solve_frame(system, settings, predict(history, warm_start, 3),
+                    new, old = solve_frame(system, settings,
+                                           predict(history, settings.warm_start, 3),
                                            targets[g]), records[g]
                     resolved += 1
                     rejoined = bool(np.abs(new.q - old.q).max() <= REJOINED)

@@ -53,3 +53,17 @@ class KinematicResult:
     def trusted(self) -> np.ndarray:
         """Per frame: converged and not flagged by the quality checks."""
         return self.converged if self.flags is None else self.converged & (self.flags == 0)
+
+
+@dataclass(frozen=True)
+class FrameStats:
+    """What a solver records of each frame (arrays over frames): Newton or optimizer iterations,
+    wall-clock seconds, ‖Φ‖ over the active equations, max |topological Φ|, the solver's
+    verdict, and (optimizers) its own message."""
+
+    iterations: np.ndarray
+    seconds: np.ndarray
+    phi_norm: np.ndarray
+    phi_top: np.ndarray
+    converged: np.ndarray
+    status: tuple[str, ...] = field(default=())
