@@ -153,3 +153,21 @@ def test_export_refuses_what_it_cannot_write(five_bar, tmp_path: Path):
                    "inputs are never modified")
     assert run_cli("export", kinematic, "--format", "mot", "--run", "b").exit_code == 0
     assert (tmp_path / "kin.b.mot").exists()
+
+
+def test_opensim_reads_the_mot_and_sto_files(five_bar, tmp_path: Path):
+    """OpenSim 4's own readers (runs where the `opensim` package is installed)."""
+    osim = pytest.importorskip("opensim")
+    results, run = five_bar
+    mot, sto = tmp_path / "a.mot", tmp_path / "m.sto"
+    run_cli("export", results, "--format", "mot", "-o", mot)
+    run_cli("export", results, "--format", "sto", "-o", sto)
+    table = osim.TimeSeriesTable(str(mot))
+    assert table.getNumRows() == len(run.result.time)
+    assert list(table.getColumnLabels()) == list(run.result.angle_names)
+    assert table.getTableMetaDataAsString("inDegrees") == "yes"
+    last = table.getRowAtIndex(table.getNumRows() - 1).to_numpy()
+    np.testing.assert_allclose(np.radians(last), run.result.theta[-1], rtol=1e-9)
+    storage = osim.Storage(str(sto))
+    assert storage.getSize() == len(run.result.time) and not storage.isInDegrees()
+    assert storage.getColumnLabels().getSize() == 1 + len(run.result.angle_names)
