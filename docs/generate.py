@@ -117,7 +117,7 @@ def _executable(name: str) -> str:
     return str(beside) if beside.exists() else (shutil.which(name) or name)
 
 
-PROGRESS = re.compile(r"^([\w -]+: frame \d+/\d+ \([\d.]+ s\)|sweep: \d+/\d+ cells \(.*)$")
+PROGRESS = re.compile(r"^([\w .-]+: frame \d+/\d+ \([\d.]+ s\)|sweep: \d+/\d+ cells \(.*)$")
 
 
 class Workspace:

@@ -7,7 +7,7 @@ import functools
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 import numpy as np
@@ -15,9 +15,12 @@ import numpy as np
 from fccgrb_cli import __version__
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.model import Model, load_model
-from fccgrb_cli.options import click_options, from_cli
+from fccgrb_cli.options import SolveOptions, click_options, from_cli
 from fccgrb_cli.progress import Progress
 from fccgrb_cli.system.structure import analyse
+
+if TYPE_CHECKING:
+    from fccgrb_cli.pipeline import Run
 
 FORM = click.Choice(["model", "full", "reduced"])
 ACCEPT_TRUNCATED = click.option(
@@ -143,37 +146,91 @@ def format_summary(row: dict) -> str:
     return f"{head}\n{body}"
 
 
+def _trial_paths(patterns: tuple[str, ...]) -> list[str]:
+    """The trials named, a quoted glob ('walk*.c3d') expanded in order."""
+    import glob
+
+    out: list[str] = []
+    for pattern in patterns:
+        if any(c in pattern for c in "*?[") and not Path(pattern).exists():
+            found = sorted(glob.glob(pattern))
+            if not found:
+                raise InputError(f"{pattern}: expected trial files matching the pattern, found "
+                                 "none")
+            out += found
+        else:
+            out.append(pattern)
+    stems = [Path(p).stem for p in out]
+    twice = sorted({s for s in stems if stems.count(s) > 1})
+    if len(out) > 1 and twice:
+        raise InputError(f"{', '.join(twice)}: expected trials with different file names (each "
+                         "run is named after its trial's)")
+    return out
+
+
 @main.command()
 @click.argument("model")
-@click.argument("trial")
+@click.argument("trials", nargs=-1, required=True, metavar="TRIAL...")
 @click.option("-o", "--output", default="results.h5", show_default=True,
               type=click.Path(dir_okay=False),
               help="HDF5 results file; an existing one gains (or replaces) this run.")
 @click_options
 @ACCEPT_TRUNCATED
 @reports_input_errors
-def solve(model: str, trial: str, output: str, accept_truncated: bool, **options: Any) -> None:
+def solve(model: str, trials: tuple[str, ...], output: str, accept_truncated: bool,
+          **options: Any) -> None:
     """Solve the kinematics of MODEL (YAML) over TRIAL (C3D or TRC markers) and write HDF5.
 
     Prints a one-row summary: ms/frame (positions), iterations/frame, mean ‖Φ‖ over the active
     equations, max |topological Φ|, mean and max Euclidean distance (mm) between each tracked
     model point and its reference marker, the frames that did not converge (failed) and those
     the quality checks flagged (a jump, another assembly branch, a broken topology).
+
+    Several trials of one subject (or a quoted glob, 'walk*.c3d'): one run each, named
+    <trial file stem>-<run name>, and, for a lower-limb model, the subject's cycles over every
+    trial's strides in /subject of the results file.
     """
-    from fccgrb_cli.clinical import clinical_table
-    from fccgrb_cli.io.results import write_run
-    from fccgrb_cli.io.trial import read_trial
     from fccgrb_cli.io.truth import truth_path
-    from fccgrb_cli.pipeline import solve_trial, summary
 
     chosen = from_cli(options)
-    inputs = {Path(p).resolve() for p in (model, trial, truth_path(trial))}
+    paths = _trial_paths(trials)
+    inputs = {Path(p).resolve() for p in (model, *paths, *map(truth_path, paths))}
     if Path(output).resolve() in inputs:
-        raise InputError(f"{output}: expected a results file other than the model, the trial or "
-                         "its truth file (inputs are never modified)")
+        raise InputError(f"{output}: expected a results file other than the model, the trials "
+                         "or their truth files (inputs are never modified)")
     loaded = load_checked(model, chosen.form)
-    run = solve_trial(loaded, read_trial(trial, accept_truncated), chosen,
-                      progress=Progress(f"solve {chosen.method}"))
+    runs = []
+    for path in paths:
+        run = _solve_one(loaded, path, chosen, accept_truncated)
+        if len(paths) > 1:
+            run = dataclasses.replace(run, name=f"{Path(path).stem}-{run.name}")
+        _write_and_show(run, output)
+        runs.append(run)
+    with_gait = [r for r in runs if r.gait is not None]
+    if len(with_gait) > 1:
+        from fccgrb_cli.gait.cycles import pooled
+        from fccgrb_cli.gait.report import subject_report
+        from fccgrb_cli.io.gait_results import write_subject
+
+        names = [r.name for r in with_gait]
+        cycles = pooled([r.gait.cycles for r in with_gait])
+        write_subject(output, names, cycles)
+        click.echo(subject_report(names, cycles))
+
+
+def _solve_one(model: Model, path: str, options: SolveOptions, accept_truncated: bool) -> Run:
+    from fccgrb_cli.io.trial import read_trial
+    from fccgrb_cli.pipeline import solve_trial
+
+    return solve_trial(model, read_trial(path, accept_truncated), options,
+                       progress=Progress(f"solve {options.method} {Path(path).name}"))
+
+
+def _write_and_show(run: Run, output: str) -> None:
+    from fccgrb_cli.clinical import clinical_table
+    from fccgrb_cli.io.results import write_run
+    from fccgrb_cli.pipeline import summary
+
     write_run(output, run, " ".join(["fccgrb", *sys.argv[1:]]))
     for message in (*run.result.messages, *run.warnings):
         click.echo(f"fccgrb: warning: {message}", err=True)

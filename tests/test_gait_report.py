@@ -220,3 +220,36 @@ def test_events_on_a_model_without_legs_is_one_line(tmp_path: Path):
     trial = ROOT / "sample_data" / "five_bar.c3d"
     one_error_line(run_cli("solve", model, trial, "--events", "plates", "-o", tmp_path / "x.h5"),
                    "--events plates", "clinical angles of both legs")
+
+
+@needs_gait
+def test_several_trials_of_one_subject_are_pooled(walk, tmp_path: Path):
+    """Two trials (here the same walk under two names, so the pooled answer is known: each
+    stride twice, the same mean, zero spread) give one run each and the subject's cycles."""
+    import h5py
+
+    _, run = walk
+    for name in ("walk1.c3d", "walk2.c3d"):
+        (tmp_path / name).symlink_to(GAIT)
+    model = tmp_path / "subject.yaml"
+    model.write_text(run.model_text, encoding="utf-8")
+    out = tmp_path / "subject.h5"
+    result = run_cli("solve", model, str(tmp_path / "walk*.c3d"), "--filter-cutoff", "6",
+                     "-o", out)
+    assert result.exit_code == 0, result.stderr
+    assert "subject: 2 trials pooled" in result.output
+    runs = fc.read_results(out)
+    assert sorted(runs) == ["walk1-nrm-wls-f6Hz", "walk2-nrm-wls-f6Hz"]
+    with h5py.File(out) as h5:
+        right = h5["subject/cycles/right"]
+        assert right["curves"].shape[0] == 2 and right["trusted"][()].all()
+        np.testing.assert_allclose(right["mean"][()], run.gait.cycles["right"].mean(),
+                                   atol=1e-12)
+        np.testing.assert_allclose(right["sd"][()], 0.0, atol=1e-9)
+    one_error_line(run_cli("solve", model, str(tmp_path / "nothing*.c3d"), "-o", out),
+                   "nothing*.c3d", "matching the pattern")
+    (tmp_path / "other").mkdir()
+    (tmp_path / "other" / "walk1.c3d").symlink_to(GAIT)
+    one_error_line(run_cli("solve", model, tmp_path / "walk1.c3d",
+                           tmp_path / "other" / "walk1.c3d", "-o", out),
+                   "walk1", "different file names")

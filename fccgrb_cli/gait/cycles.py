@@ -138,3 +138,21 @@ def _parameters(side: str, other: str, events: Events, stride_span: tuple[float,
     stance = (off - a) / stride * 100.0
     return [stride, 120.0 / stride, length, length / stride, step, width, stance,
             100.0 - stance, double]
+
+
+def pooled(per_trial: list[dict[str, SideCycles]]) -> dict[str, SideCycles]:
+    """Each side's strides of several trials of one subject together (for the subject's mean ±
+    SD over every trusted stride); the trials' variables must be the same."""
+    out: dict[str, SideCycles] = {}
+    for side in per_trial[0]:
+        parts = [trial[side] for trial in per_trial if side in trial]
+        first = parts[0]
+        if any(p.names != first.names for p in parts):
+            raise ValueError(f"{side}: the trials' cycle variables differ")
+        out[side] = SideCycles(
+            side, np.concatenate([p.start for p in parts]),
+            np.concatenate([p.stop for p in parts]),
+            np.concatenate([p.trusted for p in parts]), first.names, first.units,
+            np.concatenate([p.curves for p in parts]),
+            np.concatenate([p.parameters for p in parts]))
+    return out

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from fccgrb_cli.gait.analysis import GaitResults
-from fccgrb_cli.gait.cycles import PARAMETERS
+from fccgrb_cli.gait.cycles import PARAMETERS, SideCycles
 from fccgrb_cli.gait.events import agreement
 
 
@@ -27,27 +27,28 @@ def events_table(gait: GaitResults) -> str:
     return "\n".join(rows)
 
 
-def parameters_table(gait: GaitResults) -> str:
+def parameters_table(cycles: dict[str, SideCycles]) -> str:
     """Spatiotemporal parameters: mean over each side's strides (and how many)."""
-    sides = list(gait.cycles)
+    sides = list(cycles)
     rows = [f"{'parameter':<24}" + "".join(f"{s:>16}" for s in sides)]
     for k, (name, unit) in enumerate(PARAMETERS):
         cells = [f"{name.replace('_', ' ') + ' (' + unit + ')':<24}"]
         for side in sides:
-            values = gait.cycles[side].parameters[:, k]
+            values = cycles[side].parameters[:, k]
             finite = values[np.isfinite(values)]
             cells.append(f"{np.mean(finite):16.3g}" if len(finite) else f"{'–':>16}")
         rows.append("".join(cells))
     rows.append(f"{'strides (trusted)':<24}" + "".join(
-        f"{f'{c.n} ({int(c.trusted.sum())})':>16}" for c in gait.cycles.values()))
+        f"{f'{c.n} ({int(c.trusted.sum())})':>16}" for c in cycles.values()))
     return "\n".join(rows)
 
 
-def cycles_table(gait: GaitResults) -> str:
-    """Each side's mean cycle of every clinical angle (deg): its value at foot strike (0 %), its
-    minimum and maximum, and the % of the cycle where the maximum falls."""
+def cycles_table(cycles: dict[str, SideCycles]) -> str:
+    """Each side's mean cycle of every clinical angle (deg) over its trusted strides: its value
+    at foot strike (0 %), its minimum and maximum, and the % of the cycle where the maximum
+    falls."""
     rows = [f"{'mean cycle':<24}{'side':>6}{'at 0 %':>9}{'min':>9}{'max':>9}{'max at %':>10}"]
-    for side, c in gait.cycles.items():
+    for side, c in cycles.items():
         mean = c.mean()
         for k, (name, unit) in enumerate(zip(c.names, c.units, strict=True)):
             if unit != "deg" or not np.isfinite(mean[:, k]).all():
@@ -62,5 +63,12 @@ def gait_report(gait: GaitResults) -> str:
     notes = "".join(f"\n  ({note})" for note in gait.notes)
     return (f"gait events (used: {gait.events.source}; others: difference to the nearest of "
             f"the same foot and kind){notes}\n{events_table(gait)}\n\n"
-            f"spatiotemporal parameters (mean over strides)\n{parameters_table(gait)}\n\n"
-            f"{cycles_table(gait)}")
+            f"spatiotemporal parameters (mean over strides)\n{parameters_table(gait.cycles)}\n\n"
+            f"{cycles_table(gait.cycles)}")
+
+
+def subject_report(runs: list[str], cycles: dict[str, SideCycles]) -> str:
+    """The pooled strides of several trials: parameters and mean cycles."""
+    return (f"subject: {len(runs)} trials pooled ({', '.join(runs)})\n"
+            f"spatiotemporal parameters (mean over every trial's strides)\n"
+            f"{parameters_table(cycles)}\n\n{cycles_table(cycles)}")

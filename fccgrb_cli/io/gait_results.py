@@ -5,10 +5,15 @@
 * ``cycles/<side>/curves`` (strides × 101 × variables; attributes ``names``, ``units``),
   ``start``, ``stop`` (s), ``trusted`` (per stride), ``mean`` and ``sd`` (101 × variables over
   the trusted strides), ``parameters`` (strides × parameters; attributes ``names``, ``units``);
-* attributes ``forward`` (the direction of walking) and ``notes``.
+* attributes ``forward`` (the direction of walking) and ``notes``;
+
+and, when ``fccgrb solve`` is given several trials, ``/subject/cycles/<side>/`` the same
+cycles with every trial's strides pooled (attribute ``runs``: the runs they come from).
 """
 
 from __future__ import annotations
+
+import shutil
 
 import numpy as np
 
@@ -19,6 +24,46 @@ from fccgrb_cli.gait.events import Events
 
 def _strings(values) -> tuple[str, ...]:
     return tuple(v.decode() if isinstance(v, bytes) else str(v) for v in values)
+
+
+def write_cycles(group, cycles: dict[str, SideCycles]) -> None:
+    """``cycles/<side>/…`` as laid out above."""
+    out = group.create_group("cycles")
+    for side, c in cycles.items():
+        s = out.create_group(side)
+        s["curves"] = c.curves
+        for key in ("curves", "mean", "sd"):
+            if key != "curves":
+                s[key] = getattr(c, key)()
+            s[key].attrs.update({"names": list(c.names), "units": list(c.units)})
+        s["start"], s["stop"], s["trusted"] = c.start, c.stop, c.trusted
+        s["parameters"] = c.parameters
+        s["parameters"].attrs.update({"names": [p for p, _ in PARAMETERS],
+                                      "units": [u for _, u in PARAMETERS]})
+
+
+def read_cycles(group) -> dict[str, SideCycles]:
+    return {side: SideCycles(side, s["start"][()], s["stop"][()], s["trusted"][()],
+                             _strings(s["curves"].attrs["names"]),
+                             _strings(s["curves"].attrs["units"]), s["curves"][()],
+                             s["parameters"][()]) for side, s in group["cycles"].items()}
+
+
+def write_subject(path, runs: list[str], cycles: dict[str, SideCycles]) -> None:
+    """``/subject/``: the strides of several trials' runs (attribute ``runs``) pooled per side,
+    under ``cycles/<side>/`` as for one run (``start``/``stop`` are each trial's own times)."""
+    import h5py
+
+    from fccgrb_cli.io.atomic import atomic_path
+
+    with atomic_path(path) as tmp:
+        shutil.copyfile(path, tmp)
+        with h5py.File(tmp, "a") as h5:
+            if "subject" in h5:
+                del h5["subject"]
+            group = h5.create_group("subject")
+            group.attrs.create("runs", runs, dtype=h5py.string_dtype(encoding="utf-8"))
+            write_cycles(group, cycles)
 
 
 def write_gait(g, gait: GaitResults) -> None:
@@ -35,28 +80,13 @@ def write_gait(g, gait: GaitResults) -> None:
         e["time"] = found.time
         e.create_dataset("side", data=list(found.side), dtype=text)
         e.create_dataset("kind", data=list(found.kind), dtype=text)
-    cycles = out.create_group("cycles")
-    for side, c in gait.cycles.items():
-        s = cycles.create_group(side)
-        s["curves"] = c.curves
-        for key in ("curves", "mean", "sd"):
-            if key != "curves":
-                s[key] = getattr(c, key)()
-            s[key].attrs.update({"names": list(c.names), "units": list(c.units)})
-        s["start"], s["stop"], s["trusted"] = c.start, c.stop, c.trusted
-        s["parameters"] = c.parameters
-        s["parameters"].attrs.update({"names": [p for p, _ in PARAMETERS],
-                                      "units": [u for _, u in PARAMETERS]})
+    write_cycles(out, gait.cycles)
 
 
 def read_gait(g) -> GaitResults:
     found = {source: Events(source, e["time"][()], _strings(e["side"][()]),
                             _strings(e["kind"][()])) for source, e in g["events"].items()}
-    cycles = {side: SideCycles(side, s["start"][()], s["stop"][()], s["trusted"][()],
-                               _strings(s["curves"].attrs["names"]),
-                               _strings(s["curves"].attrs["units"]), s["curves"][()],
-                               s["parameters"][()]) for side, s in g["cycles"].items()}
-    return GaitResults(found[str(g["events"].attrs["used"])], found, cycles,
+    return GaitResults(found[str(g["events"].attrs["used"])], found, read_cycles(g),
                        np.asarray(g.attrs["forward"], dtype=float), _strings(g.attrs["notes"]))
 
 
