@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import butter, filtfilt
 
 from fccgrb_cli.errors import InputError
 
@@ -14,6 +13,8 @@ def lowpass(signal: np.ndarray, rate: float, cutoff: float, order: int = 2) -> n
     if not 0 < cutoff < rate / 2:
         raise InputError(f"--filter-cutoff: expected a cutoff between 0 and the Nyquist "
                          f"frequency {rate / 2:g} Hz, got {cutoff:g}")
+    from scipy.signal import butter, filtfilt  # 0.5 s to import: only where a filter is used
+
     b, a = butter(order, cutoff / (rate / 2))
     pad = 3 * max(len(a), len(b))
     if len(signal) <= pad:

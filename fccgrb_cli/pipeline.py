@@ -26,7 +26,6 @@ from fccgrb_cli.perturb import perturb
 from fccgrb_cli.solvers import KinematicResult, solve_ad
 from fccgrb_cli.solvers.baseline import solve_baseline
 from fccgrb_cli.solvers.nrm import NrmSettings, solve_nrm
-from fccgrb_cli.solvers.optimize import Settings, solve_optimization
 from fccgrb_cli.solvers.quality import JUMP, assessed
 from fccgrb_cli.system import System, compile_system
 
@@ -355,6 +354,8 @@ def _kinematics(model: Model, trial: Trial, inputs: np.ndarray, options: SolveOp
         labels = model.marker_labels + tuple(tv.marker for tv in model.tracked_vectors)
         return system, solve_nrm(system, time, targets, NrmSettings.from_options(o),
                                  labels=labels, source=trial.path, progress=progress)
+    from fccgrb_cli.solvers.optimize import Settings, solve_optimization  # scipy.optimize: 0.1 s
+
     return system, solve_optimization(system, time, targets, Settings.from_options(o),
                                       progress)
 
