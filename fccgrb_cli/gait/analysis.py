@@ -15,6 +15,7 @@ from fccgrb_cli.gait.events import (
     SIDES,
     SOURCES,
     Events,
+    bridged,
     c3d_events,
     kinematic_events,
     plate_events,
@@ -128,7 +129,9 @@ def analyse_gait(model: Model, trial: Trial, clinical: ClinicalResults | None,
     forward = _forward(markers, vertical)
     heels = {side: markers[f"{side}_heel"] for side in SIDES if f"{side}_heel" in markers}
     curves = _curves(clinical)
-    walk = Walk(trial.time, {k: _filled(v) for k, v in heels.items()}, forward, vertical)
+    filled = {k: bridged(v) for k, v in heels.items()}
+    walk = Walk(trial.time, {k: v for k, v in filled.items() if v is not None}, forward,
+                vertical)
     cycles = {side: side_cycles(side, chosen, trusted, curves, walk) for side in SIDES}
     return GaitResults(chosen, found, cycles, forward, tuple(notes))
 
@@ -149,18 +152,10 @@ def _choose(found: dict[str, Events], choice: str, path: str, notes: list[str]
 
 def _forward(markers: dict[str, np.ndarray], vertical: np.ndarray) -> np.ndarray:
     """The direction of walking: the pelvis's horizontal travel (x when it is unknown)."""
-    pelvis = _filled(markers["pelvis"]) if "pelvis" in markers else None
+    pelvis = bridged(markers["pelvis"]) if "pelvis" in markers else None
     if pelvis is None:
         return np.array([1.0, 0.0, 0.0])
     travel = pelvis[-1] - pelvis[0]
     travel -= (travel @ vertical) * vertical
     norm = np.linalg.norm(travel)
     return travel / norm if norm > 0 else np.array([1.0, 0.0, 0.0])
-
-
-def _filled(xyz: np.ndarray) -> np.ndarray:
-    seen = np.isfinite(xyz).all(axis=1)
-    if not seen.any():
-        return xyz
-    frames = np.arange(len(xyz))
-    return np.column_stack([np.interp(frames, frames[seen], xyz[seen, k]) for k in range(3)])

@@ -217,7 +217,7 @@ def kinematic_events(markers: dict[str, np.ndarray], rate: float, vertical: np.n
                          f"expected the landmarks {', '.join(absent)}")
     smooth = {}
     for name, xyz in markers.items():
-        filled = _filled(xyz)
+        filled = bridged(xyz)
         if filled is None:
             raise InputError(f"{where}: kinematic gait events: the {name} marker is never "
                              "seen")
@@ -238,7 +238,7 @@ def kinematic_events(markers: dict[str, np.ndarray], rate: float, vertical: np.n
     return _sorted("kinematic", items)
 
 
-def _filled(xyz: np.ndarray) -> np.ndarray | None:
+def bridged(xyz: np.ndarray) -> np.ndarray | None:
     """Gaps (NaN) bridged linearly; None when the marker is never seen."""
     seen = np.isfinite(xyz).all(axis=1)
     if not seen.any():
