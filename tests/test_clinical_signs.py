@@ -7,19 +7,20 @@ clinical moment is the internal (net muscle) moment conjugate to φ, positive to
 moment a negative dorsiflexion moment, an abductor moment a negative adduction moment.
 
 The case: ``configs/models/lower_limb.yaml`` as shipped, with gravity off and nominal masses (the
-posture is held still, q̇ = q̈ = 0, so the masses do no work and are checked to do none), put
-into an asymmetric flexed posture (the package's AD analysis, the pelvis held) and then turned
-and shifted as a whole in space so that no anatomical axis lies along a global one. Every
-expectation comes from the posture's landmarks (points of the YAML, placed with each body's
-r, u, v, w) and anatomy alone, never from the package's angle or moment definitions:
+posture is held still, q̇ = q̈ = 0, so the masses do no work; checked), put into an asymmetric
+flexed posture (the package's AD analysis from the clinical angles of POSTURE, the pelvis held)
+and turned and shifted as a whole in space so that no anatomical axis lies along a global one.
+Every expectation comes from the posture's landmarks (points of the YAML placed with each
+body's r, u, v, w) and anatomy alone, never from the package's angle or moment definitions:
 
 * the positive direction of each clinical angle is a rotation of the distal segments about an
-  anatomical axis, oriented by what the motion does: the knee's distal end moves posteriorly
-  (knee flexion, about the epicondylar axis), the knee moves anteriorly (hip flexion, about the
-  pelvis's left–right axis), the knee moves towards the midline (hip adduction), the thigh's
-  anterior face turns towards the midline (internal rotation, about the hip–knee line), the toes
-  move towards the shin (dorsiflexion, about the malleolar axis), the sole turns to face the
-  midline (inversion, about the foot's long axis: the ankle's second arm);
+  anatomical axis, oriented by what the motion does: the knee moves anteriorly (hip flexion,
+  about the pelvis's left–right axis), the knee moves towards the midline (hip adduction, about
+  the axis across that one and the thigh), the thigh's anterior face turns towards the midline
+  (internal rotation, about the hip–knee line), the shank's distal end moves towards the back
+  of the thigh (knee flexion, about the epicondylar axis), the toes move towards the shin
+  (dorsiflexion, about the malleolar axis), the sole turns to face the midline (inversion, about
+  the foot's long axis, the ankle's second arm);
 * a free moment M on the foot about such an axis e would turn the distal segment towards
   positive φ; statics demands an internal moment opposing it, a negative clinical moment
   (extensor, abductor, external rotator, plantarflexor, evertor), and −M a positive one. Where e
@@ -32,7 +33,7 @@ r, u, v, w) and anatomy alone, never from the package's angle or moment definiti
   and ∂ω/∂φ_k by central differences of postures solved with φ_k moved;
 * the angles against the same rotations: turning the distal segments a little towards positive φ
   (done in the test, rigidly, about the anatomical axis) must raise φ (by exactly the rotation for
-  the knee and the ankle) and leave the other leg's angles alone.
+  the knee and the ankle) and leave every other joint's angles alone.
 
 Loads are applied through ``ExternalLoad`` and solved by ``classical_dynamics`` (the pipeline's
 converted model) and read through ``clinical_results``, as ``fccgrb solve`` does.
@@ -160,7 +161,7 @@ def anatomical_turns(g: Geometry, side: str) -> dict[str, Turn]:
         "hip_adduction": Turn(_oriented(np.cross(to_right, long_axis), knee - hip, medial), hip,
                               leg, False),
         "hip_rotation": Turn(_oriented(long_axis, thigh_front, medial), hip, leg, False),
-        "knee_flexion": Turn(_oriented(epicondylar, ankle - knee, -anterior), knee,
+        "knee_flexion": Turn(_oriented(epicondylar, ankle - knee, -thigh_front), knee,
                              (shank, foot), True),
         "ankle_dorsiflexion": Turn(_oriented(malleolar, toes - ankle, knee - ankle), ankle,
                                    (foot,), True),
@@ -207,6 +208,9 @@ class Case:
 
 @dataclass(frozen=True)
 class Posture:
+    """The held posture: the test's model, its compiled classical system, the landmarks, the
+    drivers θ and the pelvis's driven features, angle indices and the anatomical turns."""
+
     model: Model
     system: System
     geometry: Geometry
@@ -218,6 +222,7 @@ class Posture:
 
 @pytest.fixture(scope="module")
 def posture() -> Posture:
+    """The shipped template without gravity, in POSTURE, turned by WORLD_R and shifted."""
     doc = yaml.safe_load(MODEL_PATH.read_text(encoding="utf-8"))
     doc["gravity"] = [0.0, 0.0, 0.0]
     for body in doc["bodies"].values():       # nominal inertia: still, so it does no work
@@ -390,20 +395,24 @@ def test_moment_opposes_a_load_towards_positive_angle(posture: Posture, solved: 
 
 @pytest.mark.parametrize("side", SIDES)
 def test_standing_on_a_flexed_knee(posture: Posture, solved: Solved, side: str) -> None:
-    """Body weight under the metatarsal heads of a flexed leg passes behind the knee and in
-    front of the ankle (asserted from the landmarks): it would flex the knee and dorsiflex the
-    ankle, so a knee extensor and an ankle plantarflexor moment hold it, each equal to the
-    force's moment about the joint axis (the knee's epicondylar axis, the malleolar axis)."""
+    """Body weight under the metatarsal heads of a flexed leg passes in front of the hip, behind
+    the knee and in front of the ankle (asserted from the landmarks): it would flex the hip and
+    the knee and dorsiflex the ankle, so a hip extensor, a knee extensor and an ankle
+    plantarflexor moment hold it, the last two equal to the force's moment about the joint axis
+    (the epicondylar axis, the malleolar axis)."""
     g = posture.geometry
     case = _stance_force(posture, side)
-    knee, ankle = g.point(f"thigh_{side}", "KJC"), g.point(f"shank_{side}", "AJC")
+    hip, knee = g.point(f"thigh_{side}", "HJC"), g.point(f"thigh_{side}", "KJC")
+    ankle = g.point(f"shank_{side}", "AJC")
     knee_axis = posture.turns[side]["knee_flexion"].axis
     ankle_axis = posture.turns[side]["ankle_dorsiflexion"].axis
+    hip_flexing = np.cross(case.point - hip, case.force) @ posture.turns[side]["hip_flexion"].axis
     flexing = np.cross(case.point - knee, case.force) @ knee_axis
     dorsiflexing = np.cross(case.point - ankle, case.force) @ ankle_axis
-    # the premise, from geometry: lever arms of at least 2 cm about both axes
-    assert flexing > 0.02 * BODY_WEIGHT and dorsiflexing > 0.02 * BODY_WEIGHT
+    # the premise, from geometry: lever arms of at least 2 cm about the three axes
+    assert min(hip_flexing, flexing, dorsiflexing) > 0.02 * BODY_WEIGHT
     moments = solved.moments["stance", side]
+    assert moments[posture.index["hip_flexion", side]] < 0, "expected a hip extensor moment"
     knee_moment = moments[posture.index["knee_flexion", side]]
     ankle_moment = moments[posture.index["ankle_dorsiflexion", side]]
     assert knee_moment < 0, "expected a knee extensor moment"
@@ -437,7 +446,9 @@ def test_moments_are_the_generalized_forces_of_virtual_work(posture: Posture, si
             states.append((*moved.frame(foot), q))
         (r0, R0, q0), (r1, R1, q1) = states
         phi0, phi1 = np.radians(_clinical_angles(posture, [q0, q1])[:, k])
-        turn = _vee(R1 @ R0.T - R0 @ R1.T) / 2           # sin(rotation) × axis, O(STEP³)
-        work = force @ (r1 + R1 @ local - r0 - R0 @ local) + moment @ turn
+        rotation = _vee(R1 @ R0.T - R0 @ R1.T) / 2       # sin(angle) × axis: O(STEP³) off
+        work = force @ (r1 + R1 @ local - r0 - R0 @ local) + moment @ rotation
         expected[k] = -work / (phi1 - phi0)
-    np.testing.assert_allclose(tau, expected, rtol=0, atol=1e-9 * np.abs(expected).max())
+    names = [a.name for a in posture.model.angles]
+    np.testing.assert_allclose(tau, expected, rtol=0, atol=1e-9 * np.abs(expected).max(),
+                               err_msg=f"clinical moments of {names}")
