@@ -123,7 +123,19 @@ def synth(model: str, output: str, duration: float, rate: float, units: str, for
                f"({units}); truth in {sidecar}")
     click.echo(f"AD analysis: {r.iterations.mean():.2f} iterations/frame, "
                f"{1e3 * r.time_s.mean():.3f} ms/frame, max ‖Φ‖ {r.phi_norm.max():.2e}, "
-               f"angles {np.degrees(r.theta.min()):.1f}..{np.degrees(r.theta.max()):.1f} deg")
+               + _coordinate_ranges(loaded, r.theta))
+
+
+def _coordinate_ranges(model: Model, theta: np.ndarray) -> str:
+    """'angles A..B deg' and, with distance coordinates, ', distances C..D mm'."""
+    distance = np.array([a.kind == "distance" for a in model.angles], dtype=bool)
+    parts = []
+    for mask, what, convert, unit in ((~distance, "angles", np.degrees, "deg"),
+                                      (distance, "distances", lambda d: 1e3 * d, "mm")):
+        if mask.any():
+            values = convert(theta[:, mask])
+            parts.append(f"{what} {values.min():.1f}..{values.max():.1f} {unit}")
+    return ", ".join(parts)
 
 
 def _split(text: str | None) -> tuple[str, ...]:

@@ -544,7 +544,11 @@ def summary(run: Run) -> dict[str, float | str | int]:
     }
     if run.truth_theta is not None:
         err = np.abs(r.theta - run.truth_theta)[ok]
-        row["max |dθ| deg"] = float(np.degrees(err.max())) if err.size else float("nan")
+        distance = np.array(run._angle_units) == "m"
+        angle_err = err[:, ~distance]
+        row["max |dθ| deg"] = float(np.degrees(angle_err.max())) if angle_err.size else float("nan")
+        if distance.any():
+            row["max |dd| mm"] = 1e3 * float(err[:, distance].max()) if err.size else float("nan")
     if run.dynamics is not None:
         row["max |τ| N·m"] = float(np.abs(run.dynamics.inverse.joint_moments).max())
     return row

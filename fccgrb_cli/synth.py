@@ -1,4 +1,10 @@
-"""Synthesize a trial: the prescribed motion through the AD analysis, tracked points out."""
+"""Synthesize a trial: the prescribed motion through the AD analysis, tracked points out.
+
+Every driven coordinate (angle or distance) follows its prescribed motion; a floating base
+follows its own (``bodies.NAME.motion``: translation of its origin and rotations about the ground
+axes), its drivers r*, u*, v*, w* given with their exact first and second time derivatives
+(:class:`fccgrb_cli.model.BaseMotion`); without one it is held at its stated pose.
+"""
 
 from __future__ import annotations
 
@@ -8,9 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from fccgrb_cli.errors import InputError
-from fccgrb_cli.model import Model
+from fccgrb_cli.model import BaseMotion, Model
 from fccgrb_cli.solvers import KinematicResult, solve_ad
 from fccgrb_cli.system import System, compile_system
+from fccgrb_cli.system.constraints import joint_neighbours, reachable
 
 
 @dataclass(frozen=True)
@@ -23,30 +30,66 @@ class Synthesis:
 
 
 def prescribed(model: Model, time: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """θ*, θ̇*, θ̈* (frames × angles) from every angle's prescribed motion."""
-    missing = [a.name for a in model.angles if a.motion is None]
+    """θ*, θ̇*, θ̈* (frames × coordinates) from every angle's and distance's prescribed motion."""
+    missing = [a for a in model.angles if a.motion is None]
     if missing:
-        raise InputError(f"{model.source}: angles: expected a motion for every angle to "
-                         f"synthesize a trial, missing for {', '.join(missing)}")
+        distances = any(a.kind == "distance" for a in model.angles)
+        section = "distances" if missing[0].kind == "distance" else "angles"
+        raise InputError(f"{model.source}: {section}: expected a motion for every angle"
+                         f"{' and distance' if distances else ''} to synthesize a trial, "
+                         f"missing for {', '.join(a.name for a in missing)}")
     values = [a.motion.evaluate(time) for a in model.angles]
     return tuple(np.column_stack([v[k] for v in values]) for k in range(3))
+
+
+def base_trajectory(model: Model, time: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The floating bases' driven features r, u, v (, w) and their exact first and second
+    derivatives (frames × slots × 3 each), in the order of ``System.base_reference``."""
+    parts: list[list[np.ndarray]] = [[], [], []]
+    for name in model.floating_bases:
+        body = model.body(name)
+        frames = (body.motion or BaseMotion()).frames(time, body.pose.as_array())
+        for k in range(3):
+            parts[k].append(frames[k][:, : 4 if body.form == "full" else 3])
+    n = len(time)
+    return tuple(np.concatenate(p, axis=1) if p else np.zeros((n, 0, 3)) for p in parts)
+
+
+def start_pose(system: System) -> np.ndarray:
+    """The model's pose with each floating base's group of bodies moved rigidly with the base
+    to where its motion puts it at t = 0 (the joint coordinates stay as stated)."""
+    model, layout = system.model, system.layout
+    q = layout.pose_q(model)
+    neighbours = joint_neighbours(model)
+    for name in model.floating_bases:
+        base = model.body(name)
+        if base.motion is None:
+            continue
+        frame = base.motion.frames(np.zeros(1), base.pose.as_array())[0][0]
+        R = base.motion.rotation_matrix(np.zeros(1))[0][0]
+        origin = np.array(base.pose.r)
+        for member in reachable(neighbours, name, set()):
+            sl = layout.q_slice(member)
+            block = q[sl].copy()
+            block[:3] = frame[0] + R @ (block[:3] - origin)
+            block[3:] = (block[3:].reshape(-1, 3) @ R.T).ravel()
+            q[sl] = block
+    return q
 
 
 def synthesize(model: Model, duration: float = 3.0, rate: float = 100.0, tol: float = 1e-10,
                progress: Callable[[int, int], None] | None = None) -> Synthesis:
     """Run the prescribed motion for ``duration`` s at ``rate`` Hz and read the tracked points.
-    A floating base is held at its stated pose."""
+    A floating base follows its prescribed motion (held at its stated pose without one)."""
     n_frames = round(duration * rate)
     if n_frames < 1:
         raise InputError(f"duration {duration} s at {rate} Hz gives no frame")
     time = np.arange(n_frames) / rate
     theta, theta_d, theta_dd = prescribed(model, time)
     system = compile_system(model, angles="driver")
-    pose = system.layout.pose_q(model)
-    held = np.broadcast_to(system.base_reference(pose), (n_frames, system.n_base_slots, 3))
-    still = np.zeros_like(held)
-    result = solve_ad(system, time, theta, theta_d, theta_dd, pose, tol=tol,
-                      base=(np.array(held), still, still), progress=progress)
+    result = solve_ad(system, time, theta, theta_d, theta_dd, start_pose(system), tol=tol,
+                      base=base_trajectory(model, time), progress=progress)
     if len(result.failed_frames):
         f = int(result.failed_frames[0])
         raise InputError(f"{model.source}: frame {f} (t = {time[f]:.3f} s): the kinematic "

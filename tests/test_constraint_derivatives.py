@@ -9,8 +9,11 @@ not) and smooth drive data θ*(t), y(t), the function Φ(t) = Φ(q(t), t) satisf
 so Φ_q is checked against central differences of Φ in q, and ν, γ against central differences of
 Φ(t) in time along closed-form sinusoidal motions. Every constraint type (rigid body, the six joint
 types between two moving bodies and with the ground on either side, AR drivers, MCR coordinates,
-TC and TOC tracking) is exercised in fully-defined, reduced and mixed-form models. A consistent
-motion (the pendulum's synthesized AD analysis) closes the loop, and mutated outputs prove that the
+TC and TOC tracking) is exercised in fully-defined, reduced and mixed-form models; the models with
+cylindrical, prismatic and parallel joints carry distance coordinates too ((r_Q − r_P)·s = d, the
+slides no angle can drive), as drivers and as mixed coordinates. The second-order term of Newton's
+method, Σ c_i ∇²Φ_i, is checked against central differences of Φ_qᵀc. A consistent motion (the
+pendulum's synthesized AD analysis) closes the loop, and mutated outputs prove that the
 comparisons can fail.
 """
 
@@ -36,6 +39,15 @@ EXPECTED_ROWS = {"spherical": 3, "revolute": 5, "universal": 4, "cylindrical": 4
                  "prismatic": 5, "parallel": 2}
 WITH_POINTS = {"spherical", "revolute", "universal", "cylindrical", "prismatic"}
 WITH_AXES = {"revolute", "universal", "cylindrical", "prismatic", "parallel"}
+# Joints that leave a slide: their models add distance coordinates (body–body, ground–body with
+# the ground's point and axis, body–ground with the ground's point second).
+WITH_DISTANCES = {"cylindrical", "prismatic", "parallel"}
+DISTANCES = """\
+distances:
+  - {name: d12, points: [B1.P, B2.Q], axis: B1.s}
+  - {name: d01, points: [ground.O, B1.Q], axis: ground.g}
+  - {name: d20, points: [B2.P, ground.O], axis: B2.k}
+"""
 FORMS = {"full": ("full", "full"), "reduced": ("reduced", "reduced"), "mixed": ("full", "reduced")}
 MODES = ("driver", "coordinate")
 
@@ -45,6 +57,7 @@ H_T2 = 1e-3      # step of the second time derivative (5-point stencil, O(h⁴))
 TOL_JAC = 1e-7   # relative tolerances, each error scaled by max(1, |analytic|)
 TOL_NU = 1e-7
 TOL_GAMMA = 1e-6
+TOL_HESSIAN = 1e-7
 TOL_CONSISTENT = 1e-8
 
 # Joints: name, bodies, points, axes, lock. Ground appears first (JG1) and second (JG2) so that
@@ -76,7 +89,7 @@ angles:
   - {{name: a12, vectors: [B1.s, B2.t]}}
   - {{name: a01, vectors: [ground.g, B1.k]}}
   - {{name: a20, vectors: [B2.k, ground.h]}}
-tracking:
+{distances}tracking:
   points:
     - {{marker: M1, point: B1.Q}}
     - {{marker: M2, point: B2.Q}}
@@ -99,7 +112,8 @@ def model_text(jtype: str, form: str) -> str:
             parts.append(f"lock: [{', '.join(lock)}]")
         lines.append("  - {" + ", ".join(parts) + "}")
     form1, form2 = FORMS[form]
-    return MODEL_TEMPLATE.format(jtype=jtype, form1=form1, form2=form2, joints="\n".join(lines))
+    return MODEL_TEMPLATE.format(jtype=jtype, form1=form1, form2=form2, joints="\n".join(lines),
+                                 distances=DISTANCES if jtype in WITH_DISTANCES else "")
 
 
 def build(jtype: str, form: str, mode: str, track: bool = True):
@@ -144,7 +158,8 @@ class Motion:
 
 def random_motion(system, seed: int) -> Motion:
     rng = np.random.default_rng(seed)
-    # θ* stays well inside (0, π); MCR angles are plain entries of q(t).
+    # θ* stays well inside (0, π) (distances: 1.5 ± 0.5 m); MCR coordinates are plain entries
+    # of q(t).
     theta = sinusoid(rng, (len(system.model.angles),))
     return Motion(q=sinusoid(rng, (system.nq,)),
                   theta=lambda t, k=0: (1.5 if k == 0 else 0.0) + 0.5 * theta(t, k),
@@ -217,13 +232,17 @@ def test_every_constraint_type_has_rows(jtype: str, form: str, mode: str) -> Non
     tag = "AR" if mode == "driver" else "MCR"
     for angle in ("a12", "a01", "a20"):
         assert labels.count(f"angle {angle} ({tag})") == 1
+    n_distances = 3 if jtype in WITH_DISTANCES else 0
+    assert [lab for lab in labels if lab.startswith("distance ")] == [
+        f"distance {d} ({tag})" for d in ("d12", "d01", "d20")][:n_distances]
+    assert system.distance_rows.tolist() == [False] * 3 + [True] * n_distances
     for target in ("M1", "M2", "M1->M2", "M2->M1"):
         assert [lab for lab in labels if lab.startswith(f"track {target}:")] == [
             f"track {target}: {ax}" for ax in "xyz"]
     assert system.n_targets == 4
     n_body = sum(12 if f == "full" else 9 for f in (form1, form2))
     assert system.layout.n_body_q == n_body
-    assert system.nq == n_body + (3 if mode == "coordinate" else 0)
+    assert system.nq == n_body + (3 + n_distances if mode == "coordinate" else 0)
     assert system.jacobian(np.zeros(system.nq)).shape == (len(labels), system.nq)
     # Without tracking only the TC/TOC rows disappear.
     plain = build(jtype, form, mode, track=False)
@@ -258,6 +277,35 @@ def test_nu_gamma_match_time_derivatives(jtype: str, form: str, mode: str) -> No
         (e1, l1), (e2, l2) = rate_errors(system, motion, t)
         assert e1 < TOL_NU, f"ν wrong in row {l1!r} at t={t}: relative error {e1:.2e}"
         assert e2 < TOL_GAMMA, f"γ wrong in row {l2!r} at t={t}: relative error {e2:.2e}"
+
+
+# --- 2a. the Hessian term of Newton's method on ½ΦᵀWΦ ---------------------------------------------
+def fd_hessian(system, q: np.ndarray, c: np.ndarray, h: float = H_Q) -> np.ndarray:
+    """Σ c_i ∇²Φ_i by central differences of Φ_q(q)ᵀ c."""
+    cols = []
+    for k in range(len(q)):
+        e = np.zeros_like(q)
+        e[k] = h
+        cols.append((system.jacobian(q + e).T @ c - system.jacobian(q - e).T @ c) / (2 * h))
+    return np.column_stack(cols)
+
+
+@pytest.mark.parametrize(("jtype", "form", "mode"), CASES, ids=CASE_IDS)
+def test_residual_hessian_matches_finite_differences(jtype: str, form: str, mode: str) -> None:
+    system = build(jtype, form, mode)
+    rng = np.random.default_rng(500 + CASES.index((jtype, form, mode)))
+    q = rng.uniform(-1.5, 1.5, system.nq)
+    c = rng.uniform(-1.0, 1.0, system.n_rows)
+    H = system.residual_hessian(q, c)
+    numeric = fd_hessian(system, q, c)
+    err = rel_error(H, numeric)
+    assert err.max() < TOL_HESSIAN, f"Hessian wrong at {np.unravel_index(err.argmax(), H.shape)}"
+    # Coordinate rows alone: an angle's c cos θ curvature on the diagonal (none for a distance)
+    # and its mixed derivatives with the body coordinates.
+    only = np.zeros(system.n_rows)
+    only[system.n_linear_rows + system.angle_rows] = c[system.n_linear_rows + system.angle_rows]
+    assert rel_error(system.residual_hessian(q, only), fd_hessian(system, q, only)).max() \
+        < TOL_HESSIAN
 
 
 # --- 2b. a consistent motion: the pendulum's synthesized AD analysis -----------------------------
@@ -391,3 +439,48 @@ def test_comparisons_flag_wrong_derivatives(form: str) -> None:
 
     _, (e2, l2) = rate_errors(Mutant(system, gamma=bad_gamma_rb), motion, t)
     assert e2 > 1e-3 and l2 == labels[uv]
+
+
+@pytest.mark.parametrize("form", ["full", "reduced"])
+def test_comparisons_flag_wrong_distance_terms(form: str) -> None:
+    """The distance rows' own terms: ν = ḋ* (AR), γ's d̈* (AR), Φ_d = −1 (MCR)."""
+    system = build("prismatic", form, "driver")
+    motion = random_motion(system, seed=11)
+    t = 0.7
+    labels = system.labels
+    (e1, _), (e2, _) = rate_errors(system, motion, t)
+    assert e1 < TOL_NU and e2 < TOL_GAMMA
+    row = labels.index("distance d01 (AR)")
+    k = list(system.angle_rows).index(row - system.n_linear_rows)
+
+    def bad_nu(qq: np.ndarray, dd: Drive) -> np.ndarray:
+        nu = system.nu(qq, dd).copy()
+        nu[row] = -nu[row]
+        return nu
+
+    (e1, l1), _ = rate_errors(Mutant(system, nu=bad_nu), motion, t)
+    assert e1 > 1e-3 and l1 == labels[row]
+
+    def bad_gamma(qq: np.ndarray, qd: np.ndarray, dd: Drive) -> np.ndarray:
+        gamma = system.gamma(qq, qd, dd).copy()
+        gamma[row] -= dd.theta_dd[k]
+        return gamma
+
+    _, (e2, l2) = rate_errors(Mutant(system, gamma=bad_gamma), motion, t)
+    assert e2 > 1e-3 and l2 == labels[row]
+
+    mixed = build("prismatic", form, "coordinate")
+    q = random_motion(mixed, seed=12).q(t, 0)
+    drive = random_motion(mixed, seed=12).drive(t)
+    assert jacobian_error(mixed, q, drive)[0] < TOL_JAC
+    mrow = mixed.labels.index("distance d20 (MCR)")
+    column = mixed.layout.n_body_q + 5  # a12 a01 a20 d12 d01 d20
+    assert mixed.jacobian(q)[mrow, column] == -1.0
+
+    def bad_jacobian(qq: np.ndarray) -> np.ndarray:
+        J = mixed.jacobian(qq).copy()
+        J[mrow, column] = 1.0
+        return J
+
+    err, label = jacobian_error(Mutant(mixed, jacobian=bad_jacobian), q, drive)
+    assert err > 1.0 and label == mixed.labels[mrow]

@@ -1,7 +1,8 @@
 """Every kind of wrong model is one line on stderr, exit status 2, and no traceback.
 
-Each case starts from ``configs/models/pendulum.yaml`` (its text, or its parsed document),
-breaks one thing, and runs ``fccgrb check MODEL`` and ``fccgrb synth MODEL -o OUT.c3d``.
+Each case starts from ``configs/models/pendulum.yaml`` (its text, or its parsed document; the
+distance-coordinate and base-motion cases from ``slider.yaml`` or a floating pendulum), breaks
+one thing, and runs ``fccgrb check MODEL`` and ``fccgrb synth MODEL -o OUT.c3d``.
 The single stderr line must read ``fccgrb: error: FILE: KEY.PATH: …`` with the key path that
 was broken and what was expected, and ``synth`` must leave nothing behind in the folder.
 
@@ -28,6 +29,7 @@ from fccgrb_cli.cli import main
 PENDULUM = Path(__file__).resolve().parents[1] / "configs" / "models" / "pendulum.yaml"
 PENDULUM_TEXT = PENDULUM.read_text(encoding="utf-8")
 PENDULUM_LINES = PENDULUM_TEXT.splitlines()
+SLIDER_TEXT = (PENDULUM.parent / "slider.yaml").read_text(encoding="utf-8")
 MODEL_NAME = "model.yaml"
 SYNTH_OPTIONS = ("--duration", "0.2", "--rate", "50")
 
@@ -51,6 +53,29 @@ def edit_doc(edit: Callable[[dict], None]) -> Callable[[], str]:
         return yaml.safe_dump(doc, sort_keys=False, allow_unicode=True)
 
     return make
+
+
+def edit_slider(edit: Callable[[dict], None]) -> Callable[[], str]:
+    """A case built by changing one thing in the parsed slider document (a prismatic slide
+    driven by the distance coordinate ``lift``, a hinge by the angle ``swing``)."""
+
+    def make() -> str:
+        doc = copy.deepcopy(yaml.safe_load(SLIDER_TEXT))
+        edit(doc)
+        return yaml.safe_dump(doc, sort_keys=False, allow_unicode=True)
+
+    return make
+
+
+def floating_pendulum(edit: Callable[[dict], None]) -> Callable[[], str]:
+    """The pendulum with its shoulder joint and shoulder angles removed: link1 floats."""
+
+    def change(doc: dict) -> None:
+        del doc["joints"][0]
+        del doc["angles"][:2]
+        edit(doc)
+
+    return edit_doc(change)
 
 
 def setter(*path: str | int, value: object) -> Callable[[dict], None]:
@@ -205,6 +230,67 @@ CASES = {
                                  "loads.contact[0]", ("expected a body name", "'foot'")),
     "contact-twice": Case(edit_doc(setter("loads", value={"contact": ["link2", "link2"]})),
                           "loads.contact[1]", ("expected a moving body not listed before",)),
+    # ---- distance coordinates (slider.yaml) ------------------------------------------------
+    "distance-unknown-body": Case(
+        edit_slider(setter("distances", 0, "points", 0, value="rail.O")),
+        "distances[0].points[0]", ("expected a body name", "'rail'")),
+    "distance-unknown-point": Case(
+        edit_slider(setter("distances", 0, "points", 1, value="carriage.Z")),
+        "distances[0].points[1]", ("expected a point of carriage", "'Z'")),
+    "distance-unknown-vector": Case(
+        edit_slider(setter("distances", 0, "axis", value="ground.up")),
+        "distances[0].axis", ("expected a vector of ground", "'up'")),
+    "distance-axis-of-second-body": Case(
+        edit_slider(setter("distances", 0, "axis", value="carriage.w")),
+        "distances[0].axis", ("expected a vector of ground, the body of the first point",
+                              "'carriage.w'")),
+    "distance-points-one-body": Case(
+        edit_slider(setter("distances", 0, "points", value=["carriage.C", "carriage.A"])),
+        "distances[0].points", ("expected points of two different bodies",)),
+    "distance-name-of-an-angle": Case(
+        edit_slider(setter("distances", 0, "name", value="swing")),
+        "distances[0].name", ("expected a coordinate name not used before", "'swing'")),
+    "distance-unknown-key": Case(
+        edit_slider(setter("distances", 0, "vectors", value=["ground.z", "carriage.w"])),
+        "distances[0].vectors", ("expected one of the keys", "'axis'")),
+    "distance-without-axis": Case(edit_slider(remover("distances", 0, "axis")),
+                                  "distances[0].axis", ("expected this key to be present",)),
+    "distance-axis-not-unit": Case(
+        edit_slider(setter("ground", value={"vectors": {"up": [0, 0, 2]}})),
+        "ground.vectors.up", ("expected a unit vector", "norm 2")),
+    "distance-motion-not-a-number": Case(
+        edit_slider(setter("distances", 0, "motion", "mean", value="high")),
+        "distances[0].motion.mean", ("expected a finite number", "'high'")),
+    "distance-missing": Case(edit_slider(remover("distances")), "angles",
+                             ("expected 2 coordinates (angles and distances)", "got 1")),
+    # the axis ground.x is perpendicular to the slide along z: lift cannot drive it
+    "distance-axis-across-the-slide": Case(
+        edit_slider(setter("distances", 0, "axis", value="ground.x")),
+        "angles", ("expected angular coordinates that determine", "distance lift",
+                   "perpendicular")),
+    "synth-distance-without-motion": Case(
+        edit_slider(remover("distances", 0, "motion")), "distances",
+        ("expected a motion for every angle and distance", "lift"), commands=("synth",)),
+    # ---- a floating base's prescribed motion ------------------------------------------------
+    "motion-on-a-jointed-body": Case(
+        edit_doc(setter("bodies", "link1", "motion", value={"translation": [
+            {"mean": 0}, {"mean": 0}, {"mean": 0.1}]})),
+        "bodies.link1.motion", ("expected a motion on a floating base only", "none")),
+    "motion-on-a-floating-group's-second-body": Case(
+        floating_pendulum(setter("bodies", "link2", "motion", value={"rotation": [
+            {"mean": 0}, {"mean": 0}, {"mean": 10}]})),
+        "bodies.link2.motion", ("expected a motion on a floating base only", "link1")),
+    "base-translation-two-items": Case(
+        floating_pendulum(setter("bodies", "link1", "motion", value={"translation": [
+            {"mean": 0}, {"mean": 0}]})),
+        "bodies.link1.motion.translation", ("expected a list of 3 motions",)),
+    "base-motion-unknown-key": Case(
+        floating_pendulum(setter("bodies", "link1", "motion", value={"spin": []})),
+        "bodies.link1.motion.spin", ("expected one of the keys", "'rotation'")),
+    "base-rotation-bad-term": Case(
+        floating_pendulum(setter("bodies", "link1", "motion", value={"rotation": [
+            {"mean": 0}, {"mean": 0, "terms": [{"amplitude": 5}]}, {"mean": 0}]})),
+        "bodies.link1.motion.rotation[1].terms[0].frequency", ("expected this key",)),
     "landmark-label-not-text": Case(
         edit_doc(setter("calibration", value={"landmarks": {"right_asis": [1, 2]}})),
         "calibration.landmarks.right_asis", ("expected",)),
@@ -371,3 +457,24 @@ def test_rank_error_names_the_offending_angle_only(tmp_path: Path) -> None:
     assert result.exit_code == 2
     assert "elbow_x" in result.stderr
     assert "shoulder_x" not in result.stderr
+
+
+
+def test_distance_motions_are_not_held_to_angle_ranges(tmp_path: Path) -> None:
+    """(0, 180) deg binds angles only: a slide may pass through zero and negative values, and
+    a base may turn by any angle; ``check`` and ``synth`` accept both."""
+    doc = yaml.safe_load(SLIDER_TEXT)
+    doc["distances"][0]["motion"] = {"mean": 0.0, "terms": [{"amplitude": 4.0,
+                                                             "frequency": 0.2}]}
+    model = tmp_path / MODEL_NAME
+    model.write_text(yaml.safe_dump(doc, sort_keys=False, allow_unicode=True), encoding="utf-8")
+    for command in ("check", "synth"):
+        result = runner().invoke(main, arguments(command, model, tmp_path))
+        assert result.exit_code == 0, result.output
+    spin = {"mean": 0, "terms": [{"amplitude": 400, "frequency": 1}]}
+    make = floating_pendulum(setter("bodies", "link1", "motion", value={"rotation": [
+        {"mean": 200}, {"mean": -300}, spin]}))
+    model.write_text(make(), encoding="utf-8")
+    for command in ("check", "synth"):
+        result = runner().invoke(main, arguments(command, model, tmp_path))
+        assert result.exit_code == 0, result.output

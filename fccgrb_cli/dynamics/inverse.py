@@ -2,11 +2,13 @@
 
 Written on the fully-defined equivalent x: Φ_qᵀ λ = X_qᵀ (g_x − M_x ẍ), ẍ = X_q q̈ + V̇ q̇, which
 also covers reduced bodies (their mass matrix then depends on q). λ by least squares, minimum norm
-where constraints are redundant. The moment of angular driver k, conjugate to θ_k and positive in
-the direction that increases it, is τ_k = λ_k sin θ_k. A floating base's drivers r − r*, u − u*,
-v − v* (, w − w*) apply the residual wrench F = −λ_r, M = −(u × λ_u + v × λ_v + w × λ_w) about its
-origin: their virtual power over a rigid motion of the base (the rigid-body rows do no work
-there, so this holds whatever share of λ the redundant rows take).
+where constraints are redundant. The moment of driver k, conjugate to θ_k and positive in the
+direction that increases it, is τ_k = Φ_θ,k λ_k = −g′(θ_k) λ_k: λ_k sin θ_k for an angle (N·m),
+−λ_k for a distance coordinate, whose "moment" is the joint force along it (N). A floating
+base's drivers r − r*, u − u*, v − v* (, w − w*) apply the residual wrench F = −λ_r,
+M = −(u × λ_u + v × λ_v + w × λ_w) about its origin: their virtual power over a rigid motion
+of the base (the rigid-body rows do no work there, so this holds whatever share of λ the
+redundant rows take).
 """
 
 from __future__ import annotations
@@ -24,7 +26,8 @@ from fccgrb_cli.system import System
 
 @dataclass(frozen=True)
 class InverseDynamics:
-    """Per-frame multipliers λ (frames × rows), joint moments τ (frames × angles, N·m),
+    """Per-frame multipliers λ (frames × rows), joint moments τ (frames × coordinates, N·m;
+    N for distances),
     kinetic and potential energy (J), the external loads' power (W) and the residual
     ‖Φ_qᵀλ − (g − Mq̈)‖ (a least-squares fit that is not exact flags inconsistent data)."""
 
@@ -75,7 +78,8 @@ def inverse_dynamics(system: System, q: np.ndarray, qd: np.ndarray, qdd: np.ndar
     bases, force, moment = _base_wrenches(system, xs, lam)
     return InverseDynamics(
         angle_names=tuple(a.name for a in model.angles), row_labels=system.labels, lam=lam,
-        joint_moments=lam[:, driver_rows] * np.sin(theta), kinetic=kinetic, potential=potential,
+        joint_moments=-system.g_terms(theta)[1] * lam[:, driver_rows], kinetic=kinetic,
+        potential=potential,
         external_power=power, residual=residual, base_names=bases, residual_force=force,
         residual_moment=moment)
 

@@ -16,7 +16,8 @@ Contract (SI units: m, rad, s):
                        ``warnings`` (every warning the run printed: frames flagged or not
                        converged and why, a truncated trial accepted, …; empty when none)
       q, qd, qdd                 frames × nq
-      theta, theta_d, theta_dd   frames × angles; attribute ``names``
+      theta, theta_d, theta_dd   frames × angles; attributes ``names`` and ``units`` (per column:
+                                 rad, or m for a distance coordinate; per s, per s²)
       model_points               frames × markers × 3, same marker order as /reference/markers
       markers_input              frames × markers × 3, the (perturbed) markers the solver saw
       iterations, time_s, phi_norm, phi_top_max   per frame
@@ -31,7 +32,8 @@ Contract (SI units: m, rad, s):
       ed, ed_input               frames × markers: distance of each model point to the
                                  reference marker and to the input marker, m
     with inverse dynamics:
-      joint_moments              frames × angles, N·m, conjugate to θ (τ_k = λ_k sin θ_k);
+      joint_moments              frames × angles, N·m (N for a distance: attribute ``units``),
+                                 conjugate to θ (τ_k = λ_k sin θ_k; −λ_k for a distance);
                                  attribute ``names``
       lambda                     frames × equations of the classical model; attribute ``labels``
       classical/q, qd, qdd, theta, theta_d, theta_dd   the classical model driven by θ(t)
@@ -163,9 +165,10 @@ def write_run(path: str | Path, run: Run, command: str, cell: dict | None = None
             g["solver_converged"] = r.converged
             g["flags"] = r.flags if r.flags is not None else np.zeros(r.n_frames, np.uint8)
             g["flags"].attrs.update(BITS)
-            for key in ("theta", "theta_d", "theta_dd"):
+            for key, per in (("theta", ""), ("theta_d", "/s"), ("theta_dd", "/s²")):
                 g[key] = getattr(r, key)
                 g[key].attrs["names"] = list(r.angle_names)
+                g[key].attrs.create("units", [u + per for u in run._angle_units], dtype=text)
             for key in ("model_points", "markers_input", "ed", "ed_input"):
                 g.create_dataset(key, data=getattr(run, key), compression="gzip")
             if r.status:
@@ -197,11 +200,15 @@ def _write_clinical(g, c: ClinicalResults) -> None:
 
 
 def _write_dynamics(g, run: Run) -> None:
+    import h5py
+
     d = run.dynamics
     inverse, kin = d.inverse, d.kinematics
     g.create_dataset("joint_moments", data=inverse.joint_moments)
     g["joint_moments"].attrs["names"] = list(inverse.angle_names)
-    g["joint_moments"].attrs["units"] = "N·m"
+    g["joint_moments"].attrs.create(
+        "units", ["N" if u == "m" else "N·m" for u in run._angle_units],
+        dtype=h5py.string_dtype(encoding="utf-8"))
     g.create_dataset("lambda", data=inverse.lam, compression="gzip")
     g["lambda"].attrs["labels"] = list(inverse.row_labels)
     g["joint_residual"] = inverse.residual

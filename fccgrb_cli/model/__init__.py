@@ -4,6 +4,8 @@ from fccgrb_cli.model.elements import (
     GROUND,
     AngularCoordinate,
     Body,
+    Coordinate,
+    DistanceCoordinate,
     Ground,
     Inertia,
     Joint,
@@ -15,12 +17,15 @@ from fccgrb_cli.model.elements import (
     Vector,
 )
 from fccgrb_cli.model.loader import load_model, parse_model
-from fccgrb_cli.model.motion import Motion
+from fccgrb_cli.model.motion import BaseMotion, Motion
 
 __all__ = [
     "GROUND",
     "AngularCoordinate",
+    "BaseMotion",
     "Body",
+    "Coordinate",
+    "DistanceCoordinate",
     "Ground",
     "Inertia",
     "Joint",

@@ -8,7 +8,7 @@ from typing import Literal
 
 import numpy as np
 
-from fccgrb_cli.model.motion import Motion
+from fccgrb_cli.model.motion import BaseMotion, Motion
 
 GROUND = "ground"
 Form = Literal["full", "reduced"]
@@ -111,6 +111,7 @@ class Body:
     vectors: FrozenMap
     pose: Pose = field(default_factory=Pose)
     inertia: Inertia | None = None
+    motion: BaseMotion | None = None
 
     @property
     def ncoord(self) -> int:
@@ -157,11 +158,45 @@ class AngularCoordinate:
     motion: Motion | None = None
     clinical_sign: int | None = None
 
+    @property
+    def kind(self) -> str:
+        """"angle": the row is s1·s2 − g(θ) with g = cos (FORMULATION §2)."""
+        return "angle"
+
     def clinical(self, theta: np.ndarray) -> np.ndarray | None:
         """The clinical angle in degrees, sign·(θ − 90°), or None when none is declared."""
         if self.clinical_sign is None:
             return None
         return self.clinical_sign * (np.degrees(theta) - 90.0)
+
+
+@dataclass(frozen=True)
+class DistanceCoordinate:
+    """d_k, the distance from point P of body 1 to point Q of body 2 along the unit vector s of
+    body 1: (r_Q − r_P)·s = d_k (metres). The translational analog of an angle (g(d) = d for
+    cos θ), needed to drive or solve the slides of prismatic, cylindrical and parallel joints;
+    its conjugate "moment" is the joint force (N) that pushes d to increase."""
+
+    name: str
+    body1: str
+    point1: str
+    body2: str
+    point2: str
+    axis: str
+    motion: Motion | None = None
+    clinical_sign: None = None
+
+    @property
+    def kind(self) -> str:
+        """"distance": the row is (F_Q − F_P)·s − g(d) with g(d) = d."""
+        return "distance"
+
+    def clinical(self, theta: np.ndarray) -> None:
+        """A distance has no clinical angle."""
+        return None
+
+
+Coordinate = AngularCoordinate | DistanceCoordinate
 
 
 @dataclass(frozen=True)
@@ -206,7 +241,7 @@ class Model:
     ground: Ground
     bodies: tuple[Body, ...]
     joints: tuple[Joint, ...]
-    angles: tuple[AngularCoordinate, ...]
+    angles: tuple[Coordinate, ...]
     tracked_points: tuple[TrackedPoint, ...] = ()
     tracked_vectors: tuple[TrackedVector, ...] = ()
     force_plates: tuple[PlateAssignment, ...] = ()
@@ -228,6 +263,11 @@ class Model:
         raise KeyError(name)
 
     @property
+    def floating_bases(self) -> tuple[str, ...]:
+        """The first body of every group of bodies no chain of joints ties to the ground."""
+        return floating_bases(self.bodies, self.joints)
+
+    @property
     def marker_labels(self) -> tuple[str, ...]:
         return tuple(tp.marker for tp in self.tracked_points)
 
@@ -245,6 +285,30 @@ class Model:
         )
 
 
+def floating_bases(bodies: tuple[Body, ...], joints: tuple[Joint, ...]) -> tuple[str, ...]:
+    """The first body of every group of bodies that no chain of joints ties to the ground: a
+    floating base, whose 6 degrees of freedom the markers (MC) or base drivers (AD) determine."""
+    neighbours: dict[str, set[str]] = {GROUND: set(), **{b.name: set() for b in bodies}}
+    for j in joints:
+        a, b = j.bodies
+        neighbours[a].add(b)
+        neighbours[b].add(a)
+    seen: set[str] = set()
+    bases = []
+    for start in (GROUND, *(b.name for b in bodies)):
+        if start in seen:
+            continue
+        if start != GROUND:
+            bases.append(start)
+        seen.add(start)
+        stack = [start]
+        while stack:
+            for other in neighbours[stack.pop()] - seen:
+                seen.add(other)
+                stack.append(other)
+    return tuple(bases)
+
+
 __all__ = [
     "GROUND",
     "JOINTS_WITH_AXES",
@@ -252,6 +316,8 @@ __all__ = [
     "JOINT_EQUATIONS",
     "AngularCoordinate",
     "Body",
+    "Coordinate",
+    "DistanceCoordinate",
     "Form",
     "FrozenMap",
     "Ground",
@@ -265,4 +331,5 @@ __all__ = [
     "TrackedVector",
     "Vector",
     "_frozen",
+    "floating_bases",
 ]

@@ -21,6 +21,7 @@ from fccgrb_cli.model.elements import (
     JOINTS_WITH_POINTS,
     AngularCoordinate,
     Body,
+    DistanceCoordinate,
     FrozenMap,
     Ground,
     Inertia,
@@ -33,14 +34,15 @@ from fccgrb_cli.model.elements import (
     TrackedVector,
     Vector,
     _frozen,
+    floating_bases,
 )
-from fccgrb_cli.model.motion import Motion
+from fccgrb_cli.model.motion import BaseMotion, Motion
 
 UNIT_TOL = 1e-6
 BODY_AXES = {"u": (1.0, 0.0, 0.0), "v": (0.0, 1.0, 0.0), "w": (0.0, 0.0, 1.0)}
 GROUND_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
-TOP_KEYS = {"name", "units", "gravity", "form", "ground", "bodies", "joints", "angles", "tracking",
-            "loads", "subject", "calibration"}
+TOP_KEYS = {"name", "units", "gravity", "form", "ground", "bodies", "joints", "angles",
+            "distances", "tracking", "loads", "subject", "calibration"}
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
@@ -209,7 +211,7 @@ def _named_points(r: _Reader, value: Any, path: str) -> dict:
     return {name: Point(name, r.vec3(loc, f"{path}.{name}")) for name, loc in spec.items()}
 
 
-def _bodies(r: _Reader, doc: dict) -> tuple[Body, ...]:
+def _bodies(r: _Reader, doc: dict, scale: float) -> tuple[Body, ...]:
     default_form = doc.get("form", "full")
     if default_form not in ("full", "reduced"):
         r.fail("form", "'full' or 'reduced'", default_form)
@@ -217,7 +219,7 @@ def _bodies(r: _Reader, doc: dict) -> tuple[Body, ...]:
     if not spec:
         r.fail("bodies", "at least one body", spec)
     bodies = []
-    allowed = {"form", "mass", "com", "inertia", "points", "vectors", "pose"}
+    allowed = {"form", "mass", "com", "inertia", "points", "vectors", "pose", "motion"}
     for name, body in spec.items():
         path = f"bodies.{name}"
         if name == GROUND:
@@ -234,8 +236,26 @@ def _bodies(r: _Reader, doc: dict) -> tuple[Body, ...]:
             vectors=_frozen(_named_vectors(r, body.get("vectors"), f"{path}.vectors", BODY_AXES)),
             pose=pose,
             inertia=_inertia(r, body, path),
+            motion=_base_motion(r, body["motion"], f"{path}.motion", scale)
+            if "motion" in body else None,
         ))
     return tuple(bodies)
+
+
+def _base_motion(r: _Reader, value: Any, path: str, scale: float) -> BaseMotion:
+    """A floating base's motion: ``translation`` (m) and ``rotation`` (the file's angle unit),
+    each a list of 3 motions along / about the ground's x, y, z; either may be left out."""
+    spec = r.mapping(value, path, allowed={"translation", "rotation"})
+    parts = {}
+    for key, size in (("translation", 1.0), ("rotation", scale)):
+        if key not in spec:
+            continue
+        items = spec[key]
+        if not isinstance(items, list) or len(items) != 3:
+            r.fail(f"{path}.{key}", "a list of 3 motions (x, y, z)", items)
+        parts[key] = tuple(_motion(r, item, f"{path}.{key}[{k}]", size, scale)
+                           for k, item in enumerate(items))
+    return BaseMotion(**parts)
 
 
 class _Names:
@@ -318,7 +338,11 @@ def _joints(r: _Reader, doc: dict, names: _Names) -> tuple[Joint, ...]:
     return tuple(joints)
 
 
-def _motion(r: _Reader, value: Any, path: str, scale: float) -> Motion:
+def _motion(r: _Reader, value: Any, path: str, size: float, scale: float,
+            kind: str | None = None) -> Motion:
+    """mean + Σ amplitude·sin(2π·frequency·t + phase): ``size`` converts mean and amplitude to
+    SI (the angle unit, or 1 for metres), ``scale`` the phase; an angle (``kind``) must stay
+    inside (0, 180) deg, where s1·s2 = cos θ is invertible."""
     spec = r.mapping(value, path, required=frozenset({"mean"}), allowed={"mean", "terms"})
     terms = []
     for k, term in enumerate(r.items(spec.get("terms"), f"{path}.terms")):
@@ -328,21 +352,21 @@ def _motion(r: _Reader, value: Any, path: str, scale: float) -> Motion:
         frequency = r.number(term["frequency"], f"{tpath}.frequency")
         if frequency < 0:
             r.fail(f"{tpath}.frequency", "a non-negative frequency (Hz)", frequency)
-        terms.append((r.number(term["amplitude"], f"{tpath}.amplitude") * scale,
+        terms.append((r.number(term["amplitude"], f"{tpath}.amplitude") * size,
                       frequency,
                       r.number(term.get("phase", 0.0), f"{tpath}.phase") * scale))
-    motion = Motion(r.number(spec["mean"], f"{path}.mean") * scale, tuple(terms))
+    motion = Motion(r.number(spec["mean"], f"{path}.mean") * size, tuple(terms))
     low, high = motion.bounds()
-    if low <= 0.0 or high >= math.pi:
+    if kind == "angle" and (low <= 0.0 or high >= math.pi):
         r.fail(path, "a motion that stays inside (0, 180) deg, where s1·s2 = cos θ is "
                f"invertible; it can reach [{math.degrees(low):.4g}, {math.degrees(high):.4g}] deg",
                None, show_got=False)
     return motion
 
 
-def _angles(r: _Reader, doc: dict, names: _Names, scale: float) -> tuple[AngularCoordinate, ...]:
+def _angles(r: _Reader, doc: dict, names: _Names, scale: float, seen: set[str]
+            ) -> tuple[AngularCoordinate, ...]:
     angles = []
-    seen: set[str] = set()
     for k, spec in enumerate(r.items(doc.get("angles"), "angles")):
         path = f"angles[{k}]"
         spec = r.mapping(spec, path, required=frozenset({"name", "vectors"}),
@@ -356,10 +380,50 @@ def _angles(r: _Reader, doc: dict, names: _Names, scale: float) -> tuple[Angular
         body2, vec2 = names.dotted(pair[1], f"{path}.vectors[1]", "vector")
         if body1 == body2:
             r.fail(f"{path}.vectors", "vectors of two different bodies", list(pair))
-        motion = _motion(r, spec["motion"], f"{path}.motion", scale) if "motion" in spec else None
+        motion = (_motion(r, spec["motion"], f"{path}.motion", scale, scale, "angle")
+                  if "motion" in spec else None)
         angles.append(AngularCoordinate(name, body1, vec1, body2, vec2, motion,
                                         _clinical_sign(r, spec, path)))
     return tuple(angles)
+
+
+def _distances(r: _Reader, doc: dict, names: _Names, scale: float, seen: set[str]
+               ) -> tuple[DistanceCoordinate, ...]:
+    """d = (r_Q − r_P)·s (m): P on the first body (or the ground), Q on the second, s a unit
+    vector of the first body; the motion in metres, its phase in the file's angle unit."""
+    distances = []
+    for k, spec in enumerate(r.items(doc.get("distances"), "distances")):
+        path = f"distances[{k}]"
+        spec = r.mapping(spec, path, required=frozenset({"name", "points", "axis"}),
+                         allowed={"name", "points", "axis", "motion"})
+        name = r.string(spec["name"], f"{path}.name")
+        if name in seen:
+            r.fail(f"{path}.name", "a coordinate name not used before (angles and distances)",
+                   name)
+        seen.add(name)
+        pair = r.pair(spec["points"], f"{path}.points")
+        body1, point1 = names.dotted(pair[0], f"{path}.points[0]", "point")
+        body2, point2 = names.dotted(pair[1], f"{path}.points[1]", "point")
+        if body1 == body2:
+            r.fail(f"{path}.points", "points of two different bodies", list(pair))
+        axis_body, axis = names.dotted(spec["axis"], f"{path}.axis", "vector")
+        if axis_body != body1:
+            r.fail(f"{path}.axis", f"a vector of {body1}, the body of the first point",
+                   spec["axis"])
+        motion = (_motion(r, spec["motion"], f"{path}.motion", 1.0, scale, "distance")
+                  if "motion" in spec else None)
+        distances.append(DistanceCoordinate(name, body1, point1, body2, point2, axis, motion))
+    return tuple(distances)
+
+
+def _check_base_motions(r: _Reader, bodies: tuple[Body, ...], joints: tuple[Joint, ...]) -> None:
+    """A prescribed base motion belongs to a floating base only (the joints move the others)."""
+    bases = floating_bases(bodies, joints)
+    for body in bodies:
+        if body.motion is not None and body.name not in bases:
+            r.fail(f"bodies.{body.name}.motion", "a motion on a floating base only (the first "
+                   "body of a group that no joint ties to the ground; in this model: "
+                   f"{', '.join(bases) or 'none'})", None, show_got=False)
 
 
 def _clinical_sign(r: _Reader, spec: dict, path: str) -> int | None:
@@ -477,8 +541,13 @@ def parse_model(text: str, source: str = "<model>") -> Model:
         points=_frozen(_named_points(r, gspec.get("points"), "ground.points")),
         vectors=_frozen(_named_vectors(r, gspec.get("vectors"), "ground.vectors", GROUND_AXES)),
     )
-    bodies = _bodies(r, doc)
+    bodies = _bodies(r, doc, scale)
     names = _Names(r, ground, bodies)
+    joints = _joints(r, doc, names)
+    _check_base_motions(r, bodies, joints)
+    seen: set[str] = set()
+    angles = _angles(r, doc, names, scale, seen)
+    distances = _distances(r, doc, names, scale, seen)
     tracked_points, tracked_vectors = _tracking(r, doc, names)
     plates, threshold, contact = _loads(r, doc, names)
     return Model(
@@ -486,8 +555,8 @@ def parse_model(text: str, source: str = "<model>") -> Model:
         gravity=gravity,
         ground=ground,
         bodies=bodies,
-        joints=_joints(r, doc, names),
-        angles=_angles(r, doc, names, scale),
+        joints=joints,
+        angles=angles + distances,
         tracked_points=tracked_points,
         tracked_vectors=tracked_vectors,
         force_plates=plates,

@@ -18,14 +18,17 @@ from fccgrb_cli.solvers.result import KinematicResult
 from fccgrb_cli.system import Drive, System
 
 ASSEMBLY_STEP = np.radians(5.0)
+ASSEMBLY_STEP_DISTANCE = 0.02  # m
 
 
 def assemble(system: System, q_guess: np.ndarray, theta: np.ndarray, tol: float,
              max_iter: int, base: np.ndarray | None = None) -> np.ndarray:
-    """Bring a guess (e.g. the model's stated pose) to the configuration with angles θ, moving
-    the drivers from the guess's own angles to θ in steps of at most 5° (a homotopy)."""
+    """Bring a guess (e.g. the model's stated pose) to the configuration with coordinates θ,
+    moving the drivers from the guess's own values to θ in steps of at most 5° for an angle and
+    2 cm for a distance (a homotopy)."""
     start = system.angles_at(q_guess)
-    n_steps = max(1, int(np.ceil(np.abs(theta - start).max() / ASSEMBLY_STEP)))
+    step = np.where(system.distance_rows, ASSEMBLY_STEP_DISTANCE, ASSEMBLY_STEP)
+    n_steps = max(1, int(np.ceil(np.max(np.abs(theta - start) / step, initial=0.0))))
     zeros = np.zeros_like(theta)
     q = q_guess
     for k in range(1, n_steps + 1):
@@ -45,7 +48,8 @@ def solve_ad(system: System, time: np.ndarray, theta: np.ndarray, theta_d: np.nd
              theta_dd: np.ndarray, q_guess: np.ndarray, *, tol: float = 1e-10,
              max_iter: int = 50, base: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
              progress: Callable[[int, int], None] | None = None) -> KinematicResult:
-    """AD analysis over all frames; θ, θ̇, θ̈ are (frames × n_angles) in rad, rad/s, rad/s²;
+    """AD analysis over all frames; θ, θ̇, θ̈ are (frames × n_coordinates) in rad, rad/s, rad/s²
+    (m, m/s, m/s² for distances);
     ``base``: the floating bases' driven features and their rates (frames × slots × 3 each,
     see ``System.base_reference``), required when the model has floating bases."""
     if system.n_base_slots and base is None:

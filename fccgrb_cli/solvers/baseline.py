@@ -2,7 +2,8 @@
 pre-analysis step, optionally low-passed, then the kinematic analysis with angular drivers.
 
 Each frame's segment frames are fitted to the markers (the rigid fits of ``initial_guess``), and
-each angle is the angle between the same two vectors the model's angular coordinate names.
+each angle is the angle between the same two vectors the model's angular coordinate names (a
+distance coordinate: the fitted points' offset along its axis).
 """
 
 from __future__ import annotations

@@ -99,7 +99,8 @@ class FrameProblem:
         return float(np.linalg.norm(phi[keep])), float(np.abs(phi[self.top]).max())
 
     def bounds(self) -> list[tuple[float | None, float | None]]:
-        """Unit-vector components in [−1.1, 1.1], angles in [2°, 178°], positions free. The 0.1
+        """Unit-vector components in [−1.1, 1.1], angles in [2°, 178°], positions and distance
+        coordinates free. The 0.1
         margin keeps a frame aligned with the axes (a component of exactly ±1) off the bound,
         where SLSQP would treat it as active and take several times more iterations; the angles
         stay where s1·s2 = cos θ is invertible (at 0 and π the MCR rows are singular, and
@@ -108,5 +109,6 @@ class FrameProblem:
         out: list[tuple[float | None, float | None]] = []
         for form in layout.forms:
             out += [(None, None)] * 3 + [(-1.1, 1.1)] * (9 if form == "full" else 6)
-        out += [(ANGLE_MARGIN, np.pi - ANGLE_MARGIN)] * len(layout.angle_names)
+        out += [(None, None) if distance else (ANGLE_MARGIN, np.pi - ANGLE_MARGIN)
+                for distance in self.system.distance_rows]
         return out

@@ -7,7 +7,9 @@ segment's direction (the smallest rotation from the model pose); one, a translat
 A two-point segment's rotation about its own axis is then chosen to satisfy its joints' axis
 equations with the bodies already placed (a universal joint's perpendicular arms, a revolute's
 parallel axes), the closest such roll to the model pose winning ties. Mixed coordinates follow
-from the fitted vectors, θ = acos(s1·s2).
+from the fitted bodies: θ = acos(s1·s2) from their vectors, d = (r_Q − r_P)·s from their points.
+Only joints whose points coincide (spherical, revolute, universal) share a point: a cylindrical
+or prismatic joint's points only lie on one axis line, some slide apart.
 """
 
 from __future__ import annotations
@@ -18,6 +20,8 @@ import numpy as np
 
 from fccgrb_cli.model import GROUND
 from fccgrb_cli.system import System
+
+COINCIDENT = frozenset({"spherical", "revolute", "universal"})
 
 
 def rigid_fit(local: np.ndarray, world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -152,7 +156,7 @@ def initial_guess(system: System, targets: np.ndarray) -> np.ndarray:
                 continue
             pairs = list(tracked[other])
             for j in model.joints:
-                if other in j.bodies and j.points is not None:
+                if other in j.bodies and j.type in COINCIDENT:
                     k = j.bodies.index(other)
                     neighbour = j.bodies[1 - k]
                     if neighbour in placed:

@@ -197,13 +197,18 @@ def mixed_result(system: System, time: np.ndarray, q_all: np.ndarray, stats: Fra
         theta=theta, theta_d=theta_d, theta_dd=theta_dd, angle_names=system.layout.angle_names,
         iterations=stats.iterations, time_s=stats.seconds, phi_norm=stats.phi_norm,
         phi_top_max=stats.phi_top, converged=stats.converged, messages=(*messages, *near_singular(
-            theta, system.layout.angle_names, time)), wall_s=wall_s, status=stats.status)
+            theta, system.layout.angle_names, time, system.distance_rows)), wall_s=wall_s,
+        status=stats.status)
 
 
-def near_singular(theta: np.ndarray, names: tuple[str, ...], time: np.ndarray) -> list[str]:
-    """Warnings for angles that come within 5° of 0 or π, where s1·s2 = cos θ loses θ's sign."""
+def near_singular(theta: np.ndarray, names: tuple[str, ...], time: np.ndarray,
+                  distance: np.ndarray | None = None) -> list[str]:
+    """Warnings for angles that come within 5° of 0 or π, where s1·s2 = cos θ loses θ's sign
+    (distance coordinates, marked in ``distance``, have no such point)."""
     out = []
     for k, name in enumerate(names):
+        if distance is not None and distance[k]:
+            continue
         close = np.flatnonzero(np.minimum(theta[:, k], np.pi - theta[:, k]) < NEAR_SINGULAR)
         if len(close):
             f = int(close[0])

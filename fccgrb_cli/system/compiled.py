@@ -6,8 +6,10 @@ F = A x + f0 the features and x the fully-defined equivalent coordinates (Eq. 5)
 * linear rows  Φ = F_a − F_b          Φ_x = A_a − A_b (constant)
 * tracking     Φ = F_a − y(t)         ν = ẏ, γ = ÿ − Φ_x V̇q̇ (Eq. 31–32, 35–36)
 * dot rows     Φ = F_a·F_b − c        Φ_x = F_bᵀA_a + F_aᵀA_b, γ = −2Ḟ_a·Ḟ_b − Φ_x V̇q̇
-* angular dot rows also carry −cos θ: MCR (θ a coordinate, Φ_θ = sin θ, γ −= θ̇² cos θ, Eq. 13–22)
-  or AR (θ*(t) prescribed, ν = −θ̇* sin θ*, γ −= θ̇*² cos θ* + θ̈* sin θ*, Eq. 23–26).
+* coordinate rows also carry −g(θ), g = cos for an angle (s1·s2 = cos θ) and g(d) = d for a
+  distance ((r_Q − r_P)·s = d): MCR (θ a coordinate, Φ_θ = −g′(θ), γ += g″(θ) θ̇², Eq. 13–22)
+  or AR (θ*(t) prescribed, ν = g′(θ*) θ̇*, γ += g″(θ*) θ̇*² + g′(θ*) θ̈*, Eq. 23–26); for an
+  angle these are Φ_θ = sin θ, ν = −θ̇* sin θ*, γ −= θ̇*² cos θ* + θ̈* sin θ*.
 
 Then Φ_q = Φ_x X_q with X_q = V (Eq. 7) for reduced bodies.
 """
@@ -28,10 +30,20 @@ _EMPTY = np.zeros(0)
 _EMPTY3 = np.zeros((0, 3))
 
 
+def coordinate_terms(theta: np.ndarray, distance: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """g, g′ and g″ of every coordinate (last axis of θ): cos θ, −sin θ, −cos θ for an angle,
+    d, 1, 0 where ``distance`` is True (a row's Φ = F_a·F_b − g(θ), FORMULATION §2)."""
+    cos = np.cos(theta)
+    return (np.where(distance, theta, cos), np.where(distance, 1.0, -np.sin(theta)),
+            np.where(distance, 0.0, -cos))
+
+
 @dataclass(frozen=True)
 class Drive:
-    """The time-dependent data of one frame: prescribed angles θ*, θ̇*, θ̈* (rad, rad/s, rad/s²)
-    for AR drivers and tracking targets y, ẏ, ÿ (n_targets × 3, SI) for TC/TOC."""
+    """The time-dependent data of one frame: prescribed coordinates θ*, θ̇*, θ̈* (rad, rad/s,
+    rad/s² for angles; m, m/s, m/s² for distances) for AR drivers and tracking targets y, ẏ, ÿ
+    (n_targets × 3, SI) for TC/TOC."""
 
     theta: np.ndarray = field(default_factory=lambda: _EMPTY)
     theta_d: np.ndarray = field(default_factory=lambda: _EMPTY)
@@ -70,6 +82,7 @@ class System:
     dot_b3: np.ndarray
     dot_c: np.ndarray
     angle_rows: np.ndarray
+    distance_rows: np.ndarray
     labels: tuple[str, ...]
     kinds: np.ndarray
     n_base_slots: int = 0
@@ -117,8 +130,12 @@ class System:
         products = flat[self.dot_a3] * flat[self.dot_b3]
         dot = products[0::3] + products[1::3] + products[2::3] - self.dot_c
         if len(self.angle_rows):
-            dot[self.angle_rows] -= np.cos(self._theta(q, drive))
+            dot[self.angle_rows] -= self.g_terms(self._theta(q, drive))[0]
         return np.concatenate([lin, dot])
+
+    def g_terms(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """g, g′, g″ of the coordinates θ (… × n_coordinates), see :func:`coordinate_terms`."""
+        return coordinate_terms(theta, self.distance_rows)
 
     def _jacobian(self, F: np.ndarray) -> np.ndarray:
         """Constant rows plus the dot rows F_bᵀ C_a + F_aᵀ C_b, scattered block by block: each
@@ -137,7 +154,7 @@ class System:
         if self.mixed:
             n = self.layout.n_body_q
             J[self.n_linear_rows + self.angle_rows, n + np.arange(len(self.angle_rows))] = \
-                np.sin(q[n:])
+                -self.g_terms(q[n:])[1]
         return J
 
     def _jacobian_x(self, F: np.ndarray) -> np.ndarray:
@@ -161,7 +178,8 @@ class System:
             start = 3 * len(self.lin_a)
             nu[start:start + 3 * self.n_targets] = drive.ref_d[self.trk_slot].ravel()
         if len(self.angle_rows) and not self.mixed:
-            nu[self.n_linear_rows + self.angle_rows] = -drive.theta_d * np.sin(drive.theta)
+            nu[self.n_linear_rows + self.angle_rows] = \
+                self.g_terms(drive.theta)[1] * drive.theta_d
         return nu
 
     def gamma(self, q: np.ndarray, qd: np.ndarray, drive: Drive) -> np.ndarray:
@@ -179,18 +197,19 @@ class System:
         if len(self.angle_rows):
             rows = start + self.angle_rows
             if self.mixed:
-                theta, theta_d = q[layout.n_body_q:], qd[layout.n_body_q:]
-                gamma[rows] -= theta_d**2 * np.cos(theta)
+                theta_d = qd[layout.n_body_q:]
+                gamma[rows] += self.g_terms(q[layout.n_body_q:])[2] * theta_d**2
             else:
-                th, thd, thdd = drive.theta, drive.theta_d, drive.theta_dd
-                gamma[rows] -= thd**2 * np.cos(th) + thdd * np.sin(th)
+                _, g1, g2 = self.g_terms(drive.theta)
+                gamma[rows] += g2 * drive.theta_d**2 + g1 * drive.theta_dd
         return gamma
 
     def residual_hessian(self, q: np.ndarray, c: np.ndarray) -> np.ndarray:
         """Σ_i c_i ∇²_q Φ_i (nq × nq): the second-order term of Newton's method on ½ΦᵀWΦ
         (c = WΦ). Dot rows have the constant x-Hessian C_aᵀC_b + C_bᵀC_a, assembled as
         kron(K, I3) from the 4×4 coefficient blocks; reduced bodies add the curvature of
-        w = u × v; MCR rows add c_k cos θ_k on the diagonal."""
+        w = u × v; MCR rows add −c_k g″(θ_k) on the diagonal (c_k cos θ_k for an angle, nothing
+        for a distance)."""
         layout = self.layout
         n_bodies = len(layout.body_names)
         dots = c[self.n_linear_rows:]
@@ -212,7 +231,8 @@ class System:
                 H[np.ix_(v, u)] += block
         if self.mixed:
             rows = self.angle_rows
-            H[nb + np.arange(len(rows)), nb + np.arange(len(rows))] += dots[rows] * np.cos(q[nb:])
+            H[nb + np.arange(len(rows)), nb + np.arange(len(rows))] -= \
+                dots[rows] * self.g_terms(q[nb:])[2]
         return H
 
     # --- reading the solution ------------------------------------------------------------------
@@ -228,10 +248,11 @@ class System:
         return out
 
     def angles_at(self, q: np.ndarray) -> np.ndarray:
-        """acos(s1·s2) of every angular coordinate at q, whatever the mode (rad)."""
+        """Every coordinate's value at q, whatever the mode: acos(s1·s2) for an angle (rad),
+        (r_Q − r_P)·s for a distance (m)."""
         F = self.features(self.layout.expand(q))
-        cos = np.einsum("ij,ij->i", F[self.dot_a[self.angle_rows]], F[self.dot_b[self.angle_rows]])
-        return np.arccos(np.clip(cos, -1.0, 1.0))
+        dot = np.einsum("ij,ij->i", F[self.dot_a[self.angle_rows]], F[self.dot_b[self.angle_rows]])
+        return np.where(self.distance_rows, dot, np.arccos(np.clip(dot, -1.0, 1.0)))
 
     def base_reference(self, q: np.ndarray) -> np.ndarray:
         """The floating bases' driven features at q (n_base_slots × 3: origin, u, v[, w])."""
@@ -317,6 +338,7 @@ def compile_system(model: Model, *, angles: str = "driver", track: bool = False)
         dot_b3=(3 * dot_b[:, None] + np.arange(3)).ravel(),
         dot_c=np.array([c for _, _, c, _ in cl.dots], dtype=float),
         angle_rows=idx(cl.angle_dots),
+        distance_rows=np.array(cl.distance_dots, dtype=bool),
         labels=tuple(labels),
         kinds=np.array(kinds, dtype=int),
         n_base_slots=cl.n_base,

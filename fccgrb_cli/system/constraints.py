@@ -3,7 +3,8 @@
 Each constraint becomes either linear vector equations ``F_a − F_b`` (spherical joints, ground
 points), tracking equations ``F_a − y(t)`` (TC Eq. 29–36, TOC Eq. 37–38) or scalar dot equations
 ``F_a · F_b − c`` (rigid body, joint axes, angular relations AR Eq. 23–28 and MCR Eq. 10–22, where
-``c`` is cos θ). Rows are labelled so rank reports and errors can name them.
+``c`` is g(θ): cos θ for an angle, d itself for a distance coordinate). Rows are labelled so
+rank reports and errors can name them.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ class ConstraintList:
     tracking: list[tuple[int, int, str, float | None]] = field(default_factory=list)
     dots: list[tuple[int, int, float, str]] = field(default_factory=list)
     angle_dots: list[int] = field(default_factory=list)
+    distance_dots: list[bool] = field(default_factory=list)
     n_base: int = 0
 
     def dot(self, a: int, b: int, const: float, label: str) -> int:
@@ -81,12 +83,22 @@ def joint(features: FeatureTable, out: ConstraintList, joint: Joint) -> None:
 
 
 def angular(features: FeatureTable, out: ConstraintList, model: Model, kind: str) -> None:
-    """s1 · s2 − cos θ_k: AR (kind 'driver', Eq. 23) or MCR (kind 'coordinate', Eq. 10)."""
-    for angle in model.angles:
-        row = out.dot(features.vector(angle.body1, angle.vector1),
-                      features.vector(angle.body2, angle.vector2), 0.0,
-                      f"angle {angle.name} ({'AR' if kind == 'driver' else 'MCR'})")
+    """One row per driven / mixed coordinate, F_a · F_b − g(θ_k): an angle's s1 · s2 − cos θ_k,
+    a distance's (r_Q − r_P) · s − d_k; AR (kind 'driver', Eq. 23) or MCR ('coordinate',
+    Eq. 10). ``out.distance_dots`` marks the distance rows (g(d) = d)."""
+    tag = "AR" if kind == "driver" else "MCR"
+    for coord in model.angles:
+        if coord.kind == "distance":
+            offset = features.difference(features.point(coord.body2, coord.point2),
+                                         features.point(coord.body1, coord.point1))
+            row = out.dot(offset, features.vector(coord.body1, coord.axis), 0.0,
+                          f"distance {coord.name} ({tag})")
+        else:
+            row = out.dot(features.vector(coord.body1, coord.vector1),
+                          features.vector(coord.body2, coord.vector2), 0.0,
+                          f"angle {coord.name} ({tag})")
         out.angle_dots.append(row)
+        out.distance_dots.append(coord.kind == "distance")
 
 
 def tracking(features: FeatureTable, out: ConstraintList, model: Model) -> None:
@@ -127,15 +139,7 @@ def reachable(neighbours: dict[str, set[str]], start: str, seen: set[str]) -> se
 def floating_bases(model: Model) -> tuple[str, ...]:
     """The first body of every group of bodies that no chain of joints ties to the ground: a
     floating base, whose 6 degrees of freedom the markers (MC) or base drivers (AD) determine."""
-    neighbours = joint_neighbours(model)
-    seen: set[str] = set()
-    reachable(neighbours, GROUND, seen)
-    bases = []
-    for body in model.bodies:
-        if body.name not in seen:
-            bases.append(body.name)
-            reachable(neighbours, body.name, seen)
-    return tuple(bases)
+    return model.floating_bases
 
 
 def base_drivers(features: FeatureTable, out: ConstraintList, model: Model) -> None:

@@ -1,8 +1,8 @@
 """Does the model determine its coordinates? Rank of Φ_q and redundant equations.
 
 Checked at the model's stated initial pose (with the angles it has there): the joints must leave
-exactly as many degrees of freedom as there are angular coordinates, and the AD Jacobian
-(topology + AR drivers) must then have full column rank.
+exactly as many degrees of freedom as there are driven coordinates (angles and distances), and the
+AD Jacobian (topology + AR drivers) must then have full column rank.
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ class StructureReport:
     mc_rank: int
     nq_mixed: int
     floating: tuple[str, ...] = ()
+    n_distances: int = 0
 
     def lines(self) -> list[str]:
         out = [
@@ -42,7 +43,10 @@ class StructureReport:
             f"{self.dof} degrees of freedom"
             + (f" (6 each for the floating bases {', '.join(self.floating)})"
                if self.floating else ""),
-            f"angular coordinates {self.n_angles}; AD Jacobian rank {self.ad_rank} of {self.nq}",
+            (f"angular coordinates {self.n_angles - self.n_distances}, distance coordinates "
+             f"{self.n_distances}" if self.n_distances else
+             f"angular coordinates {self.n_angles}")
+            + f"; AD Jacobian rank {self.ad_rank} of {self.nq}",
             f"tracking equations {self.n_tracking_rows}; MC Jacobian rank {self.mc_rank} "
             f"of {self.nq_mixed}",
         ]
@@ -86,27 +90,31 @@ def analyse(model: Model) -> StructureReport:
     top_rank = _rank(J[top])
     dof = ad.nq - top_rank
     n_angles = len(model.angles)
+    n_distances = sum(a.kind == "distance" for a in model.angles)
     bases = floating_bases(model)
     joint_dof = dof - 6 * len(bases)
     if n_angles != joint_dof:
-        detail = ("add angular coordinates for the free motions" if n_angles < joint_dof
-                  else "remove angular coordinates that repeat a joint's motion")
+        slides = n_distances or any(j.type in ("cylindrical", "prismatic", "parallel")
+                                    for j in model.joints)
+        what = "coordinates (angles and distances)" if slides else "angular coordinates"
+        detail = (f"add {what} for the free motions" if n_angles < joint_dof
+                  else f"remove {what} that repeat a joint's motion")
         floating = (f" besides the 6 of each floating base ({', '.join(bases)})" if bases
                     else "")
         raise InputError(
-            f"{model.source}: angles: expected {joint_dof} angular coordinates for the "
+            f"{model.source}: angles: expected {joint_dof} {what} for the "
             f"{joint_dof} degrees of freedom the joints leave{floating}, got {n_angles} "
             f"({detail})")
     ad_rank = _rank(J)
     if ad_rank < ad.nq:
         order = np.concatenate([np.flatnonzero(top), np.flatnonzero(~top)])
         culprits = [name for name in dependent_rows(J[order], tuple(ad.labels[k] for k in order))
-                    if name.startswith("angle ")]
+                    if name.startswith(("angle ", "distance "))]
         raise InputError(
             f"{model.source}: angles: expected angular coordinates that determine the "
             f"coordinates at the initial pose, got Jacobian rank {ad_rank} of {ad.nq}: "
-            f"{', '.join(culprits) or 'the angles'} repeat another angle's motion or have "
-            "parallel vectors there")
+            f"{', '.join(culprits) or 'the angles'} repeat another coordinate's motion or have "
+            "parallel vectors there (a distance: an axis perpendicular to its slide)")
     mc = compile_system(model, angles="coordinate", track=True)
     Jm = mc.jacobian(pose_of(mc))
     return StructureReport(
@@ -114,4 +122,4 @@ def analyse(model: Model) -> StructureReport:
         topology_rank=top_rank, dof=dof, n_angles=n_angles, ad_rank=ad_rank,
         redundant=dependent_rows(J, ad.labels),
         n_tracking_rows=int(mc.masks()["tracking"].sum()), mc_rank=_rank(Jm), nq_mixed=mc.nq,
-        floating=bases)
+        floating=bases, n_distances=n_distances)
