@@ -23,8 +23,10 @@ body's r, u, v, w) and anatomy alone, never from the package's angle or moment d
   the foot's long axis, the ankle's second arm);
 * a free moment M on the foot about such an axis e would turn the distal segment towards
   positive φ; statics demands an internal moment opposing it, a negative clinical moment
-  (extensor, abductor, external rotator, plantarflexor, evertor), and −M a positive one. Where e
-  is the joint's own axis (knee, both ankle axes) virtual work gives the value, −M·e;
+  (extensor, abductor, external rotator, plantarflexor, evertor), and −M a positive one. Where
+  φ̇ = ω·e exactly (the knee's and both ankle axes; hip adduction, the angle between the pelvis's
+  left–right axis and the thigh, about the floating axis across them) virtual work gives the
+  value, −M·e;
 * standing on a flexed knee: a vertical ground reaction (body weight) under the metatarsal heads
   passes behind the knee and in front of the ankle (asserted from the landmarks) and needs a knee
   extensor and an ankle plantarflexor moment equal to its moment arms times the force;
@@ -33,7 +35,7 @@ body's r, u, v, w) and anatomy alone, never from the package's angle or moment d
   and ∂ω/∂φ_k by central differences of postures solved with φ_k moved;
 * the angles against the same rotations: turning the distal segments a little towards positive φ
   (done in the test, rigidly, about the anatomical axis) must raise φ (by exactly the rotation for
-  the knee and the ankle) and leave every other joint's angles alone.
+  the knee, the ankle and hip adduction) and leave every other joint's angles alone.
 
 Loads are applied through ``ExternalLoad`` and solved by ``classical_dynamics`` (the pipeline's
 converted model) and read through ``clinical_results``, as ``fccgrb solve`` does.
@@ -130,7 +132,8 @@ class Turn:
     axis: np.ndarray
     pivot: np.ndarray
     distal: tuple[str, ...]
-    exact: bool   # the joint's own axis: φ changes by exactly the rotation, and |τ| = |M·axis|
+    exact: bool      # φ̇ = ω·axis exactly, so by duality a moment M·axis gives τ = −M·axis
+    isolated: bool   # the joint's own axis: the joint's other angle does not move either
 
 
 def anatomical_turns(g: Geometry, side: str) -> dict[str, Turn]:
@@ -156,16 +159,18 @@ def anatomical_turns(g: Geometry, side: str) -> dict[str, Turn]:
     # the template's ankle arm is the heel–metatarsal line to within a degree
     assert foot_arm @ _unit(toes - heel) > np.cos(np.radians(1.0))
     leg = (thigh, shank, foot)
+    # hip adduction (README: the ISB joint-coordinate-system angle) is the angle between the
+    # pelvis's left–right axis and the thigh's long axis: its rate is exactly ω·(floating axis)
+    floating = np.cross(to_right, long_axis)
     return {
-        "hip_flexion": Turn(_oriented(to_right, knee - hip, anterior), hip, leg, False),
-        "hip_adduction": Turn(_oriented(np.cross(to_right, long_axis), knee - hip, medial), hip,
-                              leg, False),
-        "hip_rotation": Turn(_oriented(long_axis, thigh_front, medial), hip, leg, False),
+        "hip_flexion": Turn(_oriented(to_right, knee - hip, anterior), hip, leg, False, False),
+        "hip_adduction": Turn(_oriented(floating, knee - hip, medial), hip, leg, True, False),
+        "hip_rotation": Turn(_oriented(long_axis, thigh_front, medial), hip, leg, False, False),
         "knee_flexion": Turn(_oriented(epicondylar, ankle - knee, -thigh_front), knee,
-                             (shank, foot), True),
+                             (shank, foot), True, True),
         "ankle_dorsiflexion": Turn(_oriented(malleolar, toes - ankle, knee - ankle), ankle,
-                                   (foot,), True),
-        "ankle_inversion": Turn(_oriented(foot_arm, sole, medial), ankle, (foot,), True),
+                                   (foot,), True, True),
+        "ankle_inversion": Turn(_oriented(foot_arm, sole, medial), ankle, (foot,), True, True),
     }
 
 
@@ -347,9 +352,10 @@ def test_the_posture_is_held_still(posture: Posture, solved: Solved) -> None:
 def test_angle_rises_along_its_anatomical_turn(posture: Posture, kind: str, side: str) -> None:
     """Turning the distal segments towards flexion, adduction, internal rotation, dorsiflexion
     or inversion (as anatomy defines them, about an axis built from landmarks) raises that
-    clinical angle: by exactly the turn about the knee's and the ankle's own axes, at nearly that
-    rate at the hip. The rotation is rigid, so every other joint keeps its angles; about a
-    joint's own axis so does the joint's other angle."""
+    clinical angle: by exactly the turn about the knee's and the ankle's own axes and the hip's
+    floating axis (adduction), at nearly that rate for hip flexion and rotation. The rotation is
+    rigid, so every other joint keeps its angles; about a joint's own axis so does the joint's
+    other angle."""
     turn = posture.turns[side][kind]
     delta = 1e-4
     minus, plus = _clinical_angles(posture, [_turned(posture.geometry, turn, -delta),
@@ -361,7 +367,7 @@ def test_angle_rises_along_its_anatomical_turn(posture: Posture, kind: str, side
     else:
         assert rate[k] > 0.8
     for (other, other_side), j in posture.index.items():
-        if j != k and (turn.exact or other_side != side or not _same_joint(kind, other)):
+        if j != k and (turn.isolated or other_side != side or not _same_joint(kind, other)):
             assert abs(rate[j]) < 1e-9, f"{other}_{other_side} moved with {kind}_{side}"
 
 
@@ -375,9 +381,10 @@ def test_moment_opposes_a_load_towards_positive_angle(posture: Posture, solved: 
                                                       kind: str, side: str) -> None:
     """A free moment on the foot that would turn the distal segments towards positive φ is held
     by an internal moment the other way (extensor, abductor, external rotator, plantarflexor,
-    evertor): a negative clinical moment; the reverse load a positive one. About the joint's own
-    axis (knee, ankle) virtual work gives the value: −M·axis, here ∓MOMENT. A load on one foot
-    leaves the other leg's moments at zero."""
+    evertor): a negative clinical moment; the reverse load a positive one. Where φ̇ = ω·axis
+    exactly (the knee's and ankle's own axes, the hip's floating axis for adduction) virtual work
+    gives the value: −M·axis, here ∓MOMENT. A load on one foot leaves the other leg's moments at
+    zero."""
     turn = posture.turns[side][kind]
     k = posture.index[kind, side]
     towards, away = solved.moments[kind, side, 1.0], solved.moments[kind, side, -1.0]
