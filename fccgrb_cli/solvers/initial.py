@@ -1,6 +1,7 @@
 """A first-frame guess that needs no hand-given pose (FORMULATION §3).
 
-Bodies are visited outward from the ground along the joints. Each is fitted to what is known of
+Bodies are visited outward from the ground along the joints, then outward from each floating
+base, which its own markers place. Each is fitted to what is known of
 it: its tracked markers plus the joint points it shares with bodies already placed. Three or more
 non-collinear points give a least-squares rigid fit (Söderkvist–Wedin, via the SVD); two give the
 segment's direction (the smallest rotation from the model pose); one, a translation of the pose.
@@ -144,32 +145,36 @@ def initial_guess(system: System, targets: np.ndarray) -> np.ndarray:
         if np.all(np.isfinite(target)):
             tracked[tp.body].append((model.body(tp.body).points[tp.point].local, target))
     placed: dict[str, tuple[np.ndarray, np.ndarray]] = {GROUND: (np.eye(3), np.zeros(3))}
-    order = deque([GROUND])
-    while order:
-        here = order.popleft()
-        for joint in model.joints:
-            if here not in joint.bodies:
-                continue
-            side = joint.bodies.index(here)
-            other = joint.bodies[1 - side]
-            if other in placed:
-                continue
-            pairs = list(tracked[other])
-            for j in model.joints:
-                if other in j.bodies and j.type in COINCIDENT:
-                    k = j.bodies.index(other)
-                    neighbour = j.bodies[1 - k]
-                    if neighbour in placed:
-                        pairs.append((model.body(other).points[j.points[k]].local,
-                                      _global_point(model, placed, neighbour, j.points[1 - k])))
-            body = model.body(other)
-            pose = body.pose
-            R0 = np.column_stack([pose.u, pose.v, pose.w])
-            local = np.array([p for p, _ in pairs]).reshape(-1, 3)
-            world = np.array([w for _, w in pairs]).reshape(-1, 3)
-            placed[other] = _place(local, world, R0, np.array(pose.r),
-                                   _perpendicular_pairs(model, placed, other))
-            order.append(other)
+
+    def place(other: str) -> None:
+        pairs = list(tracked[other])
+        for j in model.joints:
+            if other in j.bodies and j.type in COINCIDENT:
+                k = j.bodies.index(other)
+                neighbour = j.bodies[1 - k]
+                if neighbour in placed:
+                    pairs.append((model.body(other).points[j.points[k]].local,
+                                  _global_point(model, placed, neighbour, j.points[1 - k])))
+        pose = model.body(other).pose
+        R0 = np.column_stack([pose.u, pose.v, pose.w])
+        local = np.array([p for p, _ in pairs]).reshape(-1, 3)
+        world = np.array([w for _, w in pairs]).reshape(-1, 3)
+        placed[other] = _place(local, world, R0, np.array(pose.r),
+                               _perpendicular_pairs(model, placed, other))
+
+    # Outward from the ground, then from each floating base (placed by its own markers).
+    for root in (GROUND, *model.floating_bases):
+        if root not in placed:
+            place(root)
+        order = deque([root])
+        while order:
+            here = order.popleft()
+            for joint in model.joints:
+                if here in joint.bodies:
+                    other = joint.bodies[1 - joint.bodies.index(here)]
+                    if other not in placed:
+                        place(other)
+                        order.append(other)
     for name, (R, r) in placed.items():
         if name == GROUND:
             continue
