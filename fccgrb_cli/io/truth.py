@@ -2,7 +2,8 @@
 
 Layout (SI units, double precision):
   /time (frames,) s
-  /theta, /theta_d, /theta_dd (frames × angles) rad, rad/s, rad/s²; attribute ``names``
+  /theta, /theta_d, /theta_dd (frames × coordinates) rad, rad/s, rad/s² (m, m/s, m/s² for a
+           distance coordinate); attribute ``names``, in the model's order (angles, distances)
   /q (frames × nq) the AD solution; attribute ``form``
   /markers (frames × markers × 3) m, exactly (the C3D stores them as 32-bit floats);
            attribute ``labels``
