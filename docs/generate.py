@@ -11,7 +11,8 @@ what the command it names prints. The README's generated blocks sit between
 
 Parts and their blocks:
 
-* ``cheap`` (seconds): ``example-session`` (the five-bar session), ``gait-trial`` (calibrate,
+* ``cheap`` (seconds): ``example-session`` (the five-bar session), ``full-turns`` (the
+  crank-rocker through three turns, and docs/crank_angle.png), ``gait-trial`` (calibrate,
   solve, plot and export the walking trial of ../shared/data/c3d/Qualisys.c3d, and
   docs/gait_qualisys.png and docs/gait_cycles.png; skipped when the trial is absent),
   ``table-subset`` (check only: the AD and NRM rows of docs/table1.md and docs/table2.md
@@ -195,6 +196,19 @@ SESSION = [
 
 def example_session(ws: Workspace) -> list[Artifact]:
     return [ReadmeBlock("example-session", ws.console(SESSION))]
+
+
+CRANK = "configs/models/crank_rocker.yaml"
+FULL_TURNS = [
+    f"fccgrb synth {CRANK} -o crank.c3d",
+    f"fccgrb solve {CRANK} crank.c3d --method cno-sqp --perturb 10 -o crank.h5",
+    "fccgrb plot crank.h5 --kind angle --angle crank -o docs/crank_angle.png",
+]
+
+
+def full_turns(ws: Workspace) -> list[Artifact]:
+    return [ReadmeBlock("full-turns", ws.console(FULL_TURNS)),
+            Image.made("docs/crank_angle.png", ws)]
 
 
 GAIT = [
@@ -435,6 +449,7 @@ class Block:
 
 BLOCKS = {b.name: b for b in (
     Block("example-session", "cheap", example_session, "README: the five-bar session"),
+    Block("full-turns", "cheap", full_turns, "README and docs/crank_angle.png"),
     Block("gait-trial", "cheap", gait_trial, "README and docs/gait_qualisys.png"),
     Block("table-subset", "cheap", table_subset, "check only: docs tables' AD and NRM rows"),
     Block("sweeps", "tables", sweeps, "docs/table1.md, docs/table2.md, README sweep line"),

@@ -30,6 +30,7 @@ PENDULUM = Path(__file__).resolve().parents[1] / "configs" / "models" / "pendulu
 PENDULUM_TEXT = PENDULUM.read_text(encoding="utf-8")
 PENDULUM_LINES = PENDULUM_TEXT.splitlines()
 SLIDER_TEXT = (PENDULUM.parent / "slider.yaml").read_text(encoding="utf-8")
+CRANK_TEXT = (PENDULUM.parent / "crank_rocker.yaml").read_text(encoding="utf-8")
 MODEL_NAME = "model.yaml"
 SYNTH_OPTIONS = ("--duration", "0.2", "--rate", "50")
 
@@ -61,6 +62,17 @@ def edit_slider(edit: Callable[[dict], None]) -> Callable[[], str]:
 
     def make() -> str:
         doc = copy.deepcopy(yaml.safe_load(SLIDER_TEXT))
+        edit(doc)
+        return yaml.safe_dump(doc, sort_keys=False, allow_unicode=True)
+
+    return make
+
+
+def edit_crank(edit: Callable[[dict], None]) -> Callable[[], str]:
+    """A case built by changing one thing in the crank-rocker (a signed, full-turn angle)."""
+
+    def make() -> str:
+        doc = copy.deepcopy(yaml.safe_load(CRANK_TEXT))
         edit(doc)
         return yaml.safe_dump(doc, sort_keys=False, allow_unicode=True)
 
@@ -253,6 +265,24 @@ CASES = {
     "distance-unknown-key": Case(
         edit_slider(setter("distances", 0, "vectors", value=["ground.z", "carriage.w"])),
         "distances[0].vectors", ("expected one of the keys", "'axis'")),
+    "angle-range-unknown": Case(
+        edit_crank(setter("angles", 0, "range", value="quarter")),
+        "angles[0].range", ("expected 'full' (a signed angle", "'quarter'")),
+    "angle-full-without-axis": Case(
+        edit_crank(remover("angles", 0, "axis")),
+        "angles[0].axis", ("expected the joint axis that signs a 'range: full' angle",)),
+    "angle-axis-without-full": Case(
+        edit_crank(remover("angles", 0, "range")),
+        "angles[0].axis", ("expected an axis only with 'range: full'", "'ground.z'")),
+    "angle-axis-of-a-third-body": Case(
+        edit_crank(setter("angles", 0, "axis", value="coupler.w")),
+        "angles[0].axis", ("expected a vector of ground or crank", "'coupler.w'")),
+    "angle-axis-not-perpendicular": Case(
+        edit_crank(setter("angles", 0, "axis", value="ground.x")),
+        "angles[0].axis", ("expected a vector perpendicular to ground's vector",)),
+    "angle-rate-on-a-half-range-angle": Case(
+        edit_doc(setter("angles", 0, "motion", "rate", value=90)),
+        "angles[0].motion", ("stays inside (0, 180) deg", "'range: full'")),
     "distance-without-axis": Case(edit_slider(remover("distances", 0, "axis")),
                                   "distances[0].axis", ("expected this key to be present",)),
     "distance-axis-not-unit": Case(

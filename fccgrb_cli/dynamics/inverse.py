@@ -76,9 +76,13 @@ def inverse_dynamics(system: System, q: np.ndarray, qd: np.ndarray, qdd: np.ndar
         kinetic[f] = 0.5 * xd @ M @ xd
         potential[f] = -g @ x
     bases, force, moment = _base_wrenches(system, xs, lam)
+    moments = -system.g_terms(theta)[1] * lam[:, driver_rows]
+    if len(system.sine_rows):  # a signed angle's sine row: Φ_θ = −cos θ (docs/signed_angles.md)
+        k = system.sine_of
+        moments[:, k] -= np.cos(theta[:, k]) * lam[:, system.n_linear_rows + system.sine_rows]
     return InverseDynamics(
         angle_names=tuple(a.name for a in model.angles), row_labels=system.labels, lam=lam,
-        joint_moments=-system.g_terms(theta)[1] * lam[:, driver_rows], kinetic=kinetic,
+        joint_moments=moments, kinetic=kinetic,
         potential=potential,
         external_power=power, residual=residual, base_names=bases, residual_force=force,
         residual_moment=moment)

@@ -148,6 +148,9 @@ class AngularCoordinate:
     """θ_k, the angle between vector s1 of body 1 and vector s2 of body 2: s1·s2 = cos θ_k.
 
     Used as an angular driver (AR, Eq. 23–26) or as a mixed coordinate (MCR, Eq. 10–22).
+    With an ``axis`` (a unit vector n of body 1 or body 2 along the joint axis, s1 ⟂ n ⟂ s2) the
+    angle is signed and turns without limit (``range: full``): (s1 × s2)·n = sin θ_k joins the
+    cosine relation (docs/signed_angles.md).
     """
 
     name: str
@@ -157,6 +160,12 @@ class AngularCoordinate:
     vector2: str
     motion: Motion | None = None
     clinical_sign: int | None = None
+    axis: tuple[str, str] | None = None
+
+    @property
+    def full(self) -> bool:
+        """A signed angle that may take any value (cos θ and sin θ both pinned)."""
+        return self.axis is not None
 
     @property
     def kind(self) -> str:

@@ -343,7 +343,8 @@ def _motion(r: _Reader, value: Any, path: str, size: float, scale: float,
     """mean + Σ amplitude·sin(2π·frequency·t + phase): ``size`` converts mean and amplitude to
     SI (the angle unit, or 1 for metres), ``scale`` the phase; an angle (``kind``) must stay
     inside (0, 180) deg, where s1·s2 = cos θ is invertible."""
-    spec = r.mapping(value, path, required=frozenset({"mean"}), allowed={"mean", "terms"})
+    spec = r.mapping(value, path, required=frozenset({"mean"}),
+                     allowed={"mean", "rate", "terms"})
     terms = []
     for k, term in enumerate(r.items(spec.get("terms"), f"{path}.terms")):
         tpath = f"{path}.terms[{k}]"
@@ -355,11 +356,13 @@ def _motion(r: _Reader, value: Any, path: str, size: float, scale: float,
         terms.append((r.number(term["amplitude"], f"{tpath}.amplitude") * size,
                       frequency,
                       r.number(term.get("phase", 0.0), f"{tpath}.phase") * scale))
-    motion = Motion(r.number(spec["mean"], f"{path}.mean") * size, tuple(terms))
+    motion = Motion(r.number(spec["mean"], f"{path}.mean") * size, tuple(terms),
+                    r.number(spec.get("rate", 0.0), f"{path}.rate") * size)
     low, high = motion.bounds()
     if kind == "angle" and (low <= 0.0 or high >= math.pi):
         r.fail(path, "a motion that stays inside (0, 180) deg, where s1·s2 = cos θ is "
-               f"invertible; it can reach [{math.degrees(low):.4g}, {math.degrees(high):.4g}] deg",
+               f"invertible (or an angle with 'range: full' and an 'axis' to sign it); it can "
+               f"reach [{math.degrees(low):.4g}, {math.degrees(high):.4g}] deg",
                None, show_got=False)
     return motion
 
@@ -370,7 +373,7 @@ def _angles(r: _Reader, doc: dict, names: _Names, scale: float, seen: set[str]
     for k, spec in enumerate(r.items(doc.get("angles"), "angles")):
         path = f"angles[{k}]"
         spec = r.mapping(spec, path, required=frozenset({"name", "vectors"}),
-                         allowed={"name", "vectors", "motion", "clinical"})
+                         allowed={"name", "vectors", "motion", "clinical", "range", "axis"})
         name = r.string(spec["name"], f"{path}.name")
         if name in seen:
             r.fail(f"{path}.name", "an angle name not used before", name)
@@ -380,10 +383,12 @@ def _angles(r: _Reader, doc: dict, names: _Names, scale: float, seen: set[str]
         body2, vec2 = names.dotted(pair[1], f"{path}.vectors[1]", "vector")
         if body1 == body2:
             r.fail(f"{path}.vectors", "vectors of two different bodies", list(pair))
-        motion = (_motion(r, spec["motion"], f"{path}.motion", scale, scale, "angle")
+        axis = _angle_axis(r, spec, path, names, (body1, body2))
+        motion = (_motion(r, spec["motion"], f"{path}.motion", scale, scale,
+                          "full angle" if axis else "angle")
                   if "motion" in spec else None)
         angles.append(AngularCoordinate(name, body1, vec1, body2, vec2, motion,
-                                        _clinical_sign(r, spec, path)))
+                                        _clinical_sign(r, spec, path), axis))
     return tuple(angles)
 
 
@@ -424,6 +429,30 @@ def _check_base_motions(r: _Reader, bodies: tuple[Body, ...], joints: tuple[Join
             r.fail(f"bodies.{body.name}.motion", "a motion on a floating base only (the first "
                    "body of a group that no joint ties to the ground; in this model: "
                    f"{', '.join(bases) or 'none'})", None, show_got=False)
+
+
+def _angle_axis(r: _Reader, spec: dict, path: str, names: _Names,
+                bodies: tuple[str, str]) -> tuple[str, str] | None:
+    """``range: full`` with ``axis: BODY.VECTOR`` (a vector of one of the angle's two bodies
+    along the joint axis): a signed angle that turns without limit; ``range: half`` (the default)
+    the paper's (0°, 180°)."""
+    extent = spec.get("range", "half")
+    if extent not in ("half", "full"):
+        r.fail(f"{path}.range", "'full' (a signed angle, any number of turns) or 'half' "
+               "(0–180°, the default)", extent)
+    if extent == "half":
+        if "axis" in spec:
+            r.fail(f"{path}.axis", "an axis only with 'range: full' (it signs the angle)",
+                   spec["axis"])
+        return None
+    if "axis" not in spec:
+        r.fail(f"{path}.axis", "the joint axis that signs a 'range: full' angle: a vector of "
+               f"{bodies[0]} or {bodies[1]} perpendicular to both of the angle's vectors "
+               "(e.g. a revolute joint's axis)", None, show_got=False)
+    body, vector = names.dotted(spec["axis"], f"{path}.axis", "vector")
+    if body not in bodies:
+        r.fail(f"{path}.axis", f"a vector of {bodies[0]} or {bodies[1]}", spec["axis"])
+    return body, vector
 
 
 def _clinical_sign(r: _Reader, spec: dict, path: str) -> int | None:

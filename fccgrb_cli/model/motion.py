@@ -10,21 +10,25 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Motion:
-    """θ(t) = mean + Σ A_i sin(2π f_i t + φ_i), in SI units (rad or m), frequencies in Hz."""
+    """θ(t) = mean + rate·t + Σ A_i sin(2π f_i t + φ_i), in SI units (rad or m; rate per s),
+    frequencies in Hz. A non-zero ``rate`` turns a crank (or slides a carriage) steadily."""
 
     mean: float
     terms: tuple[tuple[float, float, float], ...] = ()
+    rate: float = 0.0
 
     def bounds(self) -> tuple[float, float]:
-        """Guaranteed lower and upper bound of θ(t) over all t."""
+        """Guaranteed lower and upper bound of θ(t) over all t (infinite with a rate)."""
+        if self.rate:
+            return -np.inf, np.inf
         spread = sum(abs(a) for a, _, _ in self.terms)
         return self.mean - spread, self.mean + spread
 
     def evaluate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """θ, θ̇ and θ̈ at the times t (s), each shaped like t."""
         t = np.asarray(t, dtype=float)
-        theta = np.full_like(t, self.mean)
-        theta_d = np.zeros_like(t)
+        theta = self.mean + self.rate * t
+        theta_d = np.full_like(t, self.rate)
         theta_dd = np.zeros_like(t)
         for amplitude, frequency, phase in self.terms:
             omega = 2.0 * np.pi * frequency

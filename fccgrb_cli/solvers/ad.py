@@ -27,6 +27,9 @@ def assemble(system: System, q_guess: np.ndarray, theta: np.ndarray, tol: float,
     moving the drivers from the guess's own values to θ in steps of at most 5° for an angle and
     2 cm for a distance (a homotopy)."""
     start = system.angles_at(q_guess)
+    # a signed angle is met at its nearest turn: the homotopy never sweeps whole turns
+    full = system.full_angles
+    start[full] += 2 * np.pi * np.round((theta[full] - start[full]) / (2 * np.pi))
     step = np.where(system.distance_rows, ASSEMBLY_STEP_DISTANCE, ASSEMBLY_STEP)
     n_steps = max(1, int(np.ceil(np.max(np.abs(theta - start) / step, initial=0.0))))
     zeros = np.zeros_like(theta)

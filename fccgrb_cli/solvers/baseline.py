@@ -65,6 +65,8 @@ def solve_baseline(model, time: np.ndarray, targets: np.ndarray, *, cutoff: floa
     fit_system = compile_system(model, angles="coordinate", track=True)
     fits = marker_fits(fit_system, targets)
     theta = np.array([fit_system.angles_at(q) for q in fits])
+    full = fit_system.full_angles
+    theta[:, full] = np.unwrap(theta[:, full], axis=0)  # signed angles keep counting turns
     ad = compile_system(model, angles="driver")
     n_body = ad.layout.n_body_q
     base = np.array([ad.base_reference(q[:n_body]) for q in fits])

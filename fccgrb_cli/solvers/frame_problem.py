@@ -23,6 +23,7 @@ class FrameProblem:
         self.system = system
         masks = system.masks()
         self.top = np.flatnonzero(masks["topology"])
+        self.equalities = self.top  # the rows the optimizers constrain (see keep_independent)
         self.trk = np.flatnonzero(masks["tracking"])
         missing = ~np.all(np.isfinite(targets), axis=1)
         self.missing = missing
@@ -32,6 +33,20 @@ class FrameProblem:
         self.drive = Drive(ref=np.where(missing[:, None], 0.0, targets))
         self._q: np.ndarray | None = None
         self._phi = self._J = None
+
+    def keep_independent(self, q: np.ndarray) -> None:
+        """Keep as many topological rows as they have rank (``System.topology_rank``), the best
+        conditioned at q first (QR with column pivoting of Φ_topᵀ), for optimizers that cannot
+        take dependent equality constraints (trust-constr). Redundancy is a model's (a closed
+        planar loop in 3D, a signed angle's cosine and sine rows), so the count is the model's,
+        not the numerical rank at q, which a guess off the constraints overstates; of a signed
+        angle's pair the pivoting keeps the row whose derivative does not vanish at this
+        angle."""
+        import scipy.linalg
+
+        J = self._eval(q)[1][self.top]
+        _, _, pivots = scipy.linalg.qr(J.T, pivoting=True, mode="economic")
+        self.equalities = np.sort(self.top[pivots[: self.system.topology_rank]])
 
     # --- cached engine evaluation ------------------------------------------------------------
     def _eval(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -48,15 +63,15 @@ class FrameProblem:
 
     # --- equality constraints ------------------------------------------------------------------
     def constraints(self, q: np.ndarray) -> np.ndarray:
-        return self._eval(q)[0][self.top]
+        return self._eval(q)[0][self.equalities]
 
     def constraints_jacobian(self, q: np.ndarray) -> np.ndarray:
-        return self._eval(q)[1][self.top]
+        return self._eval(q)[1][self.equalities]
 
     def constraints_hessian(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Σ v_i ∇²Φ_top,i."""
         c = np.zeros(self.system.n_rows)
-        c[self.top] = v
+        c[self.equalities] = v
         return self.system.residual_hessian(q, c)
 
     # --- objectives ----------------------------------------------------------------------------
@@ -99,8 +114,8 @@ class FrameProblem:
         return float(np.linalg.norm(phi[keep])), float(np.abs(phi[self.top]).max())
 
     def bounds(self) -> list[tuple[float | None, float | None]]:
-        """Unit-vector components in [−1.1, 1.1], angles in [2°, 178°], positions and distance
-        coordinates free. The 0.1
+        """Unit-vector components in [−1.1, 1.1], angles in [2°, 178°], positions, distance
+        coordinates and signed angles (``range: full``) free. The 0.1
         margin keeps a frame aligned with the axes (a component of exactly ±1) off the bound,
         where SLSQP would treat it as active and take several times more iterations; the angles
         stay where s1·s2 = cos θ is invertible (at 0 and π the MCR rows are singular, and
@@ -109,6 +124,7 @@ class FrameProblem:
         out: list[tuple[float | None, float | None]] = []
         for form in layout.forms:
             out += [(None, None)] * 3 + [(-1.1, 1.1)] * (9 if form == "full" else 6)
-        out += [(None, None) if distance else (ANGLE_MARGIN, np.pi - ANGLE_MARGIN)
-                for distance in self.system.distance_rows]
+        free = self.system.distance_rows | self.system.full_angles
+        out += [(None, None) if unbounded else (ANGLE_MARGIN, np.pi - ANGLE_MARGIN)
+                for unbounded in free]
         return out

@@ -111,7 +111,8 @@ def solve_goal_frame(problem: FrameProblem, q0: np.ndarray, *, objective: str, t
         return problem.constraints(z[:nq])
 
     def eq_jac(z: np.ndarray) -> np.ndarray:
-        return np.hstack([problem.constraints_jacobian(z[:nq]), np.zeros((len(problem.top), 1))])
+        J = problem.constraints_jacobian(z[:nq])
+        return np.hstack([J, np.zeros((len(J), 1))])
 
     gradient = np.zeros(nq + 1)
     gradient[nq] = 1.0

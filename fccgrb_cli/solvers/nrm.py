@@ -183,8 +183,18 @@ def mixed_result(system: System, time: np.ndarray, q_all: np.ndarray, stats: Fra
                  method: str, tol: float, messages: list[str] | tuple[str, ...] = (),
                  wall_s: float = float("nan")) -> KinematicResult:
     """The result of any mixed-coordinate method: θ from q, θ̇ and θ̈ by central differences,
-    consistent q̇ and q̈, and warnings for angles near 0 or π."""
+    consistent q̇ and q̈, and warnings for angles near 0 or π. A signed angle is the same
+    configuration every 2π: frames solved apart (in parallel, or from a fresh guess after a gap)
+    are brought onto one continuous count of turns, starting from the first solved frame's
+    angle in (−π, π] (as the markers give it)."""
     n_body = system.layout.n_body_q
+    full = n_body + np.flatnonzero(system.full_angles)
+    if len(full):
+        solved = np.flatnonzero(np.isfinite(q_all[:, full]).all(axis=1))
+        q_all = q_all.copy()
+        turns = q_all[np.ix_(solved, full)]
+        turns[0] -= 2 * np.pi * np.round(turns[0] / (2 * np.pi))
+        q_all[np.ix_(solved, full)] = np.unwrap(turns, axis=0)
     theta = q_all[:, n_body:]
     dt = float(time[1] - time[0]) if len(time) > 1 else 1.0
     theta_d, theta_dd = central_derivatives(theta, dt)
@@ -197,14 +207,15 @@ def mixed_result(system: System, time: np.ndarray, q_all: np.ndarray, stats: Fra
         theta=theta, theta_d=theta_d, theta_dd=theta_dd, angle_names=system.layout.angle_names,
         iterations=stats.iterations, time_s=stats.seconds, phi_norm=stats.phi_norm,
         phi_top_max=stats.phi_top, converged=stats.converged, messages=(*messages, *near_singular(
-            theta, system.layout.angle_names, time, system.distance_rows)), wall_s=wall_s,
+            theta, system.layout.angle_names, time,
+            system.distance_rows | system.full_angles)), wall_s=wall_s,
         status=stats.status)
 
 
 def near_singular(theta: np.ndarray, names: tuple[str, ...], time: np.ndarray,
                   distance: np.ndarray | None = None) -> list[str]:
     """Warnings for angles that come within 5° of 0 or π, where s1·s2 = cos θ loses θ's sign
-    (distance coordinates, marked in ``distance``, have no such point)."""
+    (coordinates marked in ``distance`` have no such point: distances and signed angles)."""
     out = []
     for k, name in enumerate(names):
         if distance is not None and distance[k]:

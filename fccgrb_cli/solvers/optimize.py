@@ -83,6 +83,8 @@ class FrameRecord:
 
 
 def _optimize(problem: FrameProblem, settings: Settings, q0: np.ndarray) -> FrameOutcome:
+    if problem.system.redundant_topology:  # SLSQP and trust-constr need independent equalities
+        problem.keep_independent(q0)
     if settings.method.startswith("cno"):
         return solve_cno_frame(problem, q0, algorithm=settings.method[4:],
                                objective=settings.objective, tol=settings.tol,

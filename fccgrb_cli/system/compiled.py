@@ -10,6 +10,9 @@ F = A x + f0 the features and x the fully-defined equivalent coordinates (Eq. 5)
   distance ((r_Q − r_P)·s = d): MCR (θ a coordinate, Φ_θ = −g′(θ), γ += g″(θ) θ̇², Eq. 13–22)
   or AR (θ*(t) prescribed, ν = g′(θ*) θ̇*, γ += g″(θ*) θ̇*² + g′(θ*) θ̈*, Eq. 23–26); for an
   angle these are Φ_θ = sin θ, ν = −θ̇* sin θ*, γ −= θ̇*² cos θ* + θ̈* sin θ*.
+* a signed angle (``range: full``) adds a sine row, (s1 × s2)·n − sin θ written as a dot row
+  F_a·F_b − sin θ (docs/signed_angles.md): Φ_θ = −cos θ, ν = cos θ* θ̇*, γ += −sin θ θ̇² (MCR)
+  or −sin θ* θ̇*² + cos θ* θ̈* (AR), Hessian += c sin θ.
 
 Then Φ_q = Φ_x X_q with X_q = V (Eq. 7) for reduced bodies.
 """
@@ -17,6 +20,7 @@ Then Φ_q = Φ_x X_q with X_q = V (Eq. 7) for reduced bodies.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -83,6 +87,8 @@ class System:
     dot_c: np.ndarray
     angle_rows: np.ndarray
     distance_rows: np.ndarray
+    sine_rows: np.ndarray
+    sine_of: np.ndarray
     labels: tuple[str, ...]
     kinds: np.ndarray
     n_base_slots: int = 0
@@ -130,7 +136,10 @@ class System:
         products = flat[self.dot_a3] * flat[self.dot_b3]
         dot = products[0::3] + products[1::3] + products[2::3] - self.dot_c
         if len(self.angle_rows):
-            dot[self.angle_rows] -= self.g_terms(self._theta(q, drive))[0]
+            theta = self._theta(q, drive)
+            dot[self.angle_rows] -= self.g_terms(theta)[0]
+            if len(self.sine_rows):
+                dot[self.sine_rows] -= np.sin(theta[self.sine_of])
         return np.concatenate([lin, dot])
 
     def g_terms(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -155,6 +164,8 @@ class System:
             n = self.layout.n_body_q
             J[self.n_linear_rows + self.angle_rows, n + np.arange(len(self.angle_rows))] = \
                 -self.g_terms(q[n:])[1]
+            J[self.n_linear_rows + self.sine_rows, n + self.sine_of] = \
+                -np.cos(q[n:][self.sine_of])
         return J
 
     def _jacobian_x(self, F: np.ndarray) -> np.ndarray:
@@ -180,6 +191,8 @@ class System:
         if len(self.angle_rows) and not self.mixed:
             nu[self.n_linear_rows + self.angle_rows] = \
                 self.g_terms(drive.theta)[1] * drive.theta_d
+            k = self.sine_of
+            nu[self.n_linear_rows + self.sine_rows] = np.cos(drive.theta[k]) * drive.theta_d[k]
         return nu
 
     def gamma(self, q: np.ndarray, qd: np.ndarray, drive: Drive) -> np.ndarray:
@@ -196,12 +209,16 @@ class System:
             gamma[t0:t0 + 3 * self.n_targets] += drive.ref_dd[self.trk_slot].ravel()
         if len(self.angle_rows):
             rows = start + self.angle_rows
+            sines, k = start + self.sine_rows, self.sine_of
             if self.mixed:
-                theta_d = qd[layout.n_body_q:]
-                gamma[rows] += self.g_terms(q[layout.n_body_q:])[2] * theta_d**2
+                theta, theta_d = q[layout.n_body_q:], qd[layout.n_body_q:]
+                gamma[rows] += self.g_terms(theta)[2] * theta_d**2
+                gamma[sines] -= np.sin(theta[k]) * theta_d[k] ** 2
             else:
                 _, g1, g2 = self.g_terms(drive.theta)
                 gamma[rows] += g2 * drive.theta_d**2 + g1 * drive.theta_dd
+                th, thd, thdd = drive.theta[k], drive.theta_d[k], drive.theta_dd[k]
+                gamma[sines] += -np.sin(th) * thd**2 + np.cos(th) * thdd
         return gamma
 
     def residual_hessian(self, q: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -233,6 +250,8 @@ class System:
             rows = self.angle_rows
             H[nb + np.arange(len(rows)), nb + np.arange(len(rows))] -= \
                 dots[rows] * self.g_terms(q[nb:])[2]
+            k = nb + self.sine_of
+            H[k, k] += dots[self.sine_rows] * np.sin(q[k])
         return H
 
     # --- reading the solution ------------------------------------------------------------------
@@ -249,10 +268,23 @@ class System:
 
     def angles_at(self, q: np.ndarray) -> np.ndarray:
         """Every coordinate's value at q, whatever the mode: acos(s1·s2) for an angle (rad),
-        (r_Q − r_P)·s for a distance (m)."""
+        atan2((s1 × s2)·n, s1·s2) in (−π, π] for a signed one, (r_Q − r_P)·s for a distance
+        (m)."""
         F = self.features(self.layout.expand(q))
         dot = np.einsum("ij,ij->i", F[self.dot_a[self.angle_rows]], F[self.dot_b[self.angle_rows]])
-        return np.where(self.distance_rows, dot, np.arccos(np.clip(dot, -1.0, 1.0)))
+        out = np.where(self.distance_rows, dot, np.arccos(np.clip(dot, -1.0, 1.0)))
+        if len(self.sine_rows):
+            sine = np.einsum("ij,ij->i", F[self.dot_a[self.sine_rows]],
+                             F[self.dot_b[self.sine_rows]])
+            out[self.sine_of] = np.arctan2(sine, dot[self.sine_of])
+        return out
+
+    @property
+    def full_angles(self) -> np.ndarray:
+        """Per coordinate: a signed angle that may take any value (``range: full``)."""
+        out = np.zeros(len(self.angle_rows), dtype=bool)
+        out[self.sine_of] = True
+        return out
 
     def base_reference(self, q: np.ndarray) -> np.ndarray:
         """The floating bases' driven features at q (n_base_slots × 3: origin, u, v[, w])."""
@@ -260,6 +292,20 @@ class System:
             return np.zeros((0, 3))
         F = self.features(self.layout.expand(q))
         return F[self.trk_a[-self.n_base_slots:]]
+
+    @cached_property
+    def topology_rank(self) -> int:
+        """The rank of the topological rows at the model's pose (assembled), below their count
+        where they are dependent: a closed planar loop written in 3D, a signed angle's cosine
+        and sine rows. Optimizers that cannot take dependent equality constraints keep this
+        many rows (see FrameProblem.keep_independent)."""
+        from fccgrb_cli.system.structure import pose_of, rank_of
+
+        return rank_of(self.jacobian(pose_of(self))[self.kinds == TOPOLOGY])
+
+    @property
+    def redundant_topology(self) -> bool:
+        return self.topology_rank < int((self.kinds == TOPOLOGY).sum())
 
     def masks(self) -> dict[str, np.ndarray]:
         """Boolean row masks by kind."""
@@ -300,7 +346,7 @@ def compile_system(model: Model, *, angles: str = "driver", track: bool = False)
     for k, (_, _, label, _) in enumerate(cl.tracking):
         labels += [f"{label}: {ax}" for ax in AXES]
         kinds += [DRIVER if k >= first_base else TRACKING] * 3
-    angle_set = set(cl.angle_dots)
+    angle_set = set(cl.angle_dots) | set(cl.sine_dots)
     for k, (_, _, _, label) in enumerate(cl.dots):
         labels.append(label)
         kinds.append(DRIVER if (k in angle_set and angles == "driver") else TOPOLOGY)
@@ -339,6 +385,8 @@ def compile_system(model: Model, *, angles: str = "driver", track: bool = False)
         dot_c=np.array([c for _, _, c, _ in cl.dots], dtype=float),
         angle_rows=idx(cl.angle_dots),
         distance_rows=np.array(cl.distance_dots, dtype=bool),
+        sine_rows=idx(cl.sine_dots),
+        sine_of=idx(cl.sine_of),
         labels=tuple(labels),
         kinds=np.array(kinds, dtype=int),
         n_base_slots=cl.n_base,

@@ -11,6 +11,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
+from fccgrb_cli.errors import InputError
 from fccgrb_cli.model import GROUND, Joint, Model
 from fccgrb_cli.system.features import FeatureTable, perpendiculars
 
@@ -26,6 +29,8 @@ class ConstraintList:
     dots: list[tuple[int, int, float, str]] = field(default_factory=list)
     angle_dots: list[int] = field(default_factory=list)
     distance_dots: list[bool] = field(default_factory=list)
+    sine_dots: list[int] = field(default_factory=list)
+    sine_of: list[int] = field(default_factory=list)
     n_base: int = 0
 
     def dot(self, a: int, b: int, const: float, label: str) -> int:
@@ -97,8 +102,37 @@ def angular(features: FeatureTable, out: ConstraintList, model: Model, kind: str
             row = out.dot(features.vector(coord.body1, coord.vector1),
                           features.vector(coord.body2, coord.vector2), 0.0,
                           f"angle {coord.name} ({tag})")
+            if coord.full:
+                out.sine_dots.append(_sine_row(features, out, model, coord, tag))
+                out.sine_of.append(len(out.angle_dots))
         out.angle_dots.append(row)
         out.distance_dots.append(coord.kind == "distance")
+
+
+def _sine_row(features: FeatureTable, out: ConstraintList, model: Model, coord,
+              tag: str) -> int:
+    """The row (s1 × s2)·n − sin θ of a signed angle, written as a dot product of two body
+    vectors (docs/signed_angles.md): s1·t with t = s2 × n when the axis n is fixed in body 2,
+    t·s2 with t = n × s1 when it is fixed in body 1 (a rigid body carries cross products of its
+    vectors along, so t's local components are the cross product of the local ones)."""
+    axis_body, axis_name = coord.axis
+    n = features.local_of(axis_body, axis_name)
+    s1 = features.local_of(coord.body1, coord.vector1)
+    s2 = features.local_of(coord.body2, coord.vector2)
+    same = s2 if axis_body == coord.body2 else s1
+    if abs(n @ same) > 1e-6 * np.linalg.norm(n) * np.linalg.norm(same):
+        k = model.angles.index(coord)
+        raise InputError(f"{model.source}: angles[{k}].axis: expected a vector perpendicular to "
+                         f"{axis_body}'s vector of the angle {coord.name}, got "
+                         f"{axis_name}·{coord.vector2 if same is s2 else coord.vector1} = "
+                         f"{n @ same:.3g}")
+    if axis_body == coord.body2:
+        a = features.vector(coord.body1, coord.vector1)
+        b = features.body_vector(coord.body2, np.cross(s2, n))
+    else:
+        a = features.body_vector(coord.body1, np.cross(n, s1))
+        b = features.vector(coord.body2, coord.vector2)
+    return out.dot(a, b, 0.0, f"angle {coord.name} ({tag}, sine)")
 
 
 def tracking(features: FeatureTable, out: ConstraintList, model: Model) -> None:

@@ -58,6 +58,11 @@ class StructureReport:
         return out
 
 
+def rank_of(J: np.ndarray) -> int:
+    """Numerical rank (singular values above the largest × max(shape) × 1e-10)."""
+    return _rank(J)
+
+
 def _rank(J: np.ndarray) -> int:
     if J.size == 0:
         return 0
