@@ -550,5 +550,10 @@ def summary(run: Run) -> dict[str, float | str | int]:
         if distance.any():
             row["max |dd| mm"] = 1e3 * float(err[:, distance].max()) if err.size else float("nan")
     if run.dynamics is not None:
-        row["max |τ| N·m"] = float(np.abs(run.dynamics.inverse.joint_moments).max())
+        loads = np.abs(run.dynamics.inverse.joint_moments)
+        distance = np.array(run._angle_units) == "m"
+        row["max |τ| N·m"] = float(loads[:, ~distance].max()) if (~distance).any() else \
+            float("nan")
+        if distance.any():  # a slide's joint force (N) is not a moment
+            row["max |F| N"] = float(loads[:, distance].max())
     return row

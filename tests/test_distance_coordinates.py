@@ -265,3 +265,14 @@ def test_summary_keeps_metres_out_of_degrees(runs: dict[str, fc.Run]) -> None:
     angle_error = np.abs(run.angles.values - run.truth_theta)[:, ~distance].max()
     assert row["max |dθ| deg"] == pytest.approx(np.degrees(angle_error), rel=1e-9)
     assert row["max |dd| mm"] == pytest.approx(500.0, abs=1e-3)
+
+
+def test_summary_keeps_newtons_out_of_newton_metres(runs: dict[str, fc.Run]) -> None:
+    """A slide's joint force is reported as max |F| N, apart from the hinges' max |τ| N·m."""
+    run = runs["nrm-wls"]
+    loads = np.abs(run.dynamics.inverse.joint_moments)
+    distance = np.array([a.kind == "distance" for a in run.model.angles])
+    row = run.summary()
+    assert row["max |F| N"] == pytest.approx(loads[:, distance].max())
+    assert row["max |τ| N·m"] == pytest.approx(loads[:, ~distance].max())
+    assert row["max |F| N"] != row["max |τ| N·m"]
