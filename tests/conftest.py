@@ -11,8 +11,8 @@ from hypothesis import HealthCheck, settings
 
 SLOW = [HealthCheck.too_slow, HealthCheck.data_too_large]
 
-settings.register_profile("ci", derandomize=True, deadline=None, max_examples=10,
+settings.register_profile("ci", derandomize=True, deadline=None, max_examples=25,
                           database=None, suppress_health_check=SLOW, print_blob=True)
-settings.register_profile("long", deadline=None, max_examples=100,
+settings.register_profile("long", deadline=None, max_examples=250,
                           suppress_health_check=SLOW, print_blob=True)
 settings.load_profile("ci")
