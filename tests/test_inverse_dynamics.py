@@ -370,7 +370,8 @@ def test_qualisys_force_plates_are_plausible() -> None:
 def test_fp_type1_plates_2_to_4_are_flagged() -> None:
     plates = read_force_plates(FP_TYPE1, read_trial(FP_TYPE1).n_frames)
     assert [p.number for p in plates] == [1, 2, 3, 4]
-    assert plates[0].problem is None
+    # plate 1 has a plate's corners but reads < 10 N under the standing left foot
+    assert plates[0].problem is not None and "l met" in plates[0].problem
     for plate in plates[1:]:
         assert plate.problem is not None and "\n" not in plate.problem
         assert not np.abs(plate.force).any()
@@ -458,15 +459,13 @@ def test_plate_with_nonsense_calibration(tmp_path: Path) -> None:
     line = the_error(fccgrb("solve", model, FP_TYPE1, *PENDULUM_ON_FP_TYPE1, "-o", out), out)
     assert line.startswith(f"fccgrb: error: {FP_TYPE1}: FORCE_PLATFORM plate 2: expected")
     assert "loads.force_plates[0].plate" in line
-    # the same through the library, and plate 1 (plausible, unloaded) only warns
+    # the same through the library, and plate 1 (a plate's corners, but < 10 N under a foot)
     trial = read_trial(FP_TYPE1)
     with pytest.raises(InputError, match="FORCE_PLATFORM plate 2"):
         plate_loads(load_model(model), trial, [])
-    warnings: list[str] = []
-    good = pendulum_with(tmp_path, plates_section((1, "link1")))
-    loads = plate_loads(load_model(good), trial, warnings)
-    assert [load.name for load in loads] == ["plate1"]
-    assert len(warnings) == 1 and "force plate 1 carries no load" in warnings[0]
+    on_plate1 = pendulum_with(tmp_path, plates_section((1, "link1")))
+    with pytest.raises(InputError, match="FORCE_PLATFORM plate 1: expected a normal force"):
+        plate_loads(load_model(on_plate1), trial, [])
 
 
 @needs_fp_type1

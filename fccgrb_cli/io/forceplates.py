@@ -12,6 +12,11 @@ from fccgrb_cli.errors import InputError
 
 _LENGTH = {"mm": 1e-3, "m": 1.0, "cm": 1e-2}
 _MOMENT = {"Nmm": 1e-3, "Nm": 1.0, "N.mm": 1e-3, "N.m": 1.0}
+MIN_LOAD = 10.0      # N: the least normal force a foot standing on a plate puts on it
+STAND_MARGIN = 0.02  # m inside the plate's outline (not a marker stuck on a plate corner)
+STAND_HEIGHT = 0.08  # m above the plate's surface (heel, metatarsal and toe markers)
+STAND_SPEED = 0.1    # m/s: still, as a stance foot's markers are and a swinging foot's are not
+STAND_TIME = 0.25    # s: how long it must stand there unloaded
 
 
 @dataclass(frozen=True)
@@ -39,20 +44,94 @@ def _blocks(signal: np.ndarray, n_frames: int) -> np.ndarray:
 
 def plausibility(corners: np.ndarray, force: np.ndarray) -> str | None:
     """What a force plate would have that these corners and forces lack ("expected …, got …"),
-    or None when they look like a plate."""
+    or None when they look like a plate: finite corners near the origin, sides of 0.1–3 m (from
+    a 0.3 m wide sensor to an instrumented-treadmill belt), forming a planar rectangle (opposite
+    corners' midpoints within 5 cm, every corner within 5 mm of the corners' plane, every angle
+    within 2° of 90°), and forces below 20 kN."""
     if not np.isfinite(corners).all() or np.abs(corners).max() > 50.0:
         return ("finite corners within 50 m of the origin, got coordinates up to "
                 f"{np.nanmax(np.abs(corners)):.3g} m")
-    sides = np.linalg.norm(np.roll(corners, -1, axis=0) - corners, axis=1)
+    edges = np.roll(corners, -1, axis=0) - corners
+    sides = np.linalg.norm(edges, axis=1)
     if sides.min() < 0.1 or sides.max() > 3.0:
         return f"sides of 0.1–3 m, got {', '.join(f'{s:.3g}' for s in sides)} m"
     skew = np.linalg.norm(corners[0] + corners[2] - corners[1] - corners[3])
     if skew > 0.05:
         return f"four corners forming a rectangle, got diagonals {skew:.3g} m apart at the middle"
+    centred = corners - corners.mean(axis=0)
+    off_plane = np.linalg.svd(centred, compute_uv=False)[2] / 2.0  # each corner's distance
+    if off_plane > 0.005:
+        return f"four corners in one plane, got corners {1e3 * off_plane:.3g} mm off their plane"
+    previous = np.roll(edges, 1, axis=0)
+    cosines = np.abs(np.sum(edges * previous, axis=1)) / (sides * np.roll(sides, 1))
+    if cosines.max() > np.sin(np.radians(2.0)):
+        worst = np.degrees(np.arccos(np.clip(cosines.max(), 0.0, 1.0)))
+        return (f"right angles at the corners (within 2°), got an angle {90 - worst:.3g}° off "
+                "a right angle")
     if not np.isfinite(force).all() or np.abs(force).max() > 2e4:
         return (f"finite forces below 20 kN, got {np.nanmax(np.abs(force)):.3g} N (the "
                 "calibration looks wrong)")
     return None
+
+
+def unloaded_under_a_foot(corners: np.ndarray, normal_force: np.ndarray, markers: np.ndarray,
+                          labels: list[str], rate: float) -> str | None:
+    """A plate that reads nothing under a foot standing on it ("expected …, got …"), or None.
+
+    A marker *stands* on a plate in a frame where it lies at least ``STAND_MARGIN`` inside the
+    plate's outline, at most ``STAND_HEIGHT`` above its surface (heel, toe and metatarsal
+    markers of a foot on the plate do; a swinging foot passes, it does not stay) and moves
+    slower than ``STAND_SPEED``. A foot on the ground carries part of the body's weight (a
+    quiet-standing adult puts hundreds of N on each foot; even a toe touch exceeds 10 N), so a
+    plate whose normal force stays below ``MIN_LOAD`` while some marker stands on it for
+    ``STAND_TIME`` or longer cannot be measuring (its calibration, zeroing or channel mapping is
+    wrong). ``markers`` is frames × markers × 3 (m, NaN where missing), ``normal_force`` the
+    force along the plate's normal per frame (N)."""
+    e1, e2 = corners[1] - corners[0], corners[3] - corners[0]
+    l1, l2 = np.linalg.norm(e1), np.linalg.norm(e2)
+    rel = markers - corners[0]
+    s1, s2 = rel @ (e1 / l1), rel @ (e2 / l2)  # along the plate's sides, m
+    with np.errstate(invalid="ignore"):
+        inside = (s1 >= STAND_MARGIN) & (s1 <= l1 - STAND_MARGIN) & \
+            (s2 >= STAND_MARGIN) & (s2 <= l2 - STAND_MARGIN)
+        low = np.abs(rel @ _normal(corners)) <= STAND_HEIGHT
+    speed = np.full(inside.shape, np.inf)
+    if len(markers) > 2:
+        speed[1:-1] = np.linalg.norm(markers[2:] - markers[:-2], axis=2) * rate / 2.0
+    with np.errstate(invalid="ignore"):
+        standing = inside & low & (speed < STAND_SPEED)
+    quiet = np.abs(normal_force) < MIN_LOAD
+    if rate <= 0:
+        return None
+    need = max(int(np.ceil(STAND_TIME * rate)), 1)
+    best, best_marker, best_start = 0, -1, 0
+    for k in range(standing.shape[1]):
+        run = standing[:, k] & quiet
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], run.astype(int), [0]])))
+        for start, stop in zip(edges[::2], edges[1::2], strict=True):
+            if stop - start > best:
+                best, best_marker, best_start = stop - start, k, start
+    if best < need:
+        return None
+    window = slice(best_start, best_start + best)
+    peak = float(np.abs(normal_force[window]).max())
+    label = labels[best_marker] if best_marker < len(labels) else f"point {best_marker + 1}"
+    return (f"a normal force of at least {MIN_LOAD:g} N while the marker "
+            f"'{label}' stands on the plate, got at most {peak:.3g} N over "
+            f"{best / rate:.3g} s from frame index {best_start} (its calibration, zeroing or "
+            "channels look wrong)")
+
+
+def _file_markers(c3d, n_frames: int) -> tuple[np.ndarray, list[str], float]:
+    """The C3D's own markers (frames × markers × 3, m; NaN where missing), labels and rate."""
+    point = c3d["parameters"]["POINT"]
+    unit = str(point["UNITS"]["value"][0]).strip() if point.get("UNITS", {}).get("value") \
+        else "mm"
+    xyz = np.asarray(c3d["data"]["points"][:3], dtype=float) * _LENGTH.get(unit, 1e-3)
+    xyz = np.transpose(xyz, (2, 1, 0))[:n_frames]  # 3 × markers × frames → frames × markers × 3
+    xyz[(xyz == 0).all(axis=2)] = np.nan
+    labels = [str(x).strip() for x in point["LABELS"]["value"]]
+    return xyz, labels, float(point["RATE"]["value"][0])
 
 
 def read_force_plates(path: str | Path, n_frames: int, threshold: float = 20.0
@@ -66,6 +145,7 @@ def read_force_plates(path: str | Path, n_frames: int, threshold: float = 20.0
     except Exception as exc:  # ezc3d raises plain RuntimeErrors for unreadable platform data
         reason = str(exc).strip() or exc.__class__.__name__
         raise InputError(f"{path}: cannot read the force platforms ({reason})") from None
+    markers, labels, rate = _file_markers(c3d, n_frames)
     plates = []
     for k, raw in enumerate(c3d["data"].get("platform", []), start=1):
         length = _LENGTH.get(str(raw["unit_position"]).strip(), 1e-3)
@@ -75,6 +155,9 @@ def read_force_plates(path: str | Path, n_frames: int, threshold: float = 20.0
         cop = _blocks(np.asarray(raw["center_of_pressure"], dtype=float), n_frames) * length
         free = _blocks(np.nan_to_num(np.asarray(raw["Tz"], dtype=float)), n_frames) * moment
         problem = plausibility(corners, force)
+        if problem is None:
+            problem = unloaded_under_a_foot(corners, force @ _normal(corners), markers, labels,
+                                            rate)
         loaded = np.abs(force @ _normal(corners)) >= threshold if problem is None else \
             np.zeros(n_frames, dtype=bool)
         centre = corners.mean(axis=0) if np.isfinite(corners).all() else np.zeros(3)
