@@ -82,14 +82,22 @@ def _as_mapping(options: SolveOptions) -> dict[str, Any]:
 
 
 def calibrate(template: Model, trial: Trial, *, mass: float | None = None,
-              frames: tuple[int, int] | None = None) -> Model:
+              frames: tuple[int, int] | None = None, knee_width: float | None = None,
+              ankle_width: float | None = None, marker_diameter: float | None = None,
+              mapping: dict[str, str] | None = None) -> Model:
     """A lower-limb ``template`` personalized from a static trial or a stretch of a walking
     trial (frame indices [A, B), default all), as ``fccgrb calibrate`` does: segment frames,
-    joint centres, marker positions and, with the subject's ``mass`` (kg), de Leva inertia."""
+    joint centres, marker positions and, with the subject's ``mass`` (kg), de Leva inertia.
+    A Helen Hayes/Davis template (``configs/models/helen_hayes.yaml``) takes the subject's
+    ``knee_width``, ``ankle_width`` and ``marker_diameter`` in mm (defaults 100, 70, 14: give
+    the measured ones); ``mapping``: the template's label → the trial's."""
+    from fccgrb_cli.anatomy.calibrate import Measurements
     from fccgrb_cli.anatomy.calibrate import calibrate as personalize
     from fccgrb_cli.model import parse_model
 
-    return parse_model(personalize(template, trial, frames, mass).text,
+    widths = (knee_width, ankle_width, marker_diameter)
+    measured = None if all(w is None for w in widths) else Measurements.from_mm(*widths)
+    return parse_model(personalize(template, trial, frames, mass, measured, mapping).text,
                        f"{template.source} calibrated on {trial.path}")
 
 

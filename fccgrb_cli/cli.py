@@ -279,25 +279,46 @@ def _frame_range(text: str | None) -> tuple[int, int] | None:
 @click.option("--mass", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Body mass in kg: scales segment inertia (de Leva 1996) and gives moments "
                    "in N·m/kg. Without it the model has no inertia (kinematics only).")
+@click.option("--knee-width", type=float, default=None, metavar="MM",
+              help="Helen Hayes/Davis templates: the knee's width across the epicondyles, mm "
+                   "(Davis et al. 1991).  [default: 100]")
+@click.option("--ankle-width", type=float, default=None, metavar="MM",
+              help="Helen Hayes/Davis templates: the ankle's width across the malleoli, mm.  "
+                   "[default: 70]")
+@click.option("--marker-diameter", type=float, default=None, metavar="MM",
+              help="Helen Hayes/Davis templates: the markers' diameter, mm.  [default: 14]")
+@click.option("--map", "mapping", multiple=True, metavar="NAME=LABEL|FILE",
+              help="The template's label → the trial's, where a lab spells them otherwise "
+                   "(repeatable NAME=LABEL, comma-separated pairs, or a YAML file of NAME: "
+                   "LABEL lines; the same map serves `fccgrb solve --map`).")
 @ACCEPT_TRUNCATED
 @reports_input_errors
 def calibrate(model: str, trial: str, output: str, frames: str | None,
-              mass: float | None, accept_truncated: bool) -> None:
-    """Personalize MODEL (a lower-limb template such as configs/models/lower_limb.yaml) from
-    TRIAL's markers: ISB segment frames from the landmarks named in its `calibration` section,
-    hip centres by Harrington et al. (2007), knee and ankle centres between the epicondyles and
-    the malleoli, each marker's local coordinates (mean over the frames), segment lengths and
-    inertia. Writes a model ready for `fccgrb solve`."""
+              mass: float | None, knee_width: float | None, ankle_width: float | None,
+              marker_diameter: float | None, mapping: tuple[str, ...],
+              accept_truncated: bool) -> None:
+    """Personalize MODEL (a lower-limb template such as configs/models/lower_limb.yaml or
+    helen_hayes.yaml) from TRIAL's markers: ISB segment frames from the landmarks named in its
+    `calibration` section, hip centres by Harrington et al. (2007), knee and ankle centres
+    between the epicondyles and the malleoli or, for the Helen Hayes/Davis set, by Davis et
+    al.'s (1991) chord construction from the knee and ankle widths, each marker's local
+    coordinates (mean over the frames), segment lengths and inertia. Writes a model ready for
+    `fccgrb solve`."""
+    from fccgrb_cli.anatomy.calibrate import Measurements
     from fccgrb_cli.anatomy.calibrate import calibrate as personalize
     from fccgrb_cli.io.atomic import atomic_path
     from fccgrb_cli.io.trial import read_trial
     from fccgrb_cli.model import parse_model
+    from fccgrb_cli.options import from_cli
 
     template = load_model(model)
+    widths = (knee_width, ankle_width, marker_diameter)
+    measured = None if all(w is None for w in widths) else Measurements.from_mm(*widths)
+    labels = dict(from_cli({"mapping": mapping}).mapping)
     data = read_trial(trial, accept_truncated)
     for message in data.warnings:
         click.echo(f"fccgrb: warning: {message}", err=True)
-    result = personalize(template, data, _frame_range(frames), mass)
+    result = personalize(template, data, _frame_range(frames), mass, measured, labels)
     personal = parse_model(result.text, output)
     analyse(personal)
     with atomic_path(output) as tmp:
@@ -307,6 +328,12 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
     click.echo(f"pelvis width {1e3 * result.pelvis_width:.0f} mm, depth "
                f"{1e3 * result.pelvis_depth:.0f} mm; segment lengths (mm): " + ", ".join(
                    f"{k} {1e3 * v:.0f}" for k, v in result.lengths.items()))
+    if result.measurements is not None:
+        click.echo(f"knee and ankle centres by Davis et al. (1991): "
+                   f"{result.measurements.describe()}")
+        if measured is None:
+            click.echo("fccgrb: warning: no --knee-width, --ankle-width, --marker-diameter: "
+                       "an average adult's used; give the subject's, measured", err=True)
     if mass is None:
         click.echo("fccgrb: warning: no --mass: the model has no inertia (inverse dynamics "
                    "skipped)", err=True)

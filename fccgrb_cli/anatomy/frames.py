@@ -66,6 +66,24 @@ def harrington_hip_centre(width: float, depth: float, side: str) -> np.ndarray:
     return 1e-3 * np.array([-0.24 * pd - 9.9, -0.30 * pw - 10.9, z if side == "r" else -z])
 
 
+def chord_joint_centre(proximal: np.ndarray, wand: np.ndarray, marker: np.ndarray,
+                       offset: float) -> np.ndarray:
+    """A joint centre from a lateral marker (Davis et al. 1991; Plug-in Gait's chord function):
+    the point J at ``offset`` (m; half the joint width plus the marker's radius) from the
+    ``marker``, in the plane of the ``proximal`` joint centre, the ``wand`` and the marker, on
+    the side away from the wand (medial), with the angle proximal–J–marker a right angle, so
+    that J–marker is the joint's medio-lateral axis, perpendicular to the segment's long axis
+    J–proximal. Per frame (frames × 3); the knee from the hip centre, the thigh wand and the
+    lateral knee marker; the ankle from the knee centre, the shank wand and the malleolus."""
+    along = proximal - marker
+    distance = np.linalg.norm(along, axis=-1, keepdims=True)
+    e1 = along / distance
+    towards_wand = wand - marker
+    e2 = -_unit(towards_wand - np.sum(towards_wand * e1, axis=-1, keepdims=True) * e1)
+    cos = offset / distance  # the right angle at J: |J − marker| = offset = distance · cos
+    return marker + offset * (cos * e1 + np.sqrt(1.0 - cos ** 2) * e2)
+
+
 def _lateral_to_right(lateral: np.ndarray, medial: np.ndarray, side: str) -> np.ndarray:
     """The medio-lateral direction pointing to the subject's right, from a side's lateral and
     medial landmarks."""
@@ -88,6 +106,20 @@ def shank_frames(knee: np.ndarray, lateral_malleolus: np.ndarray,
     ankle = 0.5 * (lateral_malleolus + medial_malleolus)
     return _frames(knee, None, knee - ankle,
                    _lateral_to_right(lateral_malleolus, medial_malleolus, side))
+
+
+def foot_frames_from_toe(ankle: np.ndarray, knee: np.ndarray, heel: np.ndarray,
+                         toe: np.ndarray) -> Frames:
+    """Foot from one forefoot marker (the Helen Hayes set's 2nd metatarsal head), origin at the
+    ankle centre: u from the heel to the toe marker, v ⟂ u in the plane of u and the shank's
+    long axis (ankle to knee centre; superior), w = u × v (right). The set has no transverse
+    forefoot landmark, so the foot's roll about its long axis comes from the shank, as in
+    Plug-in Gait, whose foot frame lies in the plane of the toe marker, the ankle and the knee
+    centres (Vicon, Plug-in Gait Reference Guide); the calibration posture has no inversion."""
+    u = _unit(toe - heel)
+    up = knee - ankle
+    v = _unit(up - np.sum(up * u, axis=1, keepdims=True) * u)
+    return Frames(ankle, np.stack([u, v, np.cross(u, v)], axis=2))
 
 
 def foot_frames(ankle: np.ndarray, heel: np.ndarray, first_metatarsal: np.ndarray,
