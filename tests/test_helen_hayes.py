@@ -24,13 +24,14 @@ import yaml
 from cli_helpers import one_error_line, run_cli
 
 import fccgrb_cli as fc
+from fccgrb_cli.io.forceplates import plausibility, unloaded_under_a_foot
 from fccgrb_cli.io.trial import write_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 TEMPLATE = ROOT / "configs" / "models" / "helen_hayes.yaml"
 FP_TYPE1 = ROOT.parent / "shared" / "data" / "c3d" / "FP_Type1.c3d"
-pytestmark = pytest.mark.skipif(not FP_TYPE1.exists(), reason=f"{FP_TYPE1} not present "
-                                "(the shared data sit beside the repository)")
+needs_fp_type1 = pytest.mark.skipif(not FP_TYPE1.exists(), reason=f"{FP_TYPE1} not present "
+                                    "(the shared data sit beside the repository)")
 
 MASS = 70.0
 KNEE_WIDTH_MM, ANKLE_WIDTH_MM, MARKER_MM = 110.0, 74.0, 16.0  # not the defaults (100, 70, 14)
@@ -136,6 +137,7 @@ def run(personal, trial):
 
 # ---- which label is which: the template's reading, from geometry ---------------------------------
 
+@needs_fp_type1
 def test_labels_are_not_swapped_left_and_right(trial) -> None:
     """The 'r' markers lie on the subject's right: right = forward × up, forward from the
     heels to the metatarsal heads, up against the lab's gravity (its y axis here)."""
@@ -150,6 +152,7 @@ def test_labels_are_not_swapped_left_and_right(trial) -> None:
         assert gap > 0.1, (name, gap)
 
 
+@needs_fp_type1
 def test_knee_1_is_the_knee_marker_by_de_leva_proportions(trial) -> None:
     """With 'knee 1' as the lateral epicondyle, Davis' knee centre splits the leg as de Leva
     (1996, Table 1) does — thigh/shank 422.2/434.0 = 0.97 for men, 368.5/432.3 = 0.85 for
@@ -173,6 +176,7 @@ def test_knee_1_is_the_knee_marker_by_de_leva_proportions(trial) -> None:
 
 # ---- calibration: joint centres against the hand construction ------------------------------------
 
+@needs_fp_type1
 def test_knee_centre_is_davis_chord_redone_by_hand(run, trial) -> None:
     """The solved knee centre (the thigh's KJC point over the trial) is the hand-made chord
     point: (knee width + marker diameter) / 2 from the lateral knee marker, hip centre by
@@ -195,6 +199,7 @@ def test_knee_centre_is_davis_chord_redone_by_hand(run, trial) -> None:
         assert np.abs(cos).max() < 0.03
 
 
+@needs_fp_type1
 def test_ankle_centre_is_davis_chord_from_the_knee_centre(run, trial) -> None:
     offset = 0.5e-3 * (ANKLE_WIDTH_MM + MARKER_MM)
     for side in "rl":
@@ -204,6 +209,7 @@ def test_ankle_centre_is_davis_chord_from_the_knee_centre(run, trial) -> None:
         assert np.abs(model_point(run, f"shank_{side}", "AJC")[::50] - expected).max() < 1e-3
 
 
+@needs_fp_type1
 def test_right_knee_centre_lies_right_of_the_pelvis_midline(run, trial) -> None:
     origin, axes, _, _ = pelvis_by_hand(trial)
     right = axes[:, :, 2]
@@ -216,6 +222,40 @@ def test_right_knee_centre_lies_right_of_the_pelvis_midline(run, trial) -> None:
 
 # ---- the solve: marker error, standing angles, the plates ----------------------------------------
 
+@needs_fp_type1
+def test_tracked_markers_sit_on_their_own_side_of_their_body(personal) -> None:
+    """Every tracked marker's calibrated position lies within 0.45 m of its body's origin and,
+    for the lateral markers (wands, knee, malleolus), on the body's lateral side: w (to the
+    subject's right) positive on the right, negative on the left. A marker of the wrong side or
+    segment in the template calibrates, and then fits a static trial, without either."""
+    lateral = ("RTHI", "RKNE", "RTIB", "RANK", "LTHI", "LKNE", "LTIB", "LANK")
+    for tp in personal.tracked_points:
+        local = np.array(personal.body(tp.body).points[tp.point].local)
+        assert np.linalg.norm(local) < 0.45, (tp, local)
+        if tp.point in lateral:
+            sign = 1 if tp.body.endswith("_r") else -1
+            assert sign * local[2] > 0.03, (tp, local)
+
+
+@needs_fp_type1
+def test_foot_frame_is_heel_to_toe_rolled_as_the_shank(run, trial) -> None:
+    """The foot's u runs from the heel to the 2nd metatarsal marker, its v lies in the plane of
+    u and the shank's long axis (knee to ankle centre; Plug-in Gait's foot), by hand."""
+    for side in "rl":
+        q = {}
+        names = list(run.q.names)
+        for vec in "uv":
+            q[vec] = run.q.values[::50, [names.index(f"foot_{side}.{vec}.{axis}")
+                                         for axis in "xyz"]]
+        u = unit(raw(trial, f"{side} met")[::50] - raw(trial, f"{side} heel")[::50])
+        shank = model_point(run, f"shank_{side}", "KJC")[::50] - \
+            model_point(run, f"shank_{side}", "AJC")[::50]
+        v = unit(shank - np.sum(shank * u, axis=1, keepdims=True) * u)
+        assert np.degrees(np.arccos(np.einsum("ij,ij->i", q["u"], u))).max() < 0.5
+        assert np.degrees(np.arccos(np.einsum("ij,ij->i", q["v"], v))).max() < 0.5
+
+
+@needs_fp_type1
 def test_static_trial_solves_with_a_small_marker_error(run) -> None:
     summary = run.summary()
     assert summary["failed"] == 0 and summary["flagged"] == 0
@@ -231,6 +271,7 @@ def sagittal_angle(a: np.ndarray, b: np.ndarray, right: np.ndarray) -> np.ndarra
                                  np.einsum("ij,ij->i", a, b)))
 
 
+@needs_fp_type1
 def test_standing_angles_are_plausible_and_match_the_raw_posture(run, trial) -> None:
     """Quiet standing holds the hip and knee near full extension and the foot flat; normal
     ranges reach about 10–15° of hip extension and up to 5–10° of knee hyperextension in
@@ -259,6 +300,11 @@ def test_standing_angles_are_plausible_and_match_the_raw_posture(run, trial) -> 
         hip_flexion = float(np.mean(sagittal_angle(superior[::50], thigh, r)))
         # knee flexion: the shank rotated back from the thigh (about the right axis)
         knee_flexion = float(np.mean(sagittal_angle(shank, thigh, r)))
+        # ankle dorsiflexion: the heel-to-toe line's angle from perpendicular to the shank
+        foot = raw(trial, f"{side} met")[::50] - raw(trial, f"{side} heel")[::50]
+        dorsiflexion = 90.0 - float(np.mean(np.degrees(np.arccos(
+            np.einsum("ij,ij->i", unit(shank), unit(foot))))))
+        assert means[f"ankle_dorsiflexion_{side}"] == pytest.approx(dorsiflexion, abs=2.0)
         assert means[f"hip_flexion_{side}"] == pytest.approx(hip_flexion, abs=2.0)
         assert means[f"knee_flexion_{side}"] == pytest.approx(knee_flexion, abs=2.0)
         for joint in ("hip_flexion", "knee_flexion", "ankle_dorsiflexion"):
@@ -266,6 +312,7 @@ def test_standing_angles_are_plausible_and_match_the_raw_posture(run, trial) -> 
     assert means["hip_flexion_r"] < -8.0 and means["knee_flexion_r"] < -6.0  # as the markers say
 
 
+@needs_fp_type1
 def test_implausible_plates_warn_once_each_and_carry_no_load(run, personal, tmp_path) -> None:
     """Through the command line: exit 0, one warning line per plate naming the file, the plate
     and why; the dynamics get no load from any of them, so no joint moment is built on them."""
@@ -306,6 +353,7 @@ def walking_copy(trial, tmp_path: Path, gaps: dict[str, slice], name: str) -> Pa
     return path
 
 
+@needs_fp_type1
 def test_another_labs_walking_trial_with_a_long_gap(trial, tmp_path) -> None:
     lab = tmp_path / "lab.yaml"
     lab.write_text("".join(f"{k}: {v}\n" for k, v in PIG.items()), encoding="utf-8")
@@ -327,6 +375,7 @@ def test_another_labs_walking_trial_with_a_long_gap(trial, tmp_path) -> None:
     assert solved.summary()["mean ED mm"] < 15.0
 
 
+@needs_fp_type1
 def test_frames_without_a_foot_are_reported_not_dropped(trial, tmp_path) -> None:
     """Without its heel and toe markers the right foot may turn about its ankle: those frames
     cannot be solved; they are an error naming the first, or with --skip-unsolvable a warning
@@ -351,6 +400,7 @@ def test_frames_without_a_foot_are_reported_not_dropped(trial, tmp_path) -> None
     assert not converged[300:350].any() and converged[:300].all() and converged[350:].all()
 
 
+@needs_fp_type1
 def test_a_missing_landmark_names_the_landmark_and_the_label(trial, tmp_path) -> None:
     walk = walking_copy(trial, tmp_path, {}, "walk.c3d")
     # the lab's map lacks the left shank wand: the file's LTIB is not found as 'l bar 2'
@@ -368,6 +418,7 @@ def test_a_missing_landmark_names_the_landmark_and_the_label(trial, tmp_path) ->
     assert not (tmp_path / "p.yaml").exists()
 
 
+@needs_fp_type1
 def test_measurements_are_checked_and_refused_where_unused(tmp_path) -> None:
     result = run_cli("calibrate", TEMPLATE, FP_TYPE1, "--knee-width", "10", "-o",
                      tmp_path / "p.yaml")
@@ -376,3 +427,51 @@ def test_measurements_are_checked_and_refused_where_unused(tmp_path) -> None:
     result = run_cli("calibrate", lower_limb, FP_TYPE1, "--ankle-width", "70", "-o",
                      tmp_path / "p.yaml")
     one_error_line(result, "--ankle-width", "Helen Hayes/Davis")
+
+
+# ---- implausible plates, on made-up plates and markers (no shared data needed) -------------------
+
+PLATE = np.array([[0.0, 0.0, 0.0], [0.6, 0.0, 0.0], [0.6, 0.4, 0.0], [0.0, 0.4, 0.0]])  # z up
+
+
+def test_a_plate_must_be_a_planar_rectangle() -> None:
+    force = np.zeros((10, 3))
+    assert plausibility(PLATE, force) is None
+    rhombus = PLATE.copy()
+    rhombus[2:, 0] += 0.05  # a parallelogram: opposite sides equal, corners 7° off square
+    assert "right angles" in plausibility(rhombus, force)
+    warped = PLATE.copy()
+    warped[[0, 2], 2] += 0.02  # two opposite corners 20 mm up: each 10 mm off the mean plane
+    assert "one plane" in plausibility(warped, force)
+    tiny = PLATE * 0.1
+    assert "sides of" in plausibility(tiny, force)
+
+
+def standing_marker(speed: float = 0.0, height: float = 0.03, x: float = 0.3) -> np.ndarray:
+    """One marker over the plate for 1 s at 100 Hz (frames × 1 × 3)."""
+    t = np.arange(100) / 100.0
+    return np.stack([x + speed * t, np.full(100, 0.2), np.full(100, height)], axis=1)[:, None]
+
+
+@pytest.mark.parametrize("newtons", [3.0, 9.0])
+def test_a_plate_reading_nothing_under_a_still_foot_is_implausible(newtons: float) -> None:
+    problem = unloaded_under_a_foot(PLATE, np.full(100, newtons), standing_marker(), ["toe"],
+                                    100.0)
+    assert problem is not None and "'toe'" in problem and "at least 10 N" in problem
+    assert f"{newtons:g} N" in problem
+
+
+@pytest.mark.parametrize("case", ["loaded", "swinging", "high", "on the rim", "brief"])
+def test_a_plate_is_not_flagged_without_a_still_unloaded_foot(case: str) -> None:
+    force, marker = np.full(100, 3.0), standing_marker()
+    if case == "loaded":
+        force = np.full(100, 350.0)  # a standing adult's foot
+    elif case == "swinging":
+        marker = standing_marker(speed=1.0, x=-0.2)  # a swing foot crossing at 1 m/s
+    elif case == "high":
+        marker = standing_marker(height=0.3)  # a knee marker over the plate
+    elif case == "on the rim":
+        marker = standing_marker(x=0.01)  # a marker stuck 10 mm inside a plate edge
+    elif case == "brief":
+        force[20:] = 400.0  # 0.2 s unloaded, then the foot's weight
+    assert unloaded_under_a_foot(PLATE, force, marker, ["toe"], 100.0) is None
