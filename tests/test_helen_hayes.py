@@ -475,3 +475,31 @@ def test_a_plate_is_not_flagged_without_a_still_unloaded_foot(case: str) -> None
     elif case == "brief":
         force[20:] = 400.0  # 0.2 s unloaded, then the foot's weight
     assert unloaded_under_a_foot(PLATE, force, marker, ["toe"], 100.0) is None
+
+
+@needs_fp_type1
+def test_readme_figures_are_a_fresh_runs(trial) -> None:
+    """The README's Helen Hayes figures (default widths, nrm-wls) agree with a fresh run, to
+    the digits written."""
+    import re
+
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    section = text[text.index("### A second marker set: Helen Hayes / Davis"):]
+    section = " ".join(section[:section.index("\n## ")].split())
+    run = fc.solve(fc.calibrate(fc.load_model(TEMPLATE), trial, mass=MASS), trial,
+                   method="nrm-wls")
+    found = re.search(r"mean marker error is ([\d.]+) mm \(max ([\d.]+) mm\)", section)
+    assert found is not None
+    assert float(found[1]) == pytest.approx(run.summary()["mean ED mm"], abs=0.0005)
+    assert float(found[2]) == pytest.approx(run.summary()["max ED mm"], abs=0.0005)
+    angles = run.clinical_angles
+    number = r"(−?[\d.]+)"
+    for name, key in (("hip flexion", "hip_flexion"), ("knee flexion", "knee_flexion"),
+                      ("ankle dorsiflexion", "ankle_dorsiflexion"),
+                      ("hip adduction", "hip_adduction"), ("hip rotation", "hip_rotation"),
+                      ("ankle inversion", "ankle_inversion")):
+        found = re.search(rf"{name} {number} / {number}", section)
+        assert found is not None, name
+        for value, side in zip(found.groups(), "rl", strict=True):
+            written = float(value.replace("−", "-"))
+            assert written == pytest.approx(float(np.mean(angles[f"{key}_{side}"])), abs=0.051)
