@@ -1,0 +1,398 @@
+"""fccgrb against OpenSim's inverse kinematics on the same five-bar and the same markers, in one
+run (issue 13, item 7).
+
+    python benchmarks/peers.py [--frames 300] [--repeat 3] [--model configs/models/five_bar.yaml]
+
+The model's YAML is built a second time in OpenSim 4.6 (``pip install '.[peers]'``): one
+``opensim.Body`` per body (the YAML's mass, centre of mass and inertia tensor, the body frame
+being fccgrb's (r; u, v, w)), a ``PinJoint`` per revolute, ``UniversalJoint`` per universal and
+``BallJoint`` per spherical joint at the YAML's joint points and axes, a marker at every tracked
+point, the YAML's gravity. Its joint frames are chosen so that, with every OpenSim coordinate at
+zero, each body sits at its YAML ``pose``: the two models span the same configuration space from
+the same neutral pose (the tests check it at P0, where both must reproduce the prescribed angles).
+
+Markers: fccgrb's synthesized trial (300 frames at 100 Hz, the prescribed motion of the YAML's
+``angles``, FORMULATION §7) perturbed at P0, P7.5 and P30 (FORMULATION §5, seed 0); every solver
+gets exactly these arrays. Solvers:
+
+- fccgrb NRM-WLS (FORMULATION §3, tracking weight 1e-3, tolerance 1e-10 on ‖Δq‖∞);
+- fccgrb CNO-SQP with the TC objective (FORMULATION §3, Eq. 29–36 as the objective, the
+  topological equations exact): min Σ ‖r_P(q) − r*_P‖² subject to Φ_top(q) = 0;
+- OpenSim's ``InverseKinematicsSolver``, every marker weight 1 and the constraint weight
+  infinite (the five-bar is an open chain: OpenSim's coordinates satisfy its joints by
+  construction): min Σ ‖r_P(q) − r*_P‖² over the nine joint coordinates — the same problem as
+  CNO-SQP, so both must reach the same optimum. Accuracy 1e-10 (the comparison) and OpenSim's
+  default 1e-5 (what its users get unless they change it).
+
+Timings (``time.perf_counter``; best of ``--repeat`` runs, the run with the smallest ms/frame;
+the answers of every repeat are identical):
+
+- fccgrb ms/frame: the mean of the solver's own per-frame times (``KinematicResult.time_s``):
+  one frame's warm-start prediction (frame 0: the initial guess from the markers) and iterations
+  to convergence. fccgrb 'call' ms/frame: the wall time of the whole ``solve_nrm`` /
+  ``solve_optimization`` call over the frames, divided by the frames: adds frame 0's set-up, the
+  consistent velocities and accelerations (which OpenSim's IK does not compute) and the
+  bookkeeping. Neither includes loading the YAML or ``compile_system``.
+- OpenSim ms/frame: per frame, the wall time of ``state.setTime(t); solver.track(state)``
+  (frame 0: ``state.setTime(t0); solver.assemble(state)`` from the default pose), as its users
+  run it; the read-out of the poses and marker errors after each frame is excluded. OpenSim
+  'call' ms/frame: building the ``MarkersReference`` from the in-memory marker table, the
+  ``InverseKinematicsSolver``, a fresh state, then the per-frame loop, divided by the frames.
+  Neither includes building the OpenSim model or the marker table (what writing a .trc file
+  would be).
+
+Columns: 'OpenSim/this': OpenSim's ms/frame at accuracy 1e-10 over the row's ms/frame; 'fit mm':
+the mean over frames and markers of the distance from each model point (from the solved body
+poses and the YAML's local point coordinates) to its marker; 'max|Δθ| deg': the largest
+difference, over frames and angles, of the YAML's angles (acos(s1·s2), the definition of
+fccgrb's mixed coordinates, Eq. 10) computed from the solved body poses, against OpenSim's at
+accuracy 1e-10. iterations/frame are not available from OpenSim's Python API ('-').
+biorbd (conda only) is detected and skipped when it is not importable.
+"""
+
+from __future__ import annotations
+
+import fccgrb_cli  # noqa: F401  (first: pins BLAS to one thread before numpy loads)
+import argparse
+import importlib
+import importlib.util
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+
+from fccgrb_cli.model import GROUND, Model, load_model
+from fccgrb_cli.perturb import perturb
+from fccgrb_cli.solvers.nrm import NrmSettings, solve_nrm
+from fccgrb_cli.solvers.optimize import Settings, solve_optimization
+from fccgrb_cli.synth import Synthesis, synthesize
+from fccgrb_cli.system import System, compile_system
+
+ROOT = Path(__file__).resolve().parents[1]
+LEVELS_MM = (0.0, 7.5, 30.0)
+ACCURACIES = (1e-10, 1e-5)
+REFERENCE_ACCURACY = 1e-10
+
+
+@dataclass(frozen=True)
+class Solved:
+    """One solver's answer on one marker set: body poses per frame (frames × bodies × 4 × 3,
+    the rows r, u, v, w of each body in the global frame, bodies in the model's order), the
+    per-frame solve seconds, the whole call's seconds and iterations per frame (NaN when the
+    solver does not report them)."""
+
+    label: str
+    poses: np.ndarray
+    seconds: np.ndarray
+    call_s: float
+    iterations: float
+
+
+# --- configurations compared through body poses ------------------------------------------------
+def poses_from_q(system: System, q: np.ndarray) -> np.ndarray:
+    """fccgrb's body poses (… × bodies × 4 × 3) from system coordinates q (… × nq): each body's
+    r, u, v, w (FORMULATION §1; a reduced body's w = u × v, Eq. 5)."""
+    q = np.asarray(q)
+    x = np.array([system.layout.expand(row) for row in q.reshape(-1, q.shape[-1])])
+    return x.reshape(*q.shape[:-1], len(system.layout.body_names), 4, 3)
+
+
+def _frame_rows(model: Model, body: str, poses: np.ndarray) -> np.ndarray:
+    """The rows r, u, v, w (… × 4 × 3) of a body, or of the ground (origin, x, y, z)."""
+    if body == GROUND:
+        return np.broadcast_to(np.vstack([np.zeros(3), np.eye(3)]), (*poses.shape[:-3], 4, 3))
+    return poses[..., [b.name for b in model.bodies].index(body), :, :]
+
+
+def angles_from_poses(model: Model, poses: np.ndarray) -> np.ndarray:
+    """The model's angles (… × n_angles, rad) from body poses (… × bodies × 4 × 3) the way
+    fccgrb defines its mixed coordinates (Eq. 10, FORMULATION §2 MCR): θ_k = acos(s1·s2) with
+    s = α u + β v + γ w the YAML's body vectors. Only unsigned angles (the five-bar's)."""
+    out = []
+    for angle in model.angles:
+        if angle.kind != "angle" or angle.full:
+            raise ValueError(f"angle {angle.name}: only unsigned angles (acos(s1·s2)) are "
+                             "compared with peers")
+        s = []
+        for body, vector in ((angle.body1, angle.vector1), (angle.body2, angle.vector2)):
+            local = np.array((model.ground if body == GROUND else model.body(body))
+                             .vectors[vector].local)
+            s.append(np.einsum("l,...lj->...j", local, _frame_rows(model, body, poses)[..., 1:, :]))
+        out.append(np.arccos(np.clip(np.einsum("...j,...j->...", s[0], s[1]), -1.0, 1.0)))
+    return np.stack(out, axis=-1)
+
+
+def points_from_poses(model: Model, poses: np.ndarray) -> np.ndarray:
+    """The tracked points (… × n_tracked × 3, m) from body poses: r + a u + b v + c w (Eq. 2),
+    in the order of the model's ``tracking.points``."""
+    out = []
+    for tp in model.tracked_points:
+        rows = _frame_rows(model, tp.body, poses)
+        a, b, c = model.body(tp.body).points[tp.point].local
+        out.append(rows[..., 0, :] + a * rows[..., 1, :] + b * rows[..., 2, :]
+                   + c * rows[..., 3, :])
+    return np.stack(out, axis=-2)
+
+
+def marker_fit(model: Model, poses: np.ndarray, markers: np.ndarray) -> np.ndarray:
+    """Per frame, the mean distance (m) from each tracked model point to its marker."""
+    return np.linalg.norm(points_from_poses(model, poses) - markers, axis=-1).mean(axis=-1)
+
+
+# --- fccgrb --------------------------------------------------------------------------------------
+def run_fccgrb(method: str, system: System, time_s: np.ndarray, markers: np.ndarray) -> Solved:
+    """fccgrb's NRM-WLS (weight 1e-3) or CNO-SQP (TC objective), tolerance 1e-10, through its
+    public solver functions."""
+    started = time.perf_counter()
+    if method == "nrm-wls":
+        result = solve_nrm(system, time_s, markers, NrmSettings(1e-3, 1e-10))
+    elif method == "cno-sqp":
+        result = solve_optimization(system, time_s, markers, Settings("cno-sqp", "tc"))
+    else:
+        raise ValueError(f"method {method!r}: expected nrm-wls or cno-sqp")
+    call = time.perf_counter() - started
+    if not result.converged.all():
+        raise RuntimeError(f"fccgrb {method}: frames {result.failed_frames.tolist()} failed")
+    return Solved(f"fccgrb {method}", poses_from_q(system, result.q), result.time_s, call,
+                  float(result.iterations.mean()))
+
+
+# --- OpenSim -------------------------------------------------------------------------------------
+def load_opensim() -> ModuleType | None:
+    """The ``opensim`` module, or None when it cannot be imported."""
+    try:
+        return importlib.import_module("opensim")
+    except ImportError:
+        return None
+
+
+def _euler_xyz(osim: ModuleType, R: np.ndarray) -> Any:
+    """OpenSim's frame orientation (body-fixed X-Y-Z angles) of the rotation matrix R, by
+    Simbody's own conversion (right at gimbal lock too, where the five-bar's universal joint
+    frames sit: their X is the global z)."""
+    return osim.Rotation(osim.Mat33(*map(float, R.ravel()))).convertRotationToBodyFixedXYZ()
+
+
+def _rotation(model: Model, body: str) -> np.ndarray:
+    """The body's orientation [u v w] (columns) at its YAML pose (the ground's: identity)."""
+    if body == GROUND:
+        return np.eye(3)
+    pose = model.body(body).pose
+    return np.column_stack([pose.u, pose.v, pose.w])
+
+
+def _local(model: Model, body: str, table: str, name: str) -> np.ndarray:
+    owner = model.ground if body == GROUND else model.body(body)
+    return np.array(getattr(owner, table)[name].local, dtype=float)
+
+
+def _joint_frame(model: Model, joint: Any) -> np.ndarray:
+    """The joint frame's orientation in the global frame at the YAML pose: a revolute's axis
+    along Z (OpenSim's PinJoint turns about Z); a universal's arms s_i, s_j along X and Y
+    (OpenSim's UniversalJoint turns about the parent's X, then the child's Y: exactly the
+    orientations that keep s_i ⟂ s_j); a spherical joint's: the identity."""
+    if joint.type == "spherical":
+        return np.eye(3)
+    bi, bj = joint.bodies
+    s_i = _rotation(model, bi) @ _local(model, bi, "vectors", joint.axes[0])
+    if joint.type == "revolute":
+        helper = np.eye(3)[np.argmin(np.abs(s_i))]
+        x = np.cross(helper, s_i)
+        x /= np.linalg.norm(x)
+        return np.column_stack([x, np.cross(s_i, x), s_i])
+    s_j = _rotation(model, bj) @ _local(model, bj, "vectors", joint.axes[1])
+    return np.column_stack([s_i, s_j, np.cross(s_i, s_j)])
+
+
+def build_opensim_model(osim: ModuleType, model: Model) -> Any:
+    """The model as an ``opensim.Model`` (see the module's docstring). Each joint's parent and
+    child frames get the same global orientation G at the YAML pose (R_i^T G in body i,
+    R_j^T G in body j), so that zero joint coordinates leave every body at its YAML pose."""
+    joint_classes = {"revolute": osim.PinJoint, "universal": osim.UniversalJoint,
+                     "spherical": osim.BallJoint}
+    out = osim.Model()
+    out.setName(model.name)
+    out.setGravity(osim.Vec3(*model.gravity))
+    bodies: dict[str, Any] = {}
+    for b in model.bodies:
+        if b.inertia is None:
+            raise ValueError(f"body {b.name}: OpenSim needs mass and inertia")
+        tensor = np.array(b.inertia.tensor)
+        body = osim.Body(b.name, b.inertia.mass, osim.Vec3(*b.inertia.com),
+                         osim.Inertia(*np.diag(tensor), tensor[0, 1], tensor[0, 2], tensor[1, 2]))
+        out.addBody(body)
+        bodies[b.name] = body
+    for joint in model.joints:
+        if joint.type not in joint_classes:
+            raise ValueError(f"joint {joint.name}: {joint.type} is not built in OpenSim here "
+                             f"(expected one of {sorted(joint_classes)})")
+        (bi, bj), G = joint.bodies, _joint_frame(model, joint)
+        parent = out.getGround() if bi == GROUND else bodies[bi]
+        out.addJoint(joint_classes[joint.type](
+            joint.name,
+            parent, osim.Vec3(*_local(model, bi, "points", joint.points[0])),
+            _euler_xyz(osim, _rotation(model, bi).T @ G),
+            bodies[bj], osim.Vec3(*_local(model, bj, "points", joint.points[1])),
+            _euler_xyz(osim, _rotation(model, bj).T @ G)))
+    for tp in model.tracked_points:
+        out.addMarker(osim.Marker(tp.marker, bodies[tp.body],
+                                  osim.Vec3(*_local(model, tp.body, "points", tp.point))))
+    out.finalizeConnections()
+    return out
+
+
+def opensim_poses(osim: ModuleType, osim_model: Any, model: Model, state: Any) -> np.ndarray:
+    """Every body's pose (bodies × 4 × 3: rows r, u, v, w) from OpenSim's ground transforms."""
+    out = np.empty((len(model.bodies), 4, 3))
+    bodies = osim_model.getBodySet()
+    for k, b in enumerate(model.bodies):
+        X = bodies.get(b.name).getTransformInGround(state)
+        R, p = X.R().asMat33(), X.p()
+        out[k, 0] = [p.get(i) for i in range(3)]
+        out[k, 1:] = [[R.get(i, j) for i in range(3)] for j in range(3)]
+    return out
+
+
+def marker_table(osim: ModuleType, labels: tuple[str, ...], time_s: np.ndarray,
+                 markers: np.ndarray, rate: float) -> Any:
+    """The markers (frames × markers × 3, m) as OpenSim's ``TimeSeriesTableVec3`` in metres,
+    what ``TRCFileAdapter`` would read from a .trc file."""
+    table = osim.TimeSeriesTableVec3()
+    table.setColumnLabels(list(labels))
+    for t, frame in zip(time_s, markers, strict=True):
+        row = osim.RowVectorVec3(len(labels))
+        for k, point in enumerate(frame):
+            row[k] = osim.Vec3(*map(float, point))
+        table.appendRow(float(t), row)
+    table.addTableMetaDataString("Units", "m")
+    table.addTableMetaDataString("DataRate", f"{rate:g}")
+    return table
+
+
+def run_opensim(osim: ModuleType, osim_model: Any, model: Model, table: Any,
+                time_s: np.ndarray, accuracy: float) -> tuple[Solved, np.ndarray]:
+    """OpenSim's IK on every frame (assemble at frame 0, track after), every marker weight 1,
+    infinite constraint weight; also OpenSim's own marker errors (frames × markers, m, in the
+    model's ``tracking.points`` order) read after each frame."""
+    started = time.perf_counter()
+    state = osim_model.initSystem()
+    weights = osim.SetMarkerWeights()
+    for tp in model.tracked_points:
+        weights.cloneAndAppend(osim.MarkerWeight(tp.marker, 1.0))
+    reference = osim.MarkersReference(table, weights)
+    solver = osim.InverseKinematicsSolver(osim_model, reference,
+                                          osim.SimTKArrayCoordinateReference(), float("inf"))
+    solver.setAccuracy(accuracy)
+    seconds = np.empty(len(time_s))
+    poses = np.empty((len(time_s), len(model.bodies), 4, 3))
+    errors = np.empty((len(time_s), len(model.tracked_points)))
+    squared = osim.SimTKArrayDouble()
+    read_out = 0.0
+    for f, t in enumerate(time_s):
+        tick = time.perf_counter()
+        state.setTime(float(t))
+        if f == 0:
+            solver.assemble(state)
+        else:
+            solver.track(state)
+        tock = time.perf_counter()
+        seconds[f] = tock - tick
+        osim_model.realizePosition(state)
+        poses[f] = opensim_poses(osim, osim_model, model, state)
+        solver.computeCurrentSquaredMarkerErrors(squared)
+        by_name = {solver.getMarkerNameForIndex(k): squared.getElt(k)
+                   for k in range(solver.getNumMarkersInUse())}
+        errors[f] = np.sqrt([by_name[tp.marker] for tp in model.tracked_points])
+        read_out += time.perf_counter() - tock
+    call = time.perf_counter() - started - read_out
+    return Solved(f"OpenSim {accuracy:.0e}", poses, seconds, call, float("nan")), errors
+
+
+# --- the comparison ------------------------------------------------------------------------------
+def best_of(repeat: int, run: Any) -> Any:
+    """The run (of ``repeat``) with the smallest mean per-frame time; ``run`` returns a Solved
+    or a (Solved, extra) pair."""
+    best = None
+    for _ in range(repeat):
+        out = run()
+        solved = out[0] if isinstance(out, tuple) else out
+        if best is None or solved.seconds.mean() < best[0]:
+            best = (solved.seconds.mean(), out)
+    return best[1]
+
+
+def compare_level(model: Model, system: System, truth: Synthesis, level_mm: float, frames: int,
+                  repeat: int, osim: ModuleType | None) -> tuple[np.ndarray, list[Solved]]:
+    """Every solver on the synthesized trial's (``truth``) first ``frames`` frames perturbed at
+    ``level_mm`` (seed 0): the markers and the solvers' answers (fccgrb's first, then OpenSim
+    at each accuracy of ACCURACIES, when OpenSim is importable)."""
+    time_s = truth.result.time[:frames]
+    markers = perturb(truth.markers, truth.labels, truth.rate, level_mm * 1e-3, seed=0)[:frames]
+    solved = [best_of(repeat, lambda m=method: run_fccgrb(m, system, time_s, markers))
+              for method in ("nrm-wls", "cno-sqp")]
+    if osim is not None:
+        osim_model = build_opensim_model(osim, model)
+        table = marker_table(osim, truth.labels, time_s, markers, truth.rate)
+        for accuracy in ACCURACIES:
+            solved.append(best_of(repeat, lambda a=accuracy: run_opensim(
+                osim, osim_model, model, table, time_s, a))[0])
+    return markers, solved
+
+
+def table_rows(model: Model, level_mm: float, markers: np.ndarray,
+               solved: list[Solved]) -> list[str]:
+    """The table's rows for one level."""
+    reference = next((s for s in solved if s.label == f"OpenSim {REFERENCE_ACCURACY:.0e}"), None)
+    rows = []
+    for s in solved:
+        ms = 1e3 * s.seconds.mean()
+        iterations = "-" if np.isnan(s.iterations) else f"{s.iterations:.2f}"
+        ratio = dtheta = "-"
+        if reference is not None:
+            ratio = f"{1e3 * reference.seconds.mean() / ms:.2f}"
+            if s is not reference:
+                diff = angles_from_poses(model, s.poses) - angles_from_poses(model,
+                                                                             reference.poses)
+                dtheta = f"{np.degrees(np.abs(diff).max()):.2e}"
+        fit = 1e3 * marker_fit(model, s.poses, markers).mean()
+        fit_text = f"{fit:.4f}" if fit >= 0.01 else f"{fit:.1e}"
+        rows.append(f"P{level_mm:<5g} {s.label:16} {ms:9.3f} {1e3 * s.call_s / len(markers):9.3f} "
+                    f"{iterations:>10} {ratio:>12} {fit_text:>9} {dtheta:>11}")
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=300)
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--model", default=str(ROOT / "configs" / "models" / "five_bar.yaml"))
+    args = parser.parse_args()
+    model = load_model(args.model)
+    system = compile_system(model, angles="coordinate", track=True)
+    osim = load_opensim()
+    if osim is None:
+        print("opensim: not installed (pip install '.[peers]'), skipped")
+    else:
+        print(f"opensim {osim.__version__}: InverseKinematicsSolver, marker weights 1, "
+              f"constraint weight inf, accuracy {' and '.join(f'{a:g}' for a in ACCURACIES)}")
+    if importlib.util.find_spec("biorbd") is None:
+        print("biorbd: not installed, skipped")
+    else:
+        print("biorbd: installed, but no biorbd model is built here yet, skipped")
+    print(f"{model.name}: {args.frames} frames, best of {args.repeat}; "
+          f"'OpenSim/this' = OpenSim {REFERENCE_ACCURACY:g} ms/frame over this row's; "
+          f"'max|Δθ|' against OpenSim {REFERENCE_ACCURACY:g}")
+    print(f"{'level':6} {'solver':16} {'ms/frame':>9} {'call ms/f':>9} {'iter/frame':>10} "
+          f"{'OpenSim/this':>12} {'fit mm':>9} {'max|Δθ| deg':>11}")
+    truth = synthesize(model)
+    for level in LEVELS_MM:
+        markers, solved = compare_level(model, system, truth, level, args.frames, args.repeat,
+                                        osim)
+        print("\n".join(table_rows(model, level, markers, solved)), flush=True)
+
+
+if __name__ == "__main__":
+    main()
