@@ -1,15 +1,16 @@
 """fccgrb against OpenSim's inverse kinematics on the same five-bar and the same markers, in one
 run (issue 13, item 7).
 
-    python benchmarks/peers.py [--frames 300] [--repeat 3] [--model configs/models/five_bar.yaml]
+    python benchmarks/peers.py [--frames 300] [--repeat 3]
 
-The model's YAML is built a second time in OpenSim 4.6 (``pip install '.[peers]'``): one
-``opensim.Body`` per body (the YAML's mass, centre of mass and inertia tensor, the body frame
-being fccgrb's (r; u, v, w)), a ``PinJoint`` per revolute, ``UniversalJoint`` per universal and
-``BallJoint`` per spherical joint at the YAML's joint points and axes, a marker at every tracked
-point, the YAML's gravity. Its joint frames are chosen so that, with every OpenSim coordinate at
-zero, each body sits at its YAML ``pose``: the two models span the same configuration space from
-the same neutral pose (the tests check it at P0, where both must reproduce the prescribed angles).
+The five-bar's YAML (configs/models/five_bar.yaml) is built a second time in OpenSim 4.6
+(``pip install '.[peers]'``): one ``opensim.Body`` per body (the YAML's mass, centre of mass and
+inertia tensor, the body frame being fccgrb's (r; u, v, w)), a ``PinJoint`` per revolute,
+``UniversalJoint`` per universal and ``BallJoint`` per spherical joint at the YAML's joint points
+and axes, a marker at every tracked point, the YAML's gravity. Its joint frames are chosen so
+that, with every OpenSim coordinate at zero, each body sits at its YAML ``pose``: the two models
+span the same configuration space from the same neutral pose (tests/test_peers.py checks the
+frames against the YAML's axes, and that at P0 OpenSim reproduces the prescribed angles).
 
 Markers: fccgrb's synthesized trial (300 frames at 100 Hz, the prescribed motion of the YAML's
 ``angles``, FORMULATION §7) perturbed at P0, P7.5 and P30 (FORMULATION §5, seed 0); every solver
@@ -368,9 +369,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=300)
     parser.add_argument("--repeat", type=int, default=3)
-    parser.add_argument("--model", default=str(ROOT / "configs" / "models" / "five_bar.yaml"))
     args = parser.parse_args()
-    model = load_model(args.model)
+    model = load_model(ROOT / "configs" / "models" / "five_bar.yaml")
     system = compile_system(model, angles="coordinate", track=True)
     osim = load_opensim()
     if osim is None:
