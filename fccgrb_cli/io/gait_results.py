@@ -20,6 +20,7 @@ import numpy as np
 from fccgrb_cli.gait.analysis import GaitResults
 from fccgrb_cli.gait.cycles import PARAMETERS, SideCycles
 from fccgrb_cli.gait.events import Events
+from fccgrb_cli.io.datasets import put
 
 
 def _strings(values) -> tuple[str, ...]:
@@ -31,13 +32,13 @@ def write_cycles(group, cycles: dict[str, SideCycles]) -> None:
     out = group.create_group("cycles")
     for side, c in cycles.items():
         s = out.create_group(side)
-        s["curves"] = c.curves
+        put(s, "curves", c.curves)
         for key in ("curves", "mean", "sd"):
             if key != "curves":
-                s[key] = getattr(c, key)()
+                put(s, key, getattr(c, key)())
             s[key].attrs.update({"names": list(c.names), "units": list(c.units)})
-        s["start"], s["stop"], s["trusted"] = c.start, c.stop, c.trusted
-        s["parameters"] = c.parameters
+        for key in ("start", "stop", "trusted", "parameters"):
+            put(s, key, getattr(c, key))
         s["parameters"].attrs.update({"names": [p for p, _ in PARAMETERS],
                                       "units": [u for _, u in PARAMETERS]})
 
@@ -77,7 +78,7 @@ def write_gait(g, gait: GaitResults) -> None:
     events.attrs["used"] = gait.events.source
     for source, found in gait.found.items():
         e = events.create_group(source)
-        e["time"] = found.time
+        put(e, "time", found.time)
         e.create_dataset("side", data=list(found.side), dtype=text)
         e.create_dataset("kind", data=list(found.kind), dtype=text)
     write_cycles(out, gait.cycles)

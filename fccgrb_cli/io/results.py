@@ -48,6 +48,8 @@ Contract (SI units: m, rad, s):
       clinical/moments           frames × clinical angles, N·m, conjugate to them (with the
                                  dynamics); clinical/moments_per_kg, N·m/kg (attribute ``mass``)
       clinical/stance/<body>     per frame, True while a force plate loads that body
+Arrays of 64 KiB or more are stored chunked and gzip-compressed (``fccgrb_cli.io.datasets``):
+a long trial is written and read a chunk at a time; any HDF5 reader decodes them.
 """
 
 from __future__ import annotations
@@ -64,6 +66,7 @@ from fccgrb_cli.dynamics.inverse import InverseDynamics
 from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.atomic import atomic_path
+from fccgrb_cli.io.datasets import put
 from fccgrb_cli.io.gait_results import read_gait, write_gait
 from fccgrb_cli.pipeline import Run
 from fccgrb_cli.solvers.quality import BITS
@@ -127,13 +130,13 @@ def write_run(path: str | Path, run: Run, command: str, cell: dict | None = None
             if "reference" in h5:
                 del h5["reference"]
             ref = h5.create_group("reference")
-            ref["markers"] = run.reference
+            put(ref, "markers", run.reference)
             ref["markers"].attrs["labels"] = list(run.labels)
             ref["markers"].attrs["rate"] = run.rate
             if run.truth_theta is not None:
                 if "truth" in h5:
                     del h5["truth"]
-                h5.create_group("truth")["theta"] = run.truth_theta
+                put(h5.create_group("truth"), "theta", run.truth_theta)
                 h5["truth/theta"].attrs["names"] = list(run.result.angle_names)
             runs = h5.require_group("runs")
             if run.name in runs:
@@ -155,22 +158,22 @@ def write_run(path: str | Path, run: Run, command: str, cell: dict | None = None
             g.attrs.update({"options": run.options.to_json(), "model": run.model_text,
                             "trial": run.trial_path, "rate": run.rate,
                             "labels": list(run.labels)})
-            g["time"] = r.time
-            g.create_dataset("reference", data=run.reference, compression="gzip")
+            put(g, "time", r.time)
+            put(g, "reference", run.reference)
             if run.truth_theta is not None:
-                g["truth_theta"] = run.truth_theta
+                put(g, "truth_theta", run.truth_theta)
             for key in ("q", "qd", "qdd", "iterations", "time_s", "phi_norm", "phi_top_max"):
-                g.create_dataset(key, data=getattr(r, key), compression="gzip")
-            g["converged"] = r.trusted
-            g["solver_converged"] = r.converged
-            g["flags"] = r.flags if r.flags is not None else np.zeros(r.n_frames, np.uint8)
+                put(g, key, getattr(r, key))
+            put(g, "converged", r.trusted)
+            put(g, "solver_converged", r.converged)
+            put(g, "flags", r.flags if r.flags is not None else np.zeros(r.n_frames, np.uint8))
             g["flags"].attrs.update(BITS)
             for key, per in (("theta", ""), ("theta_d", "/s"), ("theta_dd", "/s²")):
-                g[key] = getattr(r, key)
+                put(g, key, getattr(r, key))
                 g[key].attrs["names"] = list(r.angle_names)
                 g[key].attrs.create("units", [u + per for u in run._angle_units], dtype=text)
             for key in ("model_points", "markers_input", "ed", "ed_input"):
-                g.create_dataset(key, data=getattr(run, key), compression="gzip")
+                put(g, key, getattr(run, key))
             if r.status:
                 g.create_dataset("status", data=list(r.status),
                                  dtype=h5py.string_dtype(encoding="utf-8"))
@@ -184,19 +187,19 @@ def write_run(path: str | Path, run: Run, command: str, cell: dict | None = None
 
 def _write_clinical(g, c: ClinicalResults) -> None:
     out = g.create_group("clinical")
-    out["angles"] = c.angles
+    put(out, "angles", c.angles)
     out["angles"].attrs.update({"names": list(c.names), "units": "deg",
                                 "contact": [b or "" for b in c.contact]})
     if c.moments is not None:
-        out["moments"] = c.moments
+        put(out, "moments", c.moments)
         out["moments"].attrs.update({"names": list(c.names), "units": "N·m"})
     if c.moments_per_kg is not None:
-        out["moments_per_kg"] = c.moments_per_kg
+        put(out, "moments_per_kg", c.moments_per_kg)
         out["moments_per_kg"].attrs.update({"names": list(c.names), "units": "N·m/kg",
                                             "mass": c.mass})
     stance = out.create_group("stance")
     for body, frames in c.stance.items():
-        stance[body] = frames
+        put(stance, body, frames)
 
 
 def _write_dynamics(g, run: Run) -> None:
@@ -204,35 +207,35 @@ def _write_dynamics(g, run: Run) -> None:
 
     d = run.dynamics
     inverse, kin = d.inverse, d.kinematics
-    g.create_dataset("joint_moments", data=inverse.joint_moments)
+    put(g, "joint_moments", inverse.joint_moments)
     g["joint_moments"].attrs["names"] = list(inverse.angle_names)
     g["joint_moments"].attrs.create(
         "units", ["N" if u == "m" else "N·m" for u in run._angle_units],
         dtype=h5py.string_dtype(encoding="utf-8"))
-    g.create_dataset("lambda", data=inverse.lam, compression="gzip")
+    put(g, "lambda", inverse.lam)
     g["lambda"].attrs["labels"] = list(inverse.row_labels)
-    g["joint_residual"] = inverse.residual
+    put(g, "joint_residual", inverse.residual)
     classical = g.create_group("classical")
     classical.attrs.update({"method": kin.method, "tol": kin.tol,
                             "cutoff_hz": np.nan if d.cutoff is None else d.cutoff})
     for key in ("q", "qd", "qdd", "theta", "theta_d", "theta_dd", "iterations", "time_s",
                 "phi_norm", "phi_top_max", "converged"):
-        classical.create_dataset(key, data=getattr(kin, key), compression="gzip")
+        put(classical, key, getattr(kin, key))
     if inverse.base_names:
         for key in ("residual_force", "residual_moment"):
-            g.create_dataset(key, data=getattr(inverse, key))
+            put(g, key, getattr(inverse, key))
             g[key].attrs["bases"] = list(inverse.base_names)
         g["residual_force"].attrs["units"] = "N"
         g["residual_moment"].attrs["units"] = "N·m, about the base's origin"
     energy = g.create_group("energy")
-    energy["kinetic"], energy["potential"] = inverse.kinetic, inverse.potential
-    energy["external_power"] = inverse.external_power
+    for key in ("kinetic", "potential", "external_power"):
+        put(energy, key, getattr(inverse, key))
     loads = g.create_group("loads")
     for load in d.loads:
         item = loads.create_group(load.name)
         item.attrs["body"] = load.body
         for key in ("force", "point", "moment"):
-            item.create_dataset(key, data=getattr(load, key), compression="gzip")
+            put(item, key, getattr(load, key))
 
 
 def read_runs(path: str | Path) -> dict[str, Run]:
