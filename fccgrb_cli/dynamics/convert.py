@@ -7,12 +7,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-import numpy as np
-
 from fccgrb_cli.dynamics.inverse import InverseDynamics, inverse_dynamics
 from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.model import Model
 from fccgrb_cli.solvers.baseline import driven_by
+from fccgrb_cli.solvers.batched import Stacked
 from fccgrb_cli.solvers.result import KinematicResult
 from fccgrb_cli.system import compile_system
 
@@ -29,13 +28,20 @@ class Dynamics:
 
 def classical_dynamics(model: Model, result: KinematicResult, *, cutoff: float | None = None,
                        order: int = 2, loads: Sequence[ExternalLoad] = (),
-                       tol: float = 1e-10) -> Dynamics:
-    """Drive the classical model with the run's angles and solve its inverse dynamics."""
+                       tol: float = 1e-10, batched: bool = True) -> Dynamics:
+    """Drive the classical model with the run's angles and solve its inverse dynamics.
+
+    ``batched`` (the default): every frame at once, each starting from the run's own body
+    coordinates (they satisfy the same topology, and the drivers exactly when unfiltered), the
+    multipliers by stacked solves; False: frame by frame, each warm-started from the previous
+    one (the reference the batched path equals)."""
     system = compile_system(model, angles="driver")
     n_body = system.layout.n_body_q
-    base = np.array([system.base_reference(q[:n_body]) for q in result.q])
-    kinematics = driven_by(system, result.time, result.theta, result.q[0, :n_body].copy(),
-                           cutoff=cutoff, order=order, tol=tol, method=result.method, base=base)
+    body_q = result.q[:, :n_body]
+    base = Stacked(system).base_reference(body_q)
+    kinematics = driven_by(system, result.time, result.theta, body_q[0].copy(), cutoff=cutoff,
+                           order=order, tol=tol, method=result.method, base=base,
+                           guesses=body_q if batched else None)
     inverse = inverse_dynamics(system, kinematics.q, kinematics.qd, kinematics.qdd,
-                               kinematics.theta, loads)
+                               kinematics.theta, loads, batched=batched)
     return Dynamics(kinematics, inverse, tuple(loads), cutoff)

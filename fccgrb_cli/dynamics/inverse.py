@@ -20,6 +20,7 @@ import numpy as np
 
 from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.dynamics.mass import gravity_forces, mass_matrix
+from fccgrb_cli.solvers.batched import Stacked, factor
 from fccgrb_cli.solvers.newton import linear_solve
 from fccgrb_cli.system import System
 
@@ -45,36 +46,18 @@ class InverseDynamics:
 
 
 def inverse_dynamics(system: System, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
-                     theta: np.ndarray, loads: Sequence[ExternalLoad] = ()) -> InverseDynamics:
-    """λ and τ for every frame of an AD system's motion (q, q̇, q̈: frames × nq; θ the drivers)."""
+                     theta: np.ndarray, loads: Sequence[ExternalLoad] = (), *,
+                     batched: bool = True) -> InverseDynamics:
+    """λ and τ for every frame of an AD system's motion (q, q̇, q̈: frames × nq; θ the drivers):
+    all frames at once on stacked arrays (``batched``), or frame by frame (the reference)."""
     if system.mixed:
         raise ValueError("inverse_dynamics needs the classical system (angles='driver')")
-    model, layout = system.model, system.layout
+    model = system.model
     M = mass_matrix(model)
     g = gravity_forces(model)
+    multipliers = _stacked if batched else _frame_by_frame
+    lam, residual, xs, xds, power = multipliers(system, M, g, q, qd, qdd, loads)
     driver_rows = system.n_linear_rows + system.angle_rows
-    n = len(q)
-    lam = np.zeros((n, system.n_rows))
-    kinetic, potential, power, residual = (np.zeros(n) for _ in range(4))
-    offsets = {name: layout.x_offset(name) for name in layout.body_names}
-    xs = np.empty((n, layout.nx))
-    for f in range(n):
-        x = xs[f] = layout.expand(q[f])
-        xd = layout.expand_rate(q[f], qd[f])
-        xq = layout.expand_jacobian(q[f])
-        xdd = (qdd[f] if xq is None else xq @ qdd[f]) + layout.expand_bias(qd[f])
-        forces = g.copy()
-        for load in loads:
-            s = offsets[load.body]
-            forces[s:s + 12] += load.generalized(x[s:s + 12], f)
-            power[f] += load.power(x[s:s + 12], xd[s:s + 12], f)
-        rhs_x = forces - M @ xdd
-        rhs = rhs_x if xq is None else xq.T @ rhs_x
-        J = system.jacobian(q[f])
-        lam[f] = linear_solve(J.T, rhs)
-        residual[f] = np.linalg.norm(J.T @ lam[f] - rhs)
-        kinetic[f] = 0.5 * xd @ M @ xd
-        potential[f] = -g @ x
     bases, force, moment = _base_wrenches(system, xs, lam)
     moments = -system.g_terms(theta)[1] * lam[:, driver_rows]
     if len(system.sine_rows):  # a signed angle's sine row: Φ_θ = −cos θ (docs/signed_angles.md)
@@ -82,10 +65,62 @@ def inverse_dynamics(system: System, q: np.ndarray, qd: np.ndarray, qdd: np.ndar
         moments[:, k] -= np.cos(theta[:, k]) * lam[:, system.n_linear_rows + system.sine_rows]
     return InverseDynamics(
         angle_names=tuple(a.name for a in model.angles), row_labels=system.labels, lam=lam,
-        joint_moments=moments, kinetic=kinetic,
-        potential=potential,
-        external_power=power, residual=residual, base_names=bases, residual_force=force,
-        residual_moment=moment)
+        joint_moments=moments, kinetic=0.5 * np.einsum("fi,ij,fj->f", xds, M, xds),
+        potential=-(xs @ g), external_power=power, residual=residual, base_names=bases,
+        residual_force=force, residual_moment=moment)
+
+
+Multipliers = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def _stacked(system: System, M: np.ndarray, g: np.ndarray, q: np.ndarray, qd: np.ndarray,
+             qdd: np.ndarray, loads: Sequence[ExternalLoad]) -> Multipliers:
+    """λ (frames × rows), ‖Φ_qᵀλ − rhs‖, x, ẋ and the loads' power of every frame at once:
+    ẍ = X_q q̈ + V̇ q̇, rhs = X_qᵀ (g_x + Σ loads − M_x ẍ), Φ_qᵀ λ = rhs by stacked solves."""
+    stacked = Stacked(system)
+    n = len(q)
+    frames = np.arange(n)
+    x, xd, xq = stacked.expand(q), stacked.expand_rate(q, qd), stacked.expand_jacobian(q)
+    xdd = (qdd if xq is None else np.einsum("fxq,fq->fx", xq, qdd)) + stacked.expand_bias(qd)
+    forces = np.tile(g, (n, 1))
+    power = np.zeros(n)
+    for load in loads:
+        s = system.layout.x_offset(load.body)
+        forces[:, s:s + 12] += load.generalized(x[:, s:s + 12], frames)
+        power += load.power(x[:, s:s + 12], xd[:, s:s + 12], frames)
+    rhs_x = forces - xdd @ M.T
+    rhs = rhs_x if xq is None else np.einsum("fxq,fx->fq", xq, rhs_x)
+    J = stacked.jacobian(q)
+    lam = factor(J).solve_transposed(rhs)
+    residual = np.linalg.norm(np.einsum("frq,fr->fq", J, lam) - rhs, axis=1)
+    return lam, residual, x, xd, power
+
+
+def _frame_by_frame(system: System, M: np.ndarray, g: np.ndarray, q: np.ndarray,
+                    qd: np.ndarray, qdd: np.ndarray,
+                    loads: Sequence[ExternalLoad]) -> Multipliers:
+    """What ``_stacked`` computes, one frame at a time (``linear_solve`` on each Φ_qᵀ)."""
+    layout = system.layout
+    n = len(q)
+    lam = np.zeros((n, system.n_rows))
+    power, residual = np.zeros(n), np.zeros(n)
+    xs, xds = np.empty((n, layout.nx)), np.empty((n, layout.nx))
+    for f in range(n):
+        x = xs[f] = layout.expand(q[f])
+        xd = xds[f] = layout.expand_rate(q[f], qd[f])
+        xq = layout.expand_jacobian(q[f])
+        xdd = (qdd[f] if xq is None else xq @ qdd[f]) + layout.expand_bias(qd[f])
+        forces = g.copy()
+        for load in loads:
+            s = layout.x_offset(load.body)
+            forces[s:s + 12] += load.generalized(x[s:s + 12], f)
+            power[f] += load.power(x[s:s + 12], xd[s:s + 12], f)
+        rhs_x = forces - M @ xdd
+        rhs = rhs_x if xq is None else xq.T @ rhs_x
+        J = system.jacobian(q[f])
+        lam[f] = linear_solve(J.T, rhs)
+        residual[f] = np.linalg.norm(J.T @ lam[f] - rhs)
+    return lam, residual, xs, xds, power
 
 
 def _base_wrenches(system: System, xs: np.ndarray, lam: np.ndarray

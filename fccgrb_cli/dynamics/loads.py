@@ -26,20 +26,25 @@ class ExternalLoad:
     point: np.ndarray
     moment: np.ndarray
 
-    def generalized(self, x_body: np.ndarray, frame: int) -> np.ndarray:
-        """The 12 generalized forces on the body's fully-defined coordinates at one frame."""
-        r, u, v, w = x_body.reshape(4, 3)
-        frame_axes = np.column_stack([u, v, w])
-        local = np.linalg.solve(frame_axes, self.point[frame] - r)
+    def generalized(self, x_body: np.ndarray, frame: int | np.ndarray) -> np.ndarray:
+        """The 12 generalized forces on the body's fully-defined coordinates at one frame
+        (x_body: 12 numbers, ``frame`` an index) or at many (x_body: frames × 12, ``frame``
+        their indices; frames × 12 out)."""
+        x = x_body.reshape(*x_body.shape[:-1], 4, 3)
+        r, u, v, w = (x[..., k, :] for k in range(4))
+        frame_axes = np.stack([u, v, w], axis=-1)
+        local = np.linalg.solve(frame_axes, (self.point[frame] - r)[..., None])[..., 0]
         f = self.force[frame]
         n = self.moment[frame]
-        return np.concatenate([f, local[0] * f + 0.5 * np.cross(n, u),
-                               local[1] * f + 0.5 * np.cross(n, v),
-                               local[2] * f + 0.5 * np.cross(n, w)])
+        return np.concatenate([f, local[..., 0:1] * f + 0.5 * np.cross(n, u),
+                               local[..., 1:2] * f + 0.5 * np.cross(n, v),
+                               local[..., 2:3] * f + 0.5 * np.cross(n, w)], axis=-1)
 
-    def power(self, x_body: np.ndarray, xd_body: np.ndarray, frame: int) -> float:
-        """Power of the load: f · (velocity of the body point under it) + n · ω."""
-        return float(self.generalized(x_body, frame) @ xd_body)
+    def power(self, x_body: np.ndarray, xd_body: np.ndarray,
+              frame: int | np.ndarray) -> np.ndarray:
+        """Power of the load: f · (velocity of the body point under it) + n · ω (W; one
+        number per frame, as ``generalized``)."""
+        return np.einsum("...i,...i->...", self.generalized(x_body, frame), xd_body)
 
     def lowpassed(self, rate: float, cutoff: float, order: int = 2) -> ExternalLoad:
         """The load with force and moment low-passed like the kinematics (the same cutoff keeps

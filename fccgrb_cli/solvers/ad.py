@@ -1,7 +1,12 @@
 """Kinematic analysis with angular drivers (AD): Φ(q, t) = 0 with AR drivers (Eq. 23–28).
 
 Positions by Newton–Raphson frame by frame, each frame warm-started from the previous one
-(extrapolated with its velocity and acceleration), then Φ_q q̇ = ν and Φ_q q̈ = γ.
+(extrapolated with its velocity and acceleration), then Φ_q q̇ = ν and Φ_q q̈ = γ
+(``solve_ad``). When a good guess is known for every frame (the converted model of
+FORMULATION §4: the mixed-coordinate solution's bodies already satisfy the topology and the
+drivers it becomes), the frames are independent and ``solve_ad_batched`` solves them all at
+once on stacked arrays, the frames that do not converge in a few iterations going through the
+frame-by-frame path.
 """
 
 from __future__ import annotations
@@ -13,12 +18,16 @@ import numpy as np
 
 from fccgrb_cli.blas import single_threaded
 from fccgrb_cli.errors import InputError
+from fccgrb_cli.solvers.batched import Drives, Stacked, factor, newton_stacked
 from fccgrb_cli.solvers.newton import linear_solve, newton_raphson
 from fccgrb_cli.solvers.result import KinematicResult
 from fccgrb_cli.system import Drive, System
 
 ASSEMBLY_STEP = np.radians(5.0)
 ASSEMBLY_STEP_DISTANCE = 0.02  # m
+# Newton iterations a frame gets in the batch before it goes through the frame-by-frame path
+BATCH_ITER = 8
+Base = tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
 def assemble(system: System, q_guess: np.ndarray, theta: np.ndarray, tol: float,
@@ -46,54 +55,118 @@ def assemble(system: System, q_guess: np.ndarray, theta: np.ndarray, tol: float,
     return q
 
 
+def stacked_drives(system: System, theta: np.ndarray, theta_d: np.ndarray,
+                   theta_dd: np.ndarray, base: Base | None) -> Drives:
+    """Every frame's drive: θ*, θ̇*, θ̈* and the floating bases' driven features and their
+    rates (frames × slots × 3 each, see ``System.base_reference``; required when the model has
+    floating bases)."""
+    if system.n_base_slots and base is None:
+        raise ValueError("a model with a floating base needs its base trajectory")
+    if system.mixed:
+        raise ValueError("solve_ad needs a system compiled with angles='driver'")
+    empty = np.zeros((len(theta), system.n_base_slots, 3))
+    ref, ref_d, ref_dd = base if base is not None else (empty, empty, empty)
+    return Drives(np.asarray(theta), np.asarray(theta_d), np.asarray(theta_dd), ref, ref_d,
+                  ref_dd)
+
+
+def frame_rates(system: System, q: np.ndarray, drive: Drive) -> tuple[np.ndarray, np.ndarray]:
+    """q̇ and q̈ of one frame: Φ_q q̇ = ν, Φ_q q̈ = γ (FORMULATION §3)."""
+    J = system.jacobian(q)
+    qd = linear_solve(J, system.nu(q, drive))
+    return qd, linear_solve(J, system.gamma(q, qd, drive))
+
+
 @single_threaded
 def solve_ad(system: System, time: np.ndarray, theta: np.ndarray, theta_d: np.ndarray,
              theta_dd: np.ndarray, q_guess: np.ndarray, *, tol: float = 1e-10,
-             max_iter: int = 50, base: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+             max_iter: int = 50, base: Base | None = None,
              progress: Callable[[int, int], None] | None = None) -> KinematicResult:
     """AD analysis over all frames; θ, θ̇, θ̈ are (frames × n_coordinates) in rad, rad/s, rad/s²
     (m, m/s, m/s² for distances);
     ``base``: the floating bases' driven features and their rates (frames × slots × 3 each,
     see ``System.base_reference``), required when the model has floating bases."""
-    if system.n_base_slots and base is None:
-        raise ValueError("a model with a floating base needs its base trajectory")
-    n_slots = system.n_base_slots
-    empty = np.zeros((len(time), n_slots, 3))
-    base_ref, base_d, base_dd = base if base is not None else (empty, empty, empty)
-    if system.mixed:
-        raise ValueError("solve_ad needs a system compiled with angles='driver'")
+    drives = stacked_drives(system, theta, theta_d, theta_dd, base)
     n, nq = len(time), system.nq
     out = {k: np.zeros((n, nq)) for k in ("q", "qd", "qdd")}
     iterations = np.zeros(n, dtype=int)
     seconds = np.zeros(n)
-    phi_norm = np.zeros(n)
-    phi_top = np.zeros(n)
     converged = np.zeros(n, dtype=bool)
-    topology = system.masks()["topology"]
-    q = assemble(system, q_guess, theta[0], tol, max_iter, base_ref[0])
+    q = assemble(system, q_guess, theta[0], tol, max_iter, drives.ref[0])
     qd = qdd = np.zeros(nq)
     for f in range(n):
-        drive = Drive(theta[f], theta_d[f], theta_dd[f], base_ref[f], base_d[f], base_dd[f])
+        drive = drives.frame(f)
         started = clock.perf_counter()
         if f > 0:
             dt = time[f] - time[f - 1]
             q = q + qd * dt + 0.5 * qdd * dt * dt
         it = newton_raphson(system, q, drive, tol, max_iter)
         q = it.q
-        J = system.jacobian(q)
-        qd = linear_solve(J, system.nu(q, drive))
-        qdd = linear_solve(J, system.gamma(q, qd, drive))
+        qd, qdd = frame_rates(system, q, drive)
         seconds[f] = clock.perf_counter() - started
-        phi = system.residual(q, drive)
         out["q"][f], out["qd"][f], out["qdd"][f] = q, qd, qdd
         iterations[f], converged[f] = it.iterations, it.converged
-        phi_norm[f] = np.linalg.norm(phi)
-        phi_top[f] = np.abs(phi[topology]).max() if topology.any() else 0.0
         if progress is not None:
             progress(f + 1, n)
+    phi = Stacked(system).residual(out["q"], drives)
+    return _result(system, time, out["q"], out["qd"], out["qdd"], drives, phi,
+                   iterations, seconds, converged, tol)
+
+
+@single_threaded
+def solve_ad_batched(system: System, time: np.ndarray, theta: np.ndarray, theta_d: np.ndarray,
+                     theta_dd: np.ndarray, guesses: np.ndarray, *, tol: float = 1e-10,
+                     max_iter: int = 50, base: Base | None = None,
+                     progress: Callable[[int, int], None] | None = None) -> KinematicResult:
+    """``solve_ad`` with every frame solved at once from its own guess (``guesses``: frames
+    × nq, e.g. the mixed-coordinate solution's body coordinates): Newton–Raphson on the
+    stacked frames (``batched.newton_stacked``, ``BATCH_ITER`` iterations), then each frame
+    the batch left unconverged (or without a finite guess) by ``solve_ad``'s own path, in
+    order: assembled from its guess (the first frame) or extrapolated from the previous
+    frame's q, q̇, q̈. Velocities and accelerations by stacked solves of Φ_q q̇ = ν and
+    Φ_q q̈ = γ. Same answers as ``solve_ad`` wherever both reach the configuration the guesses
+    lie by; ``time_s`` is the whole solve's time shared evenly among the frames."""
+    drives = stacked_drives(system, theta, theta_d, theta_dd, base)
+    stacked = Stacked(system)
+    started = clock.perf_counter()
+    n = len(time)
+    q = np.array(guesses, dtype=float)
+    iterations = np.zeros(n, dtype=int)
+    converged = np.zeros(n, dtype=bool)
+    finite = np.flatnonzero(np.isfinite(q).all(axis=1))
+    if len(finite):
+        it = newton_stacked(stacked, q[finite], drives.take(finite), tol,
+                            min(BATCH_ITER, max_iter))
+        q[finite], iterations[finite], converged[finite] = it.q, it.iterations, it.converged
+    for f in np.flatnonzero(~converged):
+        if f == 0:
+            start = assemble(system, guesses[0], theta[0], tol, max_iter, drives.ref[0])
+        else:
+            qd, qdd = frame_rates(system, q[f - 1], drives.frame(f - 1))
+            dt = time[f] - time[f - 1]
+            start = q[f - 1] + qd * dt + 0.5 * qdd * dt * dt
+        one = newton_raphson(system, start, drives.frame(f), tol, max_iter)
+        q[f], converged[f] = one.q, one.converged
+        iterations[f] += one.iterations
+    phi, J = stacked.evaluate(q, drives)
+    rates = factor(J)
+    qd = rates.solve(stacked.nu(drives))
+    qdd = rates.solve(stacked.gamma(q, qd, drives))
+    seconds = np.full(n, (clock.perf_counter() - started) / max(n, 1))
+    if progress is not None:
+        progress(n, n)
+    return _result(system, time, q, qd, qdd, drives, phi, iterations, seconds, converged, tol)
+
+
+def _result(system: System, time: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+            drives: Drives, phi: np.ndarray, iterations: np.ndarray, seconds: np.ndarray,
+            converged: np.ndarray, tol: float) -> KinematicResult:
+    """The AD run's KinematicResult, with ‖Φ‖ and max |topological Φ| per frame."""
+    topology = system.masks()["topology"]
+    phi_top = np.abs(phi[:, topology]).max(axis=1) if topology.any() else np.zeros(len(q))
     return KinematicResult(
-        method="ad", tol=tol, time=np.asarray(time, dtype=float), q=out["q"], qd=out["qd"],
-        qdd=out["qdd"], theta=np.asarray(theta), theta_d=np.asarray(theta_d),
-        theta_dd=np.asarray(theta_dd), angle_names=tuple(a.name for a in system.model.angles),
-        iterations=iterations, time_s=seconds, phi_norm=phi_norm, phi_top_max=phi_top,
+        method="ad", tol=tol, time=np.asarray(time, dtype=float), q=q, qd=qd, qdd=qdd,
+        theta=drives.theta, theta_d=drives.theta_d, theta_dd=drives.theta_dd,
+        angle_names=tuple(a.name for a in system.model.angles), iterations=iterations,
+        time_s=seconds, phi_norm=np.linalg.norm(phi, axis=1), phi_top_max=phi_top,
         converged=converged)

@@ -14,7 +14,7 @@ import numpy as np
 
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.filtering import lowpass
-from fccgrb_cli.solvers.ad import solve_ad
+from fccgrb_cli.solvers.ad import solve_ad, solve_ad_batched
 from fccgrb_cli.solvers.initial import initial_guess
 from fccgrb_cli.solvers.rates import central_derivatives
 from fccgrb_cli.solvers.result import KinematicResult
@@ -39,9 +39,12 @@ def marker_fits(system: System, targets: np.ndarray) -> list[np.ndarray]:
 def driven_by(model_system: System, time: np.ndarray, theta: np.ndarray, q_guess: np.ndarray, *,
               cutoff: float | None, order: int, tol: float, method: str,
               base: np.ndarray | None = None,
-              progress: Callable[[int, int], None] | None = None) -> KinematicResult:
+              progress: Callable[[int, int], None] | None = None,
+              guesses: np.ndarray | None = None) -> KinematicResult:
     """AD analysis with drivers θ(t) (optionally low-passed), θ̇ and θ̈ by central differences;
-    a floating base follows ``base`` (frames × slots × 3), filtered and differentiated alike."""
+    a floating base follows ``base`` (frames × slots × 3), filtered and differentiated alike.
+    With ``guesses`` (frames × nq, one starting point per frame) all frames are solved at once
+    (``solve_ad_batched``); without, frame by frame from ``q_guess`` (``solve_ad``)."""
     rate = 1.0 / float(time[1] - time[0]) if len(time) > 1 else 1.0
     if cutoff is not None:
         theta = lowpass(theta, rate, cutoff, order)
@@ -53,8 +56,12 @@ def driven_by(model_system: System, time: np.ndarray, theta: np.ndarray, q_guess
             flat = lowpass(flat, rate, cutoff, order)
         d1, d2 = central_derivatives(flat, 1.0 / rate)
         base_rates = tuple(a.reshape(base.shape) for a in (flat, d1, d2))
-    result = solve_ad(model_system, time, theta, theta_d, theta_dd, q_guess, tol=tol,
-                      base=base_rates, progress=progress)
+    if guesses is None:
+        result = solve_ad(model_system, time, theta, theta_d, theta_dd, q_guess, tol=tol,
+                          base=base_rates, progress=progress)
+    else:
+        result = solve_ad_batched(model_system, time, theta, theta_d, theta_dd, guesses,
+                                  tol=tol, base=base_rates, progress=progress)
     return KinematicResult(**{**result.__dict__, "method": method})
 
 

@@ -1,0 +1,81 @@
+"""Speed of the dynamics stage alone (FORMULATION §4): the classical model driven by the solved
+angles (positions, consistent velocities and accelerations), then the inverse dynamics, on the
+five-bar sample (P30, NRM-WLS) and on the lower-limb gait trial (calibrated as in
+``benchmarks/gait.py``, NRM-WLS, 6 Hz filter, force plates).
+
+    python benchmarks/dynamics.py [--repeat 3] [--trial ../shared/data/c3d/Qualisys.c3d]
+
+The kinematic solve runs once, untimed; the figure is ``pipeline``'s dynamics step per frame
+(wall clock, best of ``--repeat``), batched (the default path) and frame by frame (the
+sequential reference it must equal). Speed goals live here, never in tests.
+"""
+
+from __future__ import annotations
+
+import fccgrb_cli  # noqa: F401  (first: pins BLAS to one thread before numpy loads)
+import argparse
+import time
+from functools import partial
+from pathlib import Path
+from unittest import mock
+
+import numpy as np
+
+from fccgrb_cli import pipeline
+from fccgrb_cli.anatomy.calibrate import calibrate
+from fccgrb_cli.dynamics import convert
+from fccgrb_cli.io.trial import read_trial
+from fccgrb_cli.model import Model, load_model, parse_model
+from fccgrb_cli.options import SolveOptions
+from fccgrb_cli.system import compile_system
+
+ROOT = Path(__file__).resolve().parents[1]
+TRIAL = ROOT.parent / "shared" / "data" / "c3d" / "Qualisys.c3d"
+
+
+def stage_ms(model: Model, trial, options: SolveOptions, repeat: int, batched: bool
+             ) -> tuple[float, float]:
+    """Best ms/frame of the dynamics stage over ``repeat`` runs, and its largest |τ| (N·m)."""
+    run = pipeline.solve_trial(model, trial, SolveOptions(**{**options.__dict__,
+                                                            "dynamics": False}))
+    model = pipeline.prepared(model, options)
+    system = compile_system(model, angles="coordinate", track=True)
+    best, tau = float("inf"), float("nan")
+    path = partial(convert.classical_dynamics, batched=batched)
+    with mock.patch.object(pipeline, "classical_dynamics", path):
+        for _ in range(repeat):
+            started = time.perf_counter()
+            dyn = pipeline._dynamics(model, trial, system, run.result, options, [], [], {})
+            best = min(best, time.perf_counter() - started)
+            tau = float(np.abs(dyn.inverse.joint_moments).max())
+    return 1e3 * best / trial.n_frames, tau
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--trial", type=Path, default=TRIAL)
+    args = parser.parse_args()
+    cases = [("five_bar P30", load_model(ROOT / "configs" / "models" / "five_bar.yaml"),
+              read_trial(ROOT / "sample_data" / "five_bar.c3d"),
+              SolveOptions(method="nrm-wls", perturb_mm=30.0, dynamics=True))]
+    if args.trial.exists():
+        gait = read_trial(args.trial)
+        template = load_model(ROOT / "configs" / "models" / "lower_limb.yaml")
+        model = parse_model(calibrate(template, gait, mass=67.0).text, "personal.yaml")
+        cases.append((f"gait {args.trial.name}", model, gait,
+                      SolveOptions(method="nrm-wls", dynamics=True, filter_cutoff=6.0)))
+    else:
+        print(f"{args.trial}: not found (the shared data folder is not here); five-bar only")
+    print(f"{'case':24} {'frames':>6} {'batched ms/frame':>17} {'sequential':>11} "
+          f"{'speed-up':>9} {'max|τ| N·m':>11}")
+    for name, model, trial, options in cases:
+        fast, tau = stage_ms(model, trial, options, args.repeat, True)
+        slow, tau_seq = stage_ms(model, trial, options, args.repeat, False)
+        print(f"{name:24} {trial.n_frames:6d} {fast:17.4f} {slow:11.4f} {slow / fast:9.1f} "
+              f"{tau:11.3f}" + ("" if abs(tau - tau_seq) <= 1e-9 * max(1.0, tau) else
+                                f"  (sequential: {tau_seq:.6f})"))
+
+
+if __name__ == "__main__":
+    main()
