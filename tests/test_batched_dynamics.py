@@ -1,9 +1,10 @@
 """The batched dynamics stage (issue 13, item 4) against the frame-by-frame one, and the stacked
 evaluation against derivatives taken by central differences.
 
-* ``classical_dynamics`` batched (every frame at once from the run's own body coordinates) and
-  sequential (frame by frame, warm-started) give the same q, q̇, q̈, θ, multipliers, joint
-  moments, residuals and energies to 1e-9, on the five-bar sample solved by NRM-WLS at P30
+* ``classical_dynamics`` batched (every frame at once from the run's own body coordinates; the
+  default where Φ_q is square, forced here for the taller ones too) and sequential (frame by
+  frame, warm-started) give the same q, q̇, q̈, θ, multipliers, joint moments, residuals and
+  energies to 1e-9, on the five-bar sample solved by NRM-WLS at P30
   (drivers met only to the WLS topology's 1e-5, then 6 Hz filtered), and on synthesized
   motions of the bundled crank-rocker (a signed full-turn angle: a sine row, so Φ_q is taller
   than wide and the stacked solves go through QR), slider (a distance coordinate), RSSR, and
@@ -74,7 +75,7 @@ def test_five_bar_sample_batched_equals_sequential(five_bar_run, cutoff) -> None
     n = result.n_frames
     push = ExternalLoad("push", "B3", rng.normal(0, 20, (n, 3)),
                         rng.normal(0, 0.3, (n, 3)), rng.normal(0, 2, (n, 3)))
-    batched = classical_dynamics(model, result, cutoff=cutoff, loads=[push])
+    batched = classical_dynamics(model, result, cutoff=cutoff, loads=[push], batched=True)
     sequential = classical_dynamics(model, result, cutoff=cutoff, loads=[push], batched=False)
     assert_same(batched, sequential)
     # not a trivial equality: the guesses were off (WLS topology, filtered drivers)
@@ -93,7 +94,7 @@ def synthesized(name: str, form: str = "model") -> tuple[Dynamics, Dynamics]:
     if form != "model":
         model = model.with_form(form)
     truth = synthesize(model, duration=1.0).result
-    return (classical_dynamics(model, truth, cutoff=6.0),
+    return (classical_dynamics(model, truth, cutoff=6.0, batched=True),
             classical_dynamics(model, truth, cutoff=6.0, batched=False))
 
 
@@ -120,7 +121,7 @@ def test_frames_left_by_the_batch_take_the_frame_by_frame_path(five_bar_run, mon
     monkeypatch.setattr(ad, "BATCH_ITER", 1)
     holed = result.q.copy()
     holed[7] = np.nan
-    batched = classical_dynamics(model, replace(result, q=holed), cutoff=6.0)
+    batched = classical_dynamics(model, replace(result, q=holed), cutoff=6.0, batched=True)
     assert (batched.kinematics.iterations > 1).sum() > 100
     assert_same(batched, sequential)
 

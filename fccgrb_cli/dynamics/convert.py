@@ -28,14 +28,20 @@ class Dynamics:
 
 def classical_dynamics(model: Model, result: KinematicResult, *, cutoff: float | None = None,
                        order: int = 2, loads: Sequence[ExternalLoad] = (),
-                       tol: float = 1e-10, batched: bool = True) -> Dynamics:
+                       tol: float = 1e-10, batched: bool | None = None) -> Dynamics:
     """Drive the classical model with the run's angles and solve its inverse dynamics.
 
-    ``batched`` (the default): every frame at once, each starting from the run's own body
-    coordinates (they satisfy the same topology, and the drivers exactly when unfiltered), the
-    multipliers by stacked solves; False: frame by frame, each warm-started from the previous
-    one (the reference the batched path equals)."""
+    ``batched`` True: every frame at once, each starting from the run's own body coordinates
+    (they satisfy the same topology, and the drivers exactly when unfiltered), the multipliers
+    by stacked solves; False: frame by frame, each warm-started from the previous one (the
+    reference the batched path equals to rounding). None (the default): batched where Φ_q is
+    square. A taller Φ_q (a signed angle's sine row, a floating base's drivers beside its
+    rigid-body rows) takes least squares: stacked QR costs as much per frame as LAPACK's
+    frame-by-frame one and the batch's guesses need more Gauss–Newton iterations there (the
+    lower-limb gait trial: 4 per frame against 2.8), so it stays frame by frame."""
     system = compile_system(model, angles="driver")
+    if batched is None:
+        batched = system.n_rows == system.nq
     n_body = system.layout.n_body_q
     body_q = result.q[:, :n_body]
     base = Stacked(system).base_reference(body_q)
