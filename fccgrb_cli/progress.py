@@ -6,13 +6,28 @@ import sys
 import time
 
 
-class Progress:
-    """A callable ``(done, total)`` that reports on stderr once the run passes ``delay`` s."""
+def _duration(seconds: float) -> str:
+    """'42 s', '3.5 min' or '1.2 h'."""
+    if seconds < 60:
+        return f"{seconds:.0f} s"
+    if seconds < 3600:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"
 
-    def __init__(self, label: str, delay: float = 1.0, every: float = 0.5):
+
+class Progress:
+    """A callable ``(done, total)`` that reports on stderr once the run passes ``delay`` s:
+    the frame, the share done, the time so far and the time left at the pace so far. On a
+    terminal one line is rewritten every ``every`` s; into a file or a pipe (a log) a line is
+    added every ``log_every`` s, so that a long trial's log stays short (a 10-minute solve:
+    about 60 lines), and a last line when the run ends."""
+
+    def __init__(self, label: str, delay: float = 1.0, every: float = 0.5,
+                 log_every: float = 10.0):
         self.label = label
         self.delay = delay
         self.every = every
+        self.log_every = log_every
         self.start = time.perf_counter()
         self.last = self.start
         self.shown = False
@@ -20,12 +35,22 @@ class Progress:
     def __call__(self, done: int, total: int) -> None:
         now = time.perf_counter()
         finished = done >= total
-        if now - self.start < self.delay or (now - self.last < self.every and not finished):
+        terminal = sys.stderr.isatty()
+        interval = self.every if terminal else self.log_every
+        if now - self.start < self.delay or (now - self.last < interval and not finished):
             return
         if not self.shown and finished:
             return
         self.last = now
         self.shown = True
-        end = "\n" if finished or not sys.stderr.isatty() else ""
-        sys.stderr.write(f"\r{self.label}: frame {done}/{total} ({now - self.start:.1f} s){end}")
+        elapsed = now - self.start
+        line = f"{self.label}: frame {done}/{total} ({100 * done / max(total, 1):.0f} %, " \
+               f"{_duration(elapsed)}"
+        if not finished and done > 0:
+            line += f", ~{_duration(elapsed * (total - done) / done)} left"
+        line += ")"
+        if terminal:
+            sys.stderr.write(f"\r{line}\033[K" + ("\n" if finished else ""))
+        else:
+            sys.stderr.write(line + "\n")
         sys.stderr.flush()
