@@ -45,9 +45,14 @@ class SolveOptions:
              "markers (segment frames fitted, then the angles; see {filter_cutoff}); nrm-ls / "
              "nrm-wls: mixed coordinates by Newton–Raphson on least squares / weighted least "
              "squares; cno-sqp / cno-ip: min of the tracking objective ({objective}) subject to "
-             "the topological equations, by SQP (SLSQP) or scipy's trust-constr; mo-tc / "
+             "the topological equations, by SQP ({optimizer}) or scipy's trust-constr; mo-tc / "
              "mo-ed: goal attainment over each tracking component / each point's Euclidean "
              "distance.")
+    optimizer: str = _option(
+        "structured", choices=("structured", "scipy"),
+        help="cno-sqp with the tc objective: the engine's stabilized SQP (Newton on the KKT "
+             "conditions with the exact Lagrangian Hessian; a frame it cannot solve goes to "
+             "SLSQP), or scipy's SLSQP for every frame (the paper's reference).")
     objective: str = _option(
         "tc", choices=("tc", "ed"),
         help="CNO objective: weighted sum of squared tracking residuals (tc, m²) or of "
@@ -68,8 +73,12 @@ class SolveOptions:
     hessian: str = _option(
         "auto", choices=("auto", "gauss-newton", "exact"),
         help="NRM iteration matrix: gauss-newton (Φ_qᵀWΦ_q, the paper's NRM), exact (adds "
-             "Σ wΦ∇²Φ: Newton on the weighted least squares), or auto: Gauss–Newton until it "
-             "converges only linearly (noisy markers), then exact.")
+             "Σ wΦ∇²Φ: Newton on the weighted least squares), or auto: Gauss–Newton until a "
+             "step is below 1 mm / 1 mrad, then exact.")
+    engine: str = _option(
+        "auto", choices=("auto", "compiled", "numpy"),
+        help="NRM's per-frame arithmetic: compiled kernels (numba), the same iteration in "
+             "numpy, or auto: compiled where numba is installed and no body is reduced.")
     skip_unsolvable: bool = _option(
         False, help="Report frames whose remaining markers cannot determine the model as "
                     "unsolved and go on, instead of stopping with an error.")

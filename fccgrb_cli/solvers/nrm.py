@@ -8,6 +8,7 @@ A marker missing in a frame (NaN) drops its tracking rows for that frame only.
 
 from __future__ import annotations
 
+import sys
 import time as clock
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -45,6 +46,8 @@ def row_weights(system: System, tracking_weight: float | None) -> np.ndarray:
 _EXTRAPOLATION = {1: (1.0,), 2: (2.0, -1.0), 3: (3.0, -3.0, 1.0), 4: (4.0, -6.0, 4.0, -1.0),
                   5: (5.0, -10.0, 10.0, -5.0, 1.0)}
 HISTORY = 5
+COMPILED_FROM = 1000
+SMOOTH = 5  # iterations of the last frame up to which the next guess extrapolates at order 4
 
 
 def without_gaps(weights: np.ndarray, system: System, missing: np.ndarray) -> np.ndarray:
@@ -72,9 +75,24 @@ def predict(history: list[np.ndarray], warm_start: str, points: int = HISTORY) -
     return sum(c * q for c, q in zip(weights, reversed(history), strict=False))
 
 
-def _rank(J: np.ndarray, w: np.ndarray) -> int:
+def solvable(system: System, q: np.ndarray, w: np.ndarray) -> bool:
+    """Whether the weighted rows left (W's zeros are the missing markers' rows) determine every
+    coordinate near q: full column rank of W^½ Φ_q."""
+    J = system.jacobian(q)
     s = np.linalg.svd(J * np.sqrt(w)[:, None], compute_uv=False)
-    return int((s > s[0] * max(J.shape) * 1e-10).sum())
+    return int((s > s[0] * max(J.shape) * 1e-10).sum()) == system.nq
+
+
+def unsolvable_text(f: int, time: np.ndarray, missing: np.ndarray, labels: tuple[str, ...],
+                    source: str) -> str:
+    gone = ", ".join(labels[k] for k in np.flatnonzero(missing))
+    where = f"{source}: " if source else ""
+    return (f"{where}frame index {f} (t = {time[f]:.3f} s): the markers left cannot "
+            f"determine the model (missing: {gone or 'none'})")
+
+
+def no_convergence_text(f: int, time: np.ndarray, iterations: int) -> str:
+    return f"frame index {f} (t = {time[f]:.3f} s): no convergence in {iterations} iterations"
 
 
 @dataclass(frozen=True)
@@ -83,7 +101,10 @@ class NrmSettings:
     squares, NRM-LS; else WLS with the topological equations weighing 1), the tolerance on
     ‖Δq‖∞ (m and rad), the iteration cap per frame, the warm start ('extrapolate' or
     'previous'), the iteration matrix ('auto', 'gauss-newton', 'exact'), and whether frames the
-    remaining markers cannot determine are reported and skipped instead of stopping."""
+    remaining markers cannot determine are reported and skipped instead of stopping; ``engine``:
+    'compiled' (the numba kernels of fccgrb_cli/solvers/kernels.py), 'numpy' (the same
+    iteration in numpy, frame by frame) or 'auto' (compiled where numba is installed and the
+    model has no reduced body)."""
 
     tracking_weight: float | None = 1e-3
     tol: float = 1e-10
@@ -91,6 +112,7 @@ class NrmSettings:
     warm_start: str = "extrapolate"
     hessian: str = "auto"
     skip_unsolvable: bool = False
+    engine: str = "auto"
 
     @property
     def method(self) -> str:
@@ -99,7 +121,35 @@ class NrmSettings:
     @classmethod
     def from_options(cls, o: SolveOptions) -> NrmSettings:
         return cls(None if o.method == "nrm-ls" else o.tracking_weight, o.tol,
-                   o.max_iter or 50, o.warm_start, o.hessian, o.skip_unsolvable)
+                   o.max_iter or 50, o.warm_start, o.hessian, o.skip_unsolvable, o.engine)
+
+    def compiled(self, system: System, n_frames: int) -> bool:
+        """Whether this solve runs in the compiled kernels. 'auto' takes them for trials of
+        ``COMPILED_FROM`` frames or more, or once numba is loaded in this process: loading
+        numba and the cached machine code costs ~0.25 s once per process, about what the numpy
+        path spends on 500–700 five-bar frames."""
+        if self.engine == "numpy":
+            return False
+        from fccgrb_cli.system.sparse import supported
+
+        if self.engine == "compiled":
+            if not supported(system):
+                raise InputError("--engine compiled: the compiled kernels take models without "
+                                 "reduced bodies (form: full); use --engine numpy or auto")
+            if not numba_available():
+                raise InputError("--engine compiled needs numba (pip install numba)")
+            return True
+        if not supported(system):
+            return False
+        if "numba" in sys.modules:
+            return True
+        return n_frames >= COMPILED_FROM and numba_available()
+
+
+def numba_available() -> bool:
+    from importlib.util import find_spec
+
+    return find_spec("numba") is not None
 
 
 @single_threaded
@@ -113,6 +163,12 @@ def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray,
     warm_start, hessian = settings.warm_start, settings.hessian
     if not system.mixed or not system.n_targets:
         raise ValueError("solve_nrm needs angles='coordinate' and track=True")
+    labels = labels or tuple(f"target {k}" for k in range(system.n_targets))
+    if settings.compiled(system, len(time)):
+        from fccgrb_cli.solvers.nrm_compiled import solve_compiled
+
+        return solve_compiled(system, time, targets, settings, labels=labels, source=source,
+                              progress=progress)
     n, nq = len(time), system.nq
     base_w = row_weights(system, tracking_weight)
     top = system.masks()["topology"]
@@ -126,7 +182,6 @@ def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray,
     checked: dict[bytes, bool] = {}
     history: list[np.ndarray] = []
     last_iterations = 0
-    labels = labels or tuple(f"target {k}" for k in range(system.n_targets))
     for f in range(n):
         started = clock.perf_counter()
         y = targets[f]
@@ -136,18 +191,15 @@ def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray,
             y = np.where(missing[:, None], 0.0, y)
         drive = Drive(ref=y)
         # high-order extrapolation only while the motion is smooth (the last frame converged
-        # at once); on rough data it overshoots, and the quadratic guess is the safer one
-        points = HISTORY if last_iterations <= 3 else 3
+        # quickly); on rough data it overshoots, and the quadratic guess is the safer one
+        points = HISTORY if last_iterations <= SMOOTH else 3
         q = predict(history, warm_start, points) if history else initial_guess(system,
                                                                                 targets[f])
         key = missing.tobytes()
         if key not in checked:
-            checked[key] = _rank(system.jacobian(q), w) == nq
+            checked[key] = solvable(system, q, w)
         if not checked[key]:
-            gone = ", ".join(labels[k] for k in np.flatnonzero(missing))
-            where = f"{source}: " if source else ""
-            text = (f"{where}frame index {f} (t = {time[f]:.3f} s): the markers left cannot "
-                    f"determine the model (missing: {gone or 'none'})")
+            text = unsolvable_text(f, time, missing, labels, source)
             if not settings.skip_unsolvable:
                 raise InputError(text)
             messages.append(text + "; frame left unsolved")
@@ -166,8 +218,7 @@ def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray,
         if it.converged:
             history = [*history[-(HISTORY - 1):], it.q]
         else:
-            messages.append(f"frame index {f} (t = {time[f]:.3f} s): no convergence in "
-                            f"{it.iterations} iterations")
+            messages.append(no_convergence_text(f, time, it.iterations))
             history = []
         phi = system.residual(it.q, drive)
         phi_norm[f] = np.linalg.norm(phi[w > 0])

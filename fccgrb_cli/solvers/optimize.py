@@ -16,7 +16,7 @@ import os
 import time as clock
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from itertools import pairwise
 from typing import TYPE_CHECKING
 
@@ -27,8 +27,9 @@ from fccgrb_cli.solvers.cno import solve_cno_frame
 from fccgrb_cli.solvers.frame_problem import FrameProblem
 from fccgrb_cli.solvers.goal import FrameOutcome, solve_goal_frame
 from fccgrb_cli.solvers.initial import initial_guess
-from fccgrb_cli.solvers.newton import gauss_newton
+from fccgrb_cli.solvers.newton import Iterate, gauss_newton
 from fccgrb_cli.solvers.nrm import (
+    COMPILED_FROM,
     NrmSettings,
     mixed_result,
     predict,
@@ -38,6 +39,7 @@ from fccgrb_cli.solvers.nrm import (
 )
 from fccgrb_cli.solvers.quality import flags_of
 from fccgrb_cli.solvers.result import FrameStats, KinematicResult
+from fccgrb_cli.solvers.sqp import FAR, sqp_weights, stabilized_sqp
 from fccgrb_cli.system import System
 
 if TYPE_CHECKING:
@@ -46,6 +48,7 @@ if TYPE_CHECKING:
 METHODS = ("cno-sqp", "cno-ip", "mo-tc", "mo-ed")
 PARALLEL_INITS = ("same", "chunks", "nrm")
 REJOINED = 1e-6
+SQP_COMPILED_FROM = 200
 
 
 @dataclass(frozen=True)
@@ -64,11 +67,20 @@ class Settings:
     workers: int | None = None
     init: str = "nrm"
     nrm_weight: float = 1e-3
+    optimizer: str = "structured"
+    engine: str = "auto"
 
     @classmethod
     def from_options(cls, o: SolveOptions) -> Settings:
         return cls(o.method, o.objective, o.tol, o.max_iter or 500, o.warm_start, o.parallel,
-                   o.workers, o.parallel_init, o.tracking_weight)
+                   o.workers, o.parallel_init, o.tracking_weight, o.optimizer, o.engine)
+
+    @property
+    def structured(self) -> bool:
+        """CNO-SQP with the TC objective by the engine's stabilized SQP (solvers/sqp.py);
+        everything else, and ``optimizer='scipy'``, through scipy (the paper's reference)."""
+        return (self.optimizer == "structured" and self.method == "cno-sqp"
+                and self.objective == "tc")
 
 
 @dataclass(frozen=True)
@@ -83,6 +95,13 @@ class FrameRecord:
 
 
 def _optimize(problem: FrameProblem, settings: Settings, q0: np.ndarray) -> FrameOutcome:
+    if settings.structured:
+        out = structured_cno_frame(problem, q0, settings.tol)
+        if out.converged:
+            return out
+        scipy = _optimize(problem, replace(settings, optimizer="scipy"), q0)
+        return FrameOutcome(scipy.q, out.iterations + scipy.iterations, scipy.converged,
+                            f"{out.message}; SLSQP: {scipy.message}")
     if problem.system.redundant_topology:  # SLSQP and trust-constr need independent equalities
         problem.keep_independent(q0)
     if settings.method.startswith("cno"):
@@ -91,6 +110,35 @@ def _optimize(problem: FrameProblem, settings: Settings, q0: np.ndarray) -> Fram
                                max_iter=settings.max_iter)
     return solve_goal_frame(problem, q0, objective=settings.method[3:], tol=settings.tol,
                             max_iter=settings.max_iter)
+
+
+def structured_cno_frame(problem: FrameProblem, q0: np.ndarray, tol: float) -> FrameOutcome:
+    """One CNO-TC frame by the stabilized SQP, judged against the problem's bounds. A guess far
+    off the constraints (a rigid fit: the first frame, or after a failure) first goes through
+    NRM-WLS, whose line search the SQP lacks; from the previous frames' extrapolation the SQP
+    starts at once."""
+    system = problem.system
+    before = 0
+    if np.abs(problem.constraints(q0)).max(initial=0.0) > FAR:
+        weights = without_gaps(row_weights(system, 1e-3), system, problem.missing)
+        start = gauss_newton(system, q0, problem.drive, weights, tol, 50, "auto")
+        q0, before = start.q, start.iterations
+    it = stabilized_sqp(system, q0, problem.drive, sqp_weights(system, problem.point_weights),
+                        tol)
+    it = Iterate(it.q, before + it.iterations, it.converged)
+    if not it.converged:
+        return FrameOutcome(it.q, it.iterations, False,
+                            f"stabilized SQP: no convergence in {it.iterations} iterations")
+    if not within_bounds(problem, it.q):
+        return FrameOutcome(it.q, it.iterations, False,
+                            "stabilized SQP: the optimum lies outside the bounds")
+    return FrameOutcome(it.q, it.iterations, True, "stabilized SQP: converged")
+
+
+def within_bounds(problem: FrameProblem, q: np.ndarray) -> bool:
+    lower = np.array([-np.inf if lo is None else lo for lo, _ in problem.bounds()])
+    upper = np.array([np.inf if hi is None else hi for _, hi in problem.bounds()])
+    return bool(np.all((q >= lower) & (q <= upper)))
 
 
 def solve_frame(system: System, settings: Settings, q0: np.ndarray, y: np.ndarray) -> FrameRecord:
@@ -159,7 +207,12 @@ def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
     label = settings.method + ("-ed" if settings.method.startswith("cno")
                                and settings.objective == "ed" else "")
     init = settings.init
-    if not settings.parallel:
+    if not settings.parallel and compiled_sqp(system, settings, n):
+        from fccgrb_cli.solvers.sqp_compiled import run_frames_compiled
+
+        records = run_frames_compiled(system, settings, targets, progress)
+        wall = float("nan")
+    elif not settings.parallel:
         records = _run_frames(
             system, settings, targets, list(range(n)),
             lambda f: first if f == 0 else initial_guess(system, targets[f]), True, progress)
@@ -183,6 +236,16 @@ def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
                        tuple(r.message for r in records))
     return mixed_result(system, time, np.array([r.q for r in records]), stats, method=label,
                         tol=settings.tol, messages=messages, wall_s=wall)
+
+
+def compiled_sqp(system: System, settings: Settings, n_frames: int) -> bool:
+    """Whether the sequential structured CNO-SQP runs in the compiled kernels: as
+    NrmSettings.compiled decides, from ``SQP_COMPILED_FROM`` frames (its numpy path costs
+    ~1 ms a frame, so numba's ~0.25 s start pays from a few hundred)."""
+    if not settings.structured:
+        return False
+    nrm = NrmSettings(engine=settings.engine)
+    return nrm.compiled(system, n_frames * COMPILED_FROM // SQP_COMPILED_FROM)
 
 
 def _parallel(system: System, time: np.ndarray, targets: np.ndarray, settings: Settings,

@@ -1,0 +1,454 @@
+"""Compiled per-frame kernels of NRM (numba): Φ, Φ_q's non-zeros, the normal equations, the
+exact Hessian's terms and an envelope Cholesky factorization, all on the constant arrays of
+:class:`~fccgrb_cli.system.sparse.SparseSystem`, and a loop over frames that does what
+``solve_nrm``'s numpy path does frame by frame (same guesses, same Gauss–Newton / Newton
+iteration, line search and stopping test: FORMULATION §3.1), without leaving machine code.
+
+The loop hands control back to Python where Python knows more: a frame without a history (the
+first, or after a failure) needs ``initial_guess``; a frame whose set of missing markers is new
+needs the rank test. ``solve_frames`` returns the frame index and the reason, and is called
+again from there.
+
+Compiled on first use and cached on disk (``cache=True``): the first call of a new install
+takes a few seconds, later processes load the machine code.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from fccgrb_cli.solvers.newton import NEAR, ROUNDING, SLOW
+from fccgrb_cli.solvers.sqp import DELTA, FAR, FEASIBLE_TOP
+from fccgrb_cli.solvers.sqp import MAX_ITER as MAX_SQP
+from fccgrb_cli.system.sparse import SparseSystem
+
+DONE, NEED_GUESS, NEED_RANK, NEED_FALLBACK = 0, 1, 2, 3
+UNKNOWN, UNSOLVABLE, SOLVABLE = -1, 0, 1
+_EXTRAPOLATION = np.array([[1.0, 0.0, 0.0, 0.0, 0.0], [2.0, -1.0, 0.0, 0.0, 0.0],
+                           [3.0, -3.0, 1.0, 0.0, 0.0], [4.0, -6.0, 4.0, -1.0, 0.0],
+                           [5.0, -10.0, 10.0, -5.0, 1.0]])
+
+
+@njit(cache=True)
+def features(s: SparseSystem, q: np.ndarray, F: np.ndarray) -> None:
+    """F = A x + f0 (flattened, Eq. 2–3), x = q's body part."""
+    for i in range(len(F)):
+        total = s.f0[i]
+        for k in range(s.a_ptr[i], s.a_ptr[i + 1]):
+            total += s.a_val[k] * q[s.a_col[k]]
+        F[i] = total
+
+
+@njit(cache=True)
+def residual(s: SparseSystem, q: np.ndarray, ref: np.ndarray, F: np.ndarray,
+             phi: np.ndarray) -> None:
+    """Φ: linear and tracking rows from the constant rows, dot rows F_a·F_b − c − g(θ), a signed
+    angle's sine row − sin θ (FORMULATION §2)."""
+    features(s, q, F)
+    nb = s.nb
+    for r in range(s.n_lin):
+        total = s.c_const[r]
+        for k in range(s.j_ptr[r], s.j_ptr[r + 1]):
+            total += s.j_const[k] * q[s.perm[s.j_col[k]]]
+        phi[r] = total
+    for t in range(len(s.trk_slot)):
+        for d in range(3):
+            phi[s.trk_start + 3 * t + d] -= ref[s.trk_slot[t], d]
+    for i in range(len(s.dot_a)):
+        a, b = 3 * s.dot_a[i], 3 * s.dot_b[i]
+        phi[s.n_lin + i] = F[a] * F[b] + F[a + 1] * F[b + 1] + F[a + 2] * F[b + 2] - s.dot_c[i]
+    for k in range(len(s.angle_rows)):
+        theta = q[nb + k]
+        g = theta if s.distance[k] else np.cos(theta)
+        phi[s.n_lin + s.angle_rows[k]] -= g
+    for j in range(len(s.sine_rows)):
+        phi[s.n_lin + s.sine_rows[j]] -= np.sin(q[nb + s.sine_of[j]])
+
+
+@njit(cache=True)
+def jacobian(s: SparseSystem, q: np.ndarray, F: np.ndarray, values: np.ndarray) -> None:
+    """Φ_q's non-zeros at the features F: constant rows, the dot rows' c ⊗ F_other scattered
+    block by block (Eq. 2–3), −g′(θ) and −cos θ of the mixed coordinates (Eq. 13–22)."""
+    values[:] = s.j_const
+    for k in range(len(s.scat_pos)):
+        values[s.scat_pos[k]] += s.scat_coef[k] * F[s.scat_feat[k]]
+    nb = s.nb
+    for k in range(len(s.angle_rows)):
+        values[s.ang_pos[k]] = -1.0 if s.distance[k] else np.sin(q[nb + k])
+    for j in range(len(s.sine_rows)):
+        values[s.sin_pos[j]] = -np.cos(q[nb + s.sine_of[j]])
+
+
+@njit(cache=True)
+def cost_of(phi: np.ndarray, w: np.ndarray) -> float:
+    total = 0.0
+    for r in range(len(phi)):
+        total += w[r] * phi[r] * phi[r]
+    return total
+
+
+@njit(cache=True)
+def normal_equations(s: SparseSystem, values: np.ndarray, phi: np.ndarray, w: np.ndarray,
+                     N: np.ndarray, g: np.ndarray) -> None:
+    """The lower triangle of Φ_qᵀWΦ_q and Φ_qᵀWΦ in the factor's order, row by row
+    (Σ_r w_r J_rᵀJ_r costs Σ nnz_r²)."""
+    n = len(g)
+    for i in range(n):
+        g[i] = 0.0
+        for j in range(s.first[i], i + 1):
+            N[i, j] = 0.0
+    for r in range(len(phi)):
+        wr = w[r]
+        if wr == 0.0:
+            continue
+        start = s.j_ptr[r]
+        for k in range(start, s.j_ptr[r + 1]):
+            vk = wr * values[k]
+            ck = s.j_col[k]
+            g[ck] += vk * phi[r]
+            for m in range(start, k + 1):
+                N[ck, s.j_col[m]] += vk * values[m]
+
+
+@njit(cache=True)
+def add_hessian(s: SparseSystem, q: np.ndarray, c: np.ndarray, N: np.ndarray) -> None:
+    """N += Σ_i c_i ∇²_q Φ_i (lower triangle): the dot rows' constant C_aᵀC_b + C_bᵀC_a, and
+    −c_k g″(θ_k) (c_k cos θ_k for an angle), c_s sin θ for a sine row on the diagonal (see
+    System.residual_hessian)."""
+    for t in range(len(s.h_row)):
+        N[s.h_row[t], s.h_col[t]] += s.h_coef[t] * c[s.n_lin + s.h_dot[t]]
+    nb = s.nb
+    for k in range(len(s.angle_rows)):
+        if not s.distance[k]:
+            p = s.ang_diag[k]
+            N[p, p] += c[s.n_lin + s.angle_rows[k]] * np.cos(q[nb + k])
+    for j in range(len(s.sine_rows)):
+        p = s.sin_diag[j]
+        N[p, p] += c[s.n_lin + s.sine_rows[j]] * np.sin(q[nb + s.sine_of[j]])
+
+
+@njit(cache=True)
+def cholesky_solve(first: np.ndarray, N: np.ndarray, L: np.ndarray, rhs: np.ndarray,
+                   out: np.ndarray) -> bool:
+    """Solve N out = rhs with N = LLᵀ factored inside its envelope (row i from column
+    first[i]); False where N is not positive definite."""
+    n = len(rhs)
+    for i in range(n):
+        fi = first[i]
+        for j in range(fi, i):
+            k0 = max(fi, first[j])
+            total = N[i, j]
+            for k in range(k0, j):
+                total -= L[i, k] * L[j, k]
+            L[i, j] = total / L[j, j]
+        total = N[i, i]
+        for k in range(fi, i):
+            total -= L[i, k] * L[i, k]
+        if not total > 0.0:
+            return False
+        L[i, i] = np.sqrt(total)
+    for i in range(n):
+        total = rhs[i]
+        for k in range(first[i], i):
+            total -= L[i, k] * out[k]
+        out[i] = total / L[i, i]
+    for i in range(n - 1, -1, -1):
+        out[i] /= L[i, i]
+        value = out[i]
+        for k in range(first[i], i):
+            out[k] -= L[i, k] * value
+    return True
+
+
+@njit(cache=True)
+def workspace(s: SparseSystem, n_rows: int):
+    """The arrays one frame's iteration writes into, allocated once per solve: features,
+    Φ, Φ_q's values, the trial's Φ, WΦ, the normal matrix and its factor, the gradient, the
+    step (factor order and q order) and the trial point."""
+    nq = s.nq
+    return (np.empty(len(s.f0)), np.empty(n_rows), np.empty(len(s.j_col)), np.empty(n_rows),
+            np.empty(n_rows), np.zeros((nq, nq)), np.zeros((nq, nq)), np.empty(nq),
+            np.empty(nq), np.empty(nq), np.empty(nq))
+
+
+@njit(cache=True)
+def gauss_newton(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, w: np.ndarray, tol: float,
+                 max_iter: int, hessian: int, q: np.ndarray, ws) -> tuple[int, bool]:
+    """One frame of fccgrb_cli.solvers.newton.gauss_newton (hessian 0 Gauss–Newton, 1 exact,
+    2 auto): the iterate is left in ``q``; returns (iterations, converged). ``ws``: see
+    :func:`workspace`."""
+    n_rows, nq = len(w), s.nq
+    F, phi, values, trial_phi, c, N, L, g, step_p, step, trial = ws
+    q[:] = q0
+    residual(s, q, ref, F, phi)
+    jacobian(s, q, F, values)
+    cost = cost_of(phi, w)
+    size = previous = np.inf
+    exact = hessian == 1
+    for k in range(1, max_iter + 1):
+        exact = exact or (hessian == 2 and (size < NEAR or size > SLOW * previous))
+        normal_equations(s, values, phi, w, N, g)
+        for i in range(nq):
+            g[i] = -g[i]
+        ok = False
+        if exact:
+            for r in range(n_rows):
+                c[r] = w[r] * phi[r]
+            add_hessian(s, q, c, N)
+            ok = cholesky_solve(s.first, N, L, g, step_p)
+            if not ok:
+                normal_equations(s, values, phi, w, N, g)
+                for i in range(nq):
+                    g[i] = -g[i]
+        if not ok:
+            ok = cholesky_solve(s.first, N, L, g, step_p)
+        if not ok:
+            return k, False
+        previous, size = size, 0.0
+        slope = 0.0
+        for p in range(nq):
+            step[s.perm[p]] = step_p[p]
+            slope -= g[p] * step_p[p]
+            size = max(size, abs(step_p[p]))
+        if not np.isfinite(size):
+            return k, False
+        if size < tol:
+            for i in range(nq):
+                q[i] += step[i]
+            return k, True
+        alpha = 1.0
+        for i in range(nq):
+            trial[i] = q[i] + step[i]
+        residual(s, trial, ref, F, trial_phi)
+        trial_cost = cost_of(trial_phi, w)
+        while trial_cost > cost + 2e-4 * alpha * slope + ROUNDING * cost and alpha >= 1e-3:
+            alpha *= 0.5
+            for i in range(nq):
+                trial[i] = q[i] + alpha * step[i]
+            residual(s, trial, ref, F, trial_phi)
+            trial_cost = cost_of(trial_phi, w)
+        q[:] = trial
+        phi[:] = trial_phi
+        cost = trial_cost
+        jacobian(s, q, F, values)  # F holds the features of the last trial, now q
+    return max_iter, False
+
+
+@njit(cache=True)
+def solve_frames(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
+                 pattern_of: np.ndarray, solvable: np.ndarray, base_w: np.ndarray,
+                 tol: float, max_iter: int, hessian: int, extrapolate: bool,
+                 start: int, stop: int, guess: np.ndarray, use_guess: bool,
+                 history: np.ndarray, state: np.ndarray,
+                 q_all: np.ndarray, iterations: np.ndarray, phi_norm: np.ndarray,
+                 phi_top: np.ndarray, converged: np.ndarray, unsolved: np.ndarray
+                 ) -> tuple[int, int]:
+    """Frames ``start`` to ``stop`` of solve_nrm's loop. ``history`` holds up to 5 solutions
+    (newest last), ``state`` = [number in history, last frame's iterations]; ``missing``
+    (frames × targets) the gaps, ``pattern_of`` each frame's set of gaps by number and
+    ``solvable`` what the rank test said of each set (UNKNOWN until asked). Returns
+    (frame, DONE | NEED_GUESS | NEED_RANK): Python supplies ``guess`` (use_guess) and calls
+    again from that frame."""
+    n_rows, nq = len(base_w), s.nq
+    ws = workspace(s, n_rows)
+    w = np.empty(n_rows)
+    y = np.empty((targets.shape[1], 3))
+    q0 = np.empty(nq)
+    q = np.empty(nq)
+    F = np.empty(len(s.f0))
+    phi = np.empty(n_rows)
+    for f in range(start, stop):
+        count = state[0]
+        if use_guess and f == start:
+            q0[:] = guess
+        elif count == 0:
+            return f, NEED_GUESS
+        elif not extrapolate:
+            q0[:] = history[count - 1]
+        else:
+            points = min(count, 5 if state[1] <= 5 else 3)
+            coef = _EXTRAPOLATION[points - 1]
+            q0[:] = 0.0
+            for j in range(points):
+                q0 += coef[j] * history[count - 1 - j]
+        key = pattern_of[f]
+        if solvable[key] == UNKNOWN:
+            guess[:] = q0
+            return f, NEED_RANK
+        if solvable[key] == UNSOLVABLE:
+            q_all[f] = np.nan
+            unsolved[f] = True
+            continue
+        for r in range(n_rows):
+            w[r] = base_w[r]
+        for t in range(targets.shape[1]):
+            for d in range(3):
+                y[t, d] = 0.0 if missing[f, t] else targets[f, t, d]
+            if missing[f, t]:
+                for d in range(3):
+                    w[s.trk_start + 3 * t + d] = 0.0
+        cap = max_iter if count else 4 * max_iter
+        k, ok = gauss_newton(s, q0, y, w, tol, cap, hessian, q, ws)
+        if not ok and count and extrapolate:
+            k2, ok = gauss_newton(s, history[count - 1], y, w, tol, max_iter, hessian, q, ws)
+            k += k2
+        q_all[f] = q
+        iterations[f] = k
+        converged[f] = ok
+        state[1] = k
+        if ok:
+            if count == 5:
+                for j in range(4):
+                    history[j] = history[j + 1]
+                history[4] = q
+            else:
+                history[count] = q
+                state[0] = count + 1
+        else:
+            state[0] = 0
+        residual(s, q, y, F, phi)
+        total, top = 0.0, 0.0
+        for r in range(n_rows):
+            if w[r] > 0.0:
+                total += phi[r] * phi[r]
+        for r in s.top_rows:
+            top = max(top, abs(phi[r]))
+        phi_norm[f] = np.sqrt(total)
+        phi_top[f] = top
+    return stop, DONE
+
+
+@njit(cache=True)
+def stabilized_sqp(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, w: np.ndarray, tol: float,
+                   max_iter: int, q: np.ndarray, ws) -> tuple[int, bool]:
+    """One frame of fccgrb_cli.solvers.sqp.stabilized_sqp (``w`` from sqp_weights): the
+    iterate is left in ``q``; returns (iterations, converged)."""
+    n_rows, nq = len(w), s.nq
+    F, phi, values, shifted, shift, N, L, g, step_p, step, _ = ws
+    q[:] = q0
+    shift[:] = 0.0
+    size = np.inf
+    for k in range(max_iter + 1):
+        residual(s, q, ref, F, phi)
+        violation = 0.0
+        for r in s.top_rows:
+            violation = max(violation, abs(phi[r]))
+        if size < tol and violation <= FEASIBLE_TOP:
+            return k, True
+        if k == max_iter:
+            break
+        jacobian(s, q, F, values)
+        for r in range(n_rows):
+            shifted[r] = phi[r] + shift[r]
+        normal_equations(s, values, shifted, w, N, g)
+        for i in range(nq):
+            g[i] = -g[i]
+        add_hessian(s, q, shift, N)
+        ok = cholesky_solve(s.first, N, L, g, step_p)
+        if not ok:
+            normal_equations(s, values, shifted, w, N, g)
+            for i in range(nq):
+                g[i] = -g[i]
+            ok = cholesky_solve(s.first, N, L, g, step_p)
+        if not ok:
+            return k + 1, False
+        size = 0.0
+        for p in range(nq):
+            step[s.perm[p]] = step_p[p]
+            size = max(size, abs(step_p[p]))
+        if not np.isfinite(size):
+            return k + 1, False
+        for r in s.top_rows:
+            total = shift[r] + phi[r]
+            for m in range(s.j_ptr[r], s.j_ptr[r + 1]):
+                total += values[m] * step[s.perm[s.j_col[m]]]
+            shift[r] = total
+        for i in range(nq):
+            q[i] += step[i]
+    return max_iter, False
+
+
+@njit(cache=True)
+def solve_frames_sqp(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
+                     point_weights: np.ndarray, nrm_w: np.ndarray, lower: np.ndarray,
+                     upper: np.ndarray, tol: float, extrapolate: bool, start: int, stop: int,
+                     guess: np.ndarray, use_guess: bool, history: np.ndarray, state: np.ndarray,
+                     q_all: np.ndarray, iterations: np.ndarray, phi_norm: np.ndarray,
+                     phi_top: np.ndarray, converged: np.ndarray) -> tuple[int, int]:
+    """Frames ``start`` to ``stop`` of the sequential CNO-SQP (optimize._run_frames with the
+    stabilized SQP): each from the quadratic extrapolation of up to 3 solutions (``history``,
+    ``state[0]`` of them). Returns (frame, DONE | NEED_GUESS | NEED_FALLBACK): a frame the SQP
+    cannot solve within the bounds goes back to Python (SLSQP) with its guess in ``guess``."""
+    n_rows, nq = len(s.c_const) + len(s.dot_c), s.nq
+    ws = workspace(s, n_rows)
+    w = np.empty(n_rows)
+    w_nrm = np.empty(n_rows)
+    active = np.empty(n_rows)
+    y = np.empty((targets.shape[1], 3))
+    q0 = np.empty(nq)
+    q = np.empty(nq)
+    F = np.empty(len(s.f0))
+    phi = np.empty(n_rows)
+    for r in range(n_rows):
+        w[r] = 0.0
+        active[r] = 1.0
+    for r in s.top_rows:
+        w[r] = 1.0
+    for f in range(start, stop):
+        count = state[0]
+        if use_guess and f == start:
+            q0[:] = guess
+        elif count == 0:
+            return f, NEED_GUESS
+        elif not extrapolate:
+            q0[:] = history[count - 1]
+        else:
+            coef = _EXTRAPOLATION[count - 1]
+            q0[:] = 0.0
+            for j in range(count):
+                q0 += coef[j] * history[count - 1 - j]
+        for t in range(targets.shape[1]):
+            gone = missing[f, t]
+            for d in range(3):
+                row = s.trk_start + 3 * t + d
+                y[t, d] = 0.0 if gone else targets[f, t, d]
+                w[row] = 0.0 if gone else 2.0 * DELTA * point_weights[t]
+                active[row] = 0.0 if gone else 1.0
+        residual(s, q0, y, F, phi)
+        before = 0
+        violation = 0.0
+        for r in s.top_rows:
+            violation = max(violation, abs(phi[r]))
+        if violation > FAR:
+            for r in range(n_rows):
+                w_nrm[r] = nrm_w[r] * active[r]
+            before, _ = gauss_newton(s, q0, y, w_nrm, tol, 50, 2, q, ws)
+            q0[:] = q
+        k, ok = stabilized_sqp(s, q0, y, w, tol, MAX_SQP, q, ws)
+        k += before
+        for i in range(nq):
+            ok = ok and lower[i] <= q[i] <= upper[i]
+        q_all[f] = q
+        iterations[f] = k
+        if not ok:
+            guess[:] = q0
+            return f, NEED_FALLBACK
+        converged[f] = True
+        if count == 3:
+            history[0] = history[1]
+            history[1] = history[2]
+            history[2] = q
+        else:
+            history[count] = q
+            state[0] = count + 1
+        residual(s, q, y, F, phi)
+        total, top = 0.0, 0.0
+        for r in range(n_rows):
+            if active[r] > 0.0:
+                total += phi[r] * phi[r]
+        for r in s.top_rows:
+            top = max(top, abs(phi[r]))
+        phi_norm[f] = np.sqrt(total)
+        phi_top[f] = top
+    return stop, DONE

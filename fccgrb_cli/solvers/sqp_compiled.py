@@ -1,0 +1,74 @@
+"""The sequential CNO-SQP (TC objective) through the compiled kernels: frames the stabilized
+SQP solves within the bounds stay in machine code; a frame without a history gets Python's
+initial guess, and a frame the SQP cannot solve goes through the numpy path's
+``solve_frame`` (SLSQP, then the retry from NRM-WLS), exactly as the numpy path would."""
+
+from __future__ import annotations
+
+import time as clock
+from collections.abc import Callable
+
+import numpy as np
+
+from fccgrb_cli.solvers import kernels
+from fccgrb_cli.solvers.frame_problem import FrameProblem
+from fccgrb_cli.solvers.initial import initial_guess
+from fccgrb_cli.solvers.nrm import row_weights
+from fccgrb_cli.solvers.nrm_compiled import BLOCK, sparse_of
+from fccgrb_cli.solvers.optimize import FrameRecord, Settings, solve_frame
+from fccgrb_cli.system import System
+
+SQP_HISTORY = 3
+
+
+def run_frames_compiled(system: System, settings: Settings, targets: np.ndarray,
+                        progress: Callable[[int, int], None] | None = None
+                        ) -> list[FrameRecord]:
+    """optimize._run_frames over every frame, chained, with the stabilized SQP compiled."""
+    s = sparse_of(system)
+    n, nq = len(targets), system.nq
+    targets = np.ascontiguousarray(targets, dtype=float)
+    missing = ~np.all(np.isfinite(targets), axis=2)
+    weights = np.array([1.0 if w is None else w for w in system.trk_weight])
+    bounds = FrameProblem(system, targets[0]).bounds()
+    lower = np.array([-np.inf if lo is None else lo for lo, _ in bounds])
+    upper = np.array([np.inf if hi is None else hi for _, hi in bounds])
+    q_all, iterations = np.zeros((n, nq)), np.zeros(n, dtype=np.int64)
+    phi_norm, phi_top = np.full(n, np.nan), np.full(n, np.nan)
+    converged, seconds = np.zeros(n, dtype=bool), np.zeros(n)
+    history, state = np.zeros((SQP_HISTORY, nq)), np.zeros(1, dtype=np.int64)
+    fallback: dict[int, FrameRecord] = {}
+    guess, use_guess = initial_guess(system, targets[0]), True
+    f = 0
+    while f < n:
+        started = clock.perf_counter()
+        g, reason = kernels.solve_frames_sqp(
+            s, targets, missing, weights, row_weights(system, 1e-3), lower, upper, settings.tol,
+            settings.warm_start != "previous", f, min(n, f + BLOCK), guess, use_guess, history,
+            state, q_all, iterations, phi_norm, phi_top, converged)
+        if g > f:
+            seconds[f:g] = (clock.perf_counter() - started) / (g - f)
+        use_guess = False
+        if reason == kernels.NEED_GUESS:
+            guess, use_guess = initial_guess(system, targets[g]), True
+        elif reason == kernels.NEED_FALLBACK:
+            record = solve_frame(system, settings, guess.copy(), targets[g])
+            fallback[g] = record
+            state[0] = _pushed(history, int(state[0]), record.q) if record.converged else 0
+            g += 1
+        if progress is not None:
+            progress(g, n)
+        f = g
+    return [fallback.get(k) or FrameRecord(q_all[k], int(iterations[k]), True,
+                                           "stabilized SQP: converged", float(seconds[k]),
+                                           float(phi_norm[k]), float(phi_top[k]))
+            for k in range(n)]
+
+
+def _pushed(history: np.ndarray, count: int, q: np.ndarray) -> int:
+    if count == len(history):
+        history[:-1] = history[1:].copy()
+        history[-1] = q
+        return count
+    history[count] = q
+    return count + 1

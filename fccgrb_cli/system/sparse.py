@@ -1,0 +1,163 @@
+"""The compiled system's sparsity, fixed for a model: Φ_q's non-zero pattern row by row, where
+each dot row's values come from the features, the order that keeps the normal matrix's
+Cholesky factor inside a narrow envelope, and the Hessian's terms in that order. The arrays feed
+the compiled per-frame kernels (fccgrb_cli/solvers/kernels.py); nothing here runs per frame.
+
+A row of Φ_q touches the 12 coordinates of at most two bodies (plus one mixed coordinate): on
+the five-bar 87 rows × 69 columns hold 1,272 non-zeros (21 %), so ΦᵀWΦ costs Σ nnz_r² instead of
+a dense product, and ordered by reverse Cuthill–McKee its factor fills an envelope of a third
+of the lower triangle.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from fccgrb_cli.system.compiled import System
+
+
+class SparseSystem(NamedTuple):
+    """Constant arrays of a mixed-coordinate system with fully-defined bodies (x = q's body
+    part). ``j_ptr``/``j_col``: CSR pattern of Φ_q (columns already in the factor's order);
+    ``j_const``: the constant values (linear and tracking rows, zero elsewhere); ``scat_pos``,
+    ``scat_coef``, ``scat_feat``: each dot row's value += coef · F_flat[feat] (Eq. 2–3);
+    ``ang_pos``/``sin_pos``: where the mixed coordinates' entries −g′(θ) and −cos θ sit;
+    ``first``: each row's first column in the factor's envelope; ``ang_diag``/``sin_diag``:
+    the mixed coordinates' places on the diagonal in that order; ``h_*``: the Hessian's
+    lower-triangle terms (row, column, coefficient, dot row)."""
+
+    nq: int
+    nb: int
+    n_lin: int
+    trk_start: int
+    a_ptr: np.ndarray
+    a_col: np.ndarray
+    a_val: np.ndarray
+    f0: np.ndarray
+    c_const: np.ndarray
+    trk_slot: np.ndarray
+    dot_a: np.ndarray
+    dot_b: np.ndarray
+    dot_c: np.ndarray
+    angle_rows: np.ndarray
+    distance: np.ndarray
+    sine_rows: np.ndarray
+    sine_of: np.ndarray
+    j_ptr: np.ndarray
+    j_col: np.ndarray
+    j_const: np.ndarray
+    scat_pos: np.ndarray
+    scat_coef: np.ndarray
+    scat_feat: np.ndarray
+    ang_pos: np.ndarray
+    sin_pos: np.ndarray
+    perm: np.ndarray
+    first: np.ndarray
+    ang_diag: np.ndarray
+    sin_diag: np.ndarray
+    h_row: np.ndarray
+    h_col: np.ndarray
+    h_coef: np.ndarray
+    h_dot: np.ndarray
+    top_rows: np.ndarray
+
+
+def supported(system: System) -> bool:
+    """The kernels take mixed coordinates with tracking and fully-defined bodies (a reduced body's
+    w = u × v makes Φ_q depend on q through X_q: those systems keep the numpy path)."""
+    layout = system.layout
+    return (system.mixed and system.n_targets > 0 and not len(layout.reduced_w)
+            and layout.n_body_q == layout.nx)
+
+
+def sparse_system(system: System) -> SparseSystem:
+    """The arrays of :class:`SparseSystem` for ``system`` (see :func:`supported`)."""
+    if not supported(system):
+        raise ValueError("sparse_system needs mixed coordinates, tracking and no reduced body")
+    nq, nb, n_rows = system.nq, system.layout.n_body_q, system.n_rows
+    n_lin = system.n_linear_rows
+    n_ang = len(system.angle_rows)
+
+    mixed_rows = n_lin + np.concatenate([system.angle_rows, system.sine_rows]).astype(int)
+    mixed_cols = nb + np.concatenate([np.arange(n_ang), system.sine_of]).astype(int)
+    pattern = np.zeros((n_rows, nq), dtype=bool)
+    pattern.flat[system.scatter_index] = True
+    pattern[:n_lin, :nb] |= system.J_const != 0.0
+    pattern[mixed_rows, mixed_cols] = True
+    # degree-aware order of the normal matrix's graph (entries where two columns share a row)
+    graph = (pattern.T.astype(float) @ pattern.astype(float)) != 0.0
+    perm = _reverse_cuthill_mckee(graph)
+    inverse = np.empty(nq, dtype=int)
+    inverse[perm] = np.arange(nq)
+
+    # CSR, each row's entries in the factor's column order (the normal matrix's lower triangle
+    # is then the pairs m ≤ k of a row)
+    rows, cols = np.nonzero(pattern)
+    order = np.lexsort((inverse[cols], rows))
+    rows, cols = rows[order], cols[order]
+    position = np.full((n_rows, nq), -1, dtype=int)
+    position[rows, cols] = np.arange(len(rows))
+    j_const = np.zeros(len(rows))
+    lin = rows < n_lin
+    j_const[lin] = system.J_const[rows[lin], cols[lin]]
+    scat_rows, scat_cols = np.divmod(system.scatter_index, nq)
+
+    A = system.A_flat
+    a_rows, a_cols = np.nonzero(A)
+    hess_rows, hess_cols, hess_coef, hess_dot = _hessian_terms(system, inverse)
+    first = _envelope(graph[np.ix_(perm, perm)])
+    return SparseSystem(
+        nq=nq, nb=nb, n_lin=n_lin, trk_start=3 * len(system.lin_a),
+        a_ptr=_pointers(a_rows, len(A)), a_col=a_cols, a_val=A[a_rows, a_cols],
+        f0=system.f0.ravel().copy(), c_const=system.c_const.copy(),
+        trk_slot=system.trk_slot.astype(np.int64),
+        dot_a=system.dot_a.astype(np.int64), dot_b=system.dot_b.astype(np.int64),
+        dot_c=system.dot_c.copy(), angle_rows=system.angle_rows.astype(np.int64),
+        distance=system.distance_rows.copy(), sine_rows=system.sine_rows.astype(np.int64),
+        sine_of=system.sine_of.astype(np.int64),
+        j_ptr=_pointers(rows, n_rows), j_col=inverse[cols], j_const=j_const,
+        scat_pos=position[scat_rows, scat_cols],
+        scat_coef=system.scatter_coef.copy(), scat_feat=system.scatter_gather.astype(np.int64),
+        ang_pos=position[n_lin + system.angle_rows, nb + np.arange(n_ang)],
+        sin_pos=position[n_lin + system.sine_rows, nb + system.sine_of],
+        perm=perm, first=first,
+        ang_diag=inverse[nb + np.arange(n_ang)], sin_diag=inverse[nb + system.sine_of],
+        h_row=hess_rows, h_col=hess_cols, h_coef=hess_coef, h_dot=hess_dot,
+        top_rows=np.flatnonzero(system.masks()["topology"]),
+    )
+
+
+def _pointers(rows: np.ndarray, n: int) -> np.ndarray:
+    return np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=n))]).astype(np.int64)
+
+
+def _hessian_terms(system: System, inverse: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The dot rows' constant Hessian kron(K, I3) (System.residual_hessian) as terms of the
+    lower triangle in the factor's order: H[row, col] += coef · c[dot]."""
+    side = 4 * len(system.layout.body_names)
+    ka, kb = np.divmod(system.hess_index, side)
+    d = np.arange(3)
+    rows = inverse[(3 * ka[:, None] + d).ravel()]
+    cols = inverse[(3 * kb[:, None] + d).ravel()]
+    coef = np.repeat(system.hess_coef, 3)
+    dot = np.repeat(system.hess_row, 3)
+    lower = rows >= cols
+    return rows[lower], cols[lower], coef[lower], dot[lower].astype(np.int64)
+
+
+def _reverse_cuthill_mckee(graph: np.ndarray) -> np.ndarray:
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+    return np.asarray(reverse_cuthill_mckee(csr_matrix(graph), symmetric_mode=True),
+                      dtype=np.int64)
+
+
+def _envelope(graph: np.ndarray) -> np.ndarray:
+    """Each row's first column with a non-zero in the lower triangle: the Cholesky factor stays
+    inside this envelope (fill-in never reaches left of a row's first entry)."""
+    lower = np.tril(graph)
+    return np.argmax(lower, axis=1).astype(np.int64)

@@ -1,0 +1,236 @@
+"""The compiled kernels against the numpy implementation they replace.
+
+Piece by piece, at random configurations: Φ, Φ_q, the normal equations and the Hessian term
+built from the sparse arrays equal System.residual / jacobian / residual_hessian (themselves
+checked by central differences in tests/test_constraint_derivatives.py and elsewhere), and the
+envelope Cholesky solves what numpy's solver solves. Whole solves: NRM through the kernels gives
+the numpy path's coordinates to 1e-12 with the same iterations, flags and messages, on the
+bundled mechanisms (angles, signed angles, distances), generated trees on fixed and moving
+bases, gaps, unsolvable frames, every iteration matrix and warm start, the real gait trial.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from generated_models import build_case, structures
+from hypothesis import given
+from hypothesis import strategies as st
+from test_generated import RATE, T0, reference
+
+from fccgrb_cli.errors import InputError
+from fccgrb_cli.model import load_model, parse_model
+from fccgrb_cli.perturb import perturb
+from fccgrb_cli.solvers import kernels
+from fccgrb_cli.solvers.nrm import NrmSettings, row_weights, solve_nrm
+from fccgrb_cli.solvers.nrm_compiled import sparse_of
+from fccgrb_cli.synth import synthesize
+from fccgrb_cli.system import Drive, compile_system
+from fccgrb_cli.system.sparse import supported
+from fccgrb_cli.system.structure import pose_of
+
+ROOT = Path(__file__).resolve().parents[1]
+MODELS = ROOT / "configs" / "models"
+BUNDLED = ("five_bar", "crank_rocker", "slider_crank", "rssr", "slider", "pendulum")
+GAIT = ROOT.parent / "shared" / "data" / "c3d" / "Qualisys.c3d"
+
+
+def mixed(name: str):
+    model = load_model(MODELS / f"{name}.yaml")
+    return model, compile_system(model, angles="coordinate", track=True)
+
+
+def dense_jacobian(s, values: np.ndarray, n_rows: int) -> np.ndarray:
+    """Φ_q from the CSR values, back in q's column order."""
+    J = np.zeros((n_rows, s.nq))
+    rows = np.repeat(np.arange(n_rows), np.diff(s.j_ptr))
+    np.add.at(J, (rows, s.perm[s.j_col]), values)
+    return J
+
+
+def in_q_order(s, lower: np.ndarray) -> np.ndarray:
+    """A symmetric matrix from its lower triangle in the factor's order, back in q's order."""
+    full = np.tril(lower) + np.tril(lower, -1).T
+    out = np.empty_like(full)
+    out[np.ix_(s.perm, s.perm)] = full
+    return out
+
+
+def envelope_mask(s) -> np.ndarray:
+    n = s.nq
+    cols = np.arange(n)
+    return (cols[None, :] >= s.first[:, None]) & (cols[None, :] <= cols[:, None])
+
+
+@pytest.mark.parametrize("name", BUNDLED)
+def test_pieces_equal_the_dense_system(name: str) -> None:
+    _, system = mixed(name)
+    s = sparse_of(system)
+    rng = np.random.default_rng(abs(hash(name)) % 2**32)
+    n_rows = system.n_rows
+    for _ in range(3):
+        q = pose_of(system) + 0.05 * rng.standard_normal(system.nq)
+        ref = rng.standard_normal((system.n_targets, 3))
+        w = rng.uniform(0.1, 2.0, n_rows)
+        F, phi = np.empty(len(s.f0)), np.empty(n_rows)
+        kernels.residual(s, q, ref, F, phi)
+        phi_dense, J_dense = system.evaluate(q, Drive(ref=ref))
+        assert np.abs(phi - phi_dense).max() < 1e-13
+        values = np.empty(len(s.j_col))
+        kernels.jacobian(s, q, F, values)
+        assert np.abs(dense_jacobian(s, values, n_rows) - J_dense).max() < 1e-13
+
+        N, g = np.full((s.nq, s.nq), np.nan), np.empty(s.nq)
+        kernels.normal_equations(s, values, phi, w, N, g)
+        inside = envelope_mask(s)
+        assert np.isfinite(N[inside]).all()  # every entry of the envelope was written
+        normal = J_dense.T @ (w[:, None] * J_dense)
+        assert np.abs(in_q_order(s, np.where(inside, N, 0.0)) - normal).max() \
+            < 1e-12 * np.abs(normal).max()
+        assert np.abs(g[np.argsort(s.perm)] - J_dense.T @ (w * phi)).max() < 1e-12
+        # the pattern of ΦᵀWΦ lies inside the envelope: nothing outside it is non-zero
+        assert np.abs(normal[np.ix_(s.perm, s.perm)][~inside & np.tri(s.nq, dtype=bool)]).max(
+            initial=0.0) == 0.0
+
+        c = w * phi
+        H = np.where(inside, 0.0, np.nan)
+        kernels.add_hessian(s, q, c, H)
+        H_dense = system.residual_hessian(q, c)
+        assert np.abs(in_q_order(s, np.where(inside, H, 0.0)) - H_dense).max() \
+            < 1e-12 * max(np.abs(H_dense).max(), 1e-300)
+
+
+@given(st.integers(0, 2**32 - 1))
+def test_envelope_cholesky_solves(seed: int) -> None:
+    _, system = mixed("five_bar")
+    s = sparse_of(system)
+    rng = np.random.default_rng(seed)
+    inside = envelope_mask(s)
+    B = np.where(inside, rng.standard_normal((s.nq, s.nq)), 0.0)
+    A = B @ B.T + s.nq * np.eye(s.nq)  # SPD; its factor B's envelope is the envelope
+    A = np.where(inside, A, 0.0)
+    A = np.tril(A) + np.tril(A, -1).T
+    rhs = rng.standard_normal(s.nq)
+    out, L = np.empty(s.nq), np.zeros((s.nq, s.nq))
+    assert kernels.cholesky_solve(s.first, np.tril(A), L, rhs, out)
+    assert np.abs(A @ out - rhs).max() < 1e-10 * np.abs(rhs).max()
+    indefinite = np.tril(A) - 2 * np.abs(A).max() * np.eye(s.nq)
+    assert not kernels.cholesky_solve(s.first, indefinite, L, rhs, out)
+
+
+def both(system, time, markers, **settings):
+    numpy = solve_nrm(system, time, markers, NrmSettings(**settings, engine="numpy"))
+    compiled = solve_nrm(system, time, markers, NrmSettings(**settings, engine="compiled"))
+    return numpy, compiled
+
+
+def assert_same(a, b, tol: float = 1e-10) -> None:
+    """The two engines' results: the same frames converged, failed and left unsolved, the same
+    messages, and where a frame took the same iterations in both, the same coordinates to
+    1e-12. Rounding (the kernels sum in another order) may flip a borderline decision — a step
+    ratio at exactly the 'auto' switch, a line search at its limit — on a frame that a hard
+    start (a rigid-fit guess into P30 noise) drags through tens of iterations; such frames
+    (at most 5 %) must still agree to 10 × the tolerance on ‖Δq‖, and a failed frame only in
+    being failed."""
+    assert (a.converged == b.converged).all()
+    assert np.array_equal(np.isnan(a.q), np.isnan(b.q))
+    same = a.iterations == b.iterations
+    assert same.mean() >= 0.95, np.flatnonzero(~same)
+    ok = a.converged
+    assert np.abs(a.q[ok & same] - b.q[ok & same]).max(initial=0.0) < 1e-12
+    assert np.abs(a.q[ok & ~same] - b.q[ok & ~same]).max(initial=0.0) < 10 * tol
+    if same.all():
+        assert a.messages == b.messages
+    assert np.abs(a.phi_top_max[ok] - b.phi_top_max[ok]).max(initial=0.0) < 1e-12
+    assert np.abs(a.phi_norm[ok] - b.phi_norm[ok]).max(initial=0.0) < 1e-10
+
+
+@pytest.mark.parametrize("name", BUNDLED)
+@pytest.mark.parametrize("level", [0.0, 30e-3])
+def test_engines_agree_on_bundled_models(name: str, level: float) -> None:
+    model, system = mixed(name)
+    truth = synthesize(model)
+    markers = perturb(truth.markers, truth.labels, truth.rate, level, seed=3)[:80]
+    numpy, compiled = both(system, truth.result.time[:80], markers)
+    assert numpy.converged.all()
+    assert_same(numpy, compiled)
+
+
+@pytest.mark.parametrize(("hessian", "warm_start", "weight"), [
+    ("gauss-newton", "extrapolate", 1e-3), ("exact", "extrapolate", 1e-3),
+    ("auto", "previous", 1e-3), ("auto", "extrapolate", None)])
+def test_engines_agree_for_every_setting(hessian: str, warm_start: str, weight) -> None:
+    model, system = mixed("five_bar")
+    truth = synthesize(model)
+    markers = perturb(truth.markers, truth.labels, truth.rate, 15e-3, seed=1)[:60]
+    assert_same(*both(system, truth.result.time[:60], markers, hessian=hessian,
+                      warm_start=warm_start, tracking_weight=weight))
+
+
+def test_engines_agree_on_gaps_unsolvable_frames_and_failures() -> None:
+    model, system = mixed("five_bar")
+    truth = synthesize(model)
+    markers = perturb(truth.markers, truth.labels, truth.rate, 7.5e-3, seed=2)[:90].copy()
+    time = truth.result.time[:90]
+    markers[10:14, 0] = np.nan            # a gap the others can bridge
+    index = {label: k for k, label in enumerate(truth.labels)}
+    markers[30:33, [index["P5"], index["P6"]]] = np.nan  # nothing left on B5: unsolvable
+    markers[50, :] += 0.3                 # a jump that the next frames recover from
+    numpy, compiled = both(system, time, markers, skip_unsolvable=True)
+    assert numpy.messages and np.isnan(numpy.q[30:33]).all()
+    assert_same(numpy, compiled)
+    capped = both(system, time, markers, skip_unsolvable=True, max_iter=2)
+    assert (~capped[0].converged).sum() > 5  # failures, retries and fresh starts after them
+    assert_same(*capped)
+    for engine in ("numpy", "compiled"):
+        with pytest.raises(InputError, match=r"frame index 30 .*missing: P5, P6"):
+            solve_nrm(system, time, markers, NrmSettings(engine=engine),
+                      labels=tuple(truth.labels))
+
+
+@given(structures(floating=False) | structures(floating=True))
+def test_engines_agree_on_generated_trees(structure) -> None:
+    case = build_case(structure)
+    t = T0 + np.arange(24) / RATE
+    ref = reference(case, t)
+    model = parse_model(case.text, "generated.yaml").with_form("full")
+    system = compile_system(model, angles="coordinate", track=True)
+    assert supported(system)
+    noisy = ref.markers + 0.01 * np.sin(np.arange(24)[:, None, None] * 0.7
+                                        + np.arange(ref.markers.shape[1])[None, :, None]
+                                        + np.arange(3))
+    for markers in (ref.markers, noisy):
+        assert_same(*both(system, t, markers, tol=1e-12))
+
+
+def test_reduced_bodies_stay_on_the_numpy_path() -> None:
+    model = load_model(MODELS / "five_bar.yaml").with_form("reduced")
+    system = compile_system(model, angles="coordinate", track=True)
+    assert not supported(system)
+    assert not NrmSettings(engine="auto").compiled(system, 10**6)
+    with pytest.raises(InputError, match="reduced"):
+        NrmSettings(engine="compiled").compiled(system, 10)
+
+
+def test_weights_follow_the_settings() -> None:
+    _, system = mixed("five_bar")
+    w = row_weights(system, 1e-3)
+    assert (w[system.masks()["tracking"]] == 1e-3).all()
+    assert (w[system.masks()["topology"]] == 1.0).all()
+
+
+@pytest.mark.skipif(not GAIT.exists(), reason="the shared data folder is not here")
+def test_engines_agree_on_the_gait_trial() -> None:
+    from fccgrb_cli.anatomy.calibrate import calibrate
+    from fccgrb_cli.io.trial import read_trial
+    from fccgrb_cli.options import SolveOptions
+    from fccgrb_cli.pipeline import solve_trial
+
+    trial = read_trial(GAIT)
+    cal = calibrate(load_model(MODELS / "lower_limb.yaml"), trial, mass=67.0)
+    model = parse_model(cal.text, "personal.yaml")
+    runs = [solve_trial(model, trial, SolveOptions(engine=e, dynamics=False))
+            for e in ("numpy", "compiled")]
+    assert_same(runs[0].result, runs[1].result)
