@@ -26,7 +26,11 @@ gets exactly these arrays. Solvers:
   default 1e-5 (what its users get unless they change it).
 
 Timings (``time.perf_counter``; best of ``--repeat`` runs, the run with the smallest ms/frame;
-the answers of every repeat are identical):
+the answers of every repeat are identical). Before any timing, one untimed solve of each fccgrb
+method on the P0 markers: one-time start-up (numba loading its cached kernels) is left out, and
+every level runs on the same engine (fccgrb's 'auto' engine takes the compiled kernels once they
+are loaded in the process, as in a session that solves more than one trial), not on whichever
+engine the previous row happened to load:
 
 - fccgrb ms/frame: the mean of the solver's own per-frame times (``KinematicResult.time_s``):
   one frame's warm-start prediction (frame 0: the initial guess from the markers) and iterations
@@ -325,6 +329,12 @@ def best_of(repeat: int, run: Any) -> Any:
     return best[1]
 
 
+def warm_up(system: System, truth: Synthesis, frames: int) -> None:
+    """One untimed solve of each fccgrb method on the exact markers (see the timings above)."""
+    for method in ("nrm-wls", "cno-sqp"):
+        run_fccgrb(method, system, truth.result.time[:frames], truth.markers[:frames])
+
+
 def compare_level(model: Model, system: System, truth: Synthesis, level_mm: float, frames: int,
                   repeat: int, osim: ModuleType | None) -> tuple[np.ndarray, list[Solved]]:
     """Every solver on the synthesized trial's (``truth``) first ``frames`` frames perturbed at
@@ -388,6 +398,7 @@ def main() -> None:
     print(f"{'level':6} {'solver':16} {'ms/frame':>9} {'call ms/f':>9} {'iter/frame':>10} "
           f"{'OpenSim/this':>12} {'fit mm':>9} {'max|Δθ| deg':>11}")
     truth = synthesize(model)
+    warm_up(system, truth, args.frames)
     for level in LEVELS_MM:
         markers, solved = compare_level(model, system, truth, level, args.frames, args.repeat,
                                         osim)
