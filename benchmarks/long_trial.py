@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from fccgrb_cli.anatomy.calibrate import calibrate
-from fccgrb_cli.io.c3d import write_markers
+from fccgrb_cli.io.c3d import save
 from fccgrb_cli.io.trial import Trial, read_trial
 from fccgrb_cli.model import load_model
 
@@ -77,6 +77,25 @@ def tiled(trial: Trial, frames: int) -> tuple[np.ndarray, float, float]:
     return walk, seam, inside
 
 
+def write_walk(path: Path, labels: tuple[str, ...], markers: np.ndarray, rate: float) -> None:
+    """The markers (frames × markers × 3, m) as C3D points in mm, with the frame range in
+    TRIAL:ACTUAL_START_FIELD/ACTUAL_END_FIELD (two 16-bit words each, low first), where
+    POINT:FRAMES (one word) stops at 65535 (see fccgrb_cli/io/c3d_header.py)."""
+    import ezc3d
+
+    c3d = ezc3d.c3d()
+    point = c3d["parameters"]["POINT"]
+    point["RATE"]["value"], point["LABELS"]["value"] = [float(rate)], list(labels)
+    point["UNITS"]["value"] = ["mm"]
+    points = np.ones((4, markers.shape[1], len(markers)))
+    points[:3] = np.transpose(markers * 1e3, (2, 1, 0))
+    c3d["data"]["points"] = points
+    last = len(markers)
+    c3d.add_parameter("TRIAL", "ACTUAL_START_FIELD", [1, 0])
+    c3d.add_parameter("TRIAL", "ACTUAL_END_FIELD", [last & 0xFFFF, last >> 16])
+    save(c3d, path)
+
+
 def time_report(text: str) -> dict[str, str]:
     """GNU time -v's 'key: value' lines."""
     return dict(m.groups() for m in re.finditer(r"^\s*(.+?): (.*)$", text, re.MULTILINE))
@@ -111,7 +130,7 @@ def main() -> None:
         personal.write_text(calibrate(template, trial, mass=67.0).text, encoding="utf-8")
         walk, _, _ = tiled(trial, args.frames)
         long_c3d = folder / "long.c3d"
-        write_markers(long_c3d, list(trial.labels), walk, trial.rate)
+        write_walk(long_c3d, trial.labels, walk, trial.rate)
         del walk
         results, report = folder / "long.h5", folder / "time.txt"
         command = ["/usr/bin/time", "-v", "-o", str(report), str(FCCGRB), "solve",
