@@ -384,51 +384,58 @@ def _fields(output: str, width: int) -> list[list[str]]:
 
 def bench_kinematics(ws: Workspace) -> list[Artifact]:
     command = "python benchmarks/kinematics.py --forms full"
-    rows = _fields(ws.run(command, cwd=ROOT), 10)
-    by = {(r[0], r[2], float(r[3]), float(r[4])): r for r in rows}
+    rows = _fields(ws.run(command, cwd=ROOT), 11)
+    by = {(r[0], r[2], r[3], float(r[4]), float(r[5])): r for r in rows}
     lines = [f"`{command}`, its tol 1e-10 rows:", "",
-             "| model (full form), tol 1e-10 | P0 ms/frame | P0 total ms/frame | iterations "
-             "| P30 ms/frame | iterations | failed (P0, P30) | paper P0 ms/frame |",
-             "|---|---|---|---|---|---|---|---|"]
+             "| model (full form), tol 1e-10 | engine | P0 ms/frame | P0 total ms/frame "
+             "| iterations | P7.5 ms/frame | P30 ms/frame | iterations | failed (P0–P30) "
+             "| paper P0 ms/frame |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     models = {"pendulum": ("pendulum", "table1", ("",)),
               "five_bar": ("five-bar", "table2", ("9", "8", ""))}
     for model, (label, table, points) in models.items():
         for method, (family, variant) in (("ad", ("KA", "AD")), ("nrm-ls", ("NRM", "LS")),
                                           ("nrm-wls", ("NRM", "WLS"))):
-            p0 = by[(model, method, 1e-10, 0.0)]
-            p30 = by.get((model, method, 1e-10, 30.0))
-            failed = int(p0[9]) + (int(p30[9]) if p30 else 0)
-            lines.append(
-                f"| {label}, {method.upper()} | {p0[5]} | {p0[6]} | {p0[7]} | "
-                f"{p30[5] if p30 else '–'} | {p30[7] if p30 else '–'} | {failed} | "
-                f"{_paper(table, family, variant, points)} |")
+            for engine in ("numpy", "compiled"):
+                p0 = by.get((model, method, engine, 1e-10, 0.0))
+                if p0 is None:
+                    continue
+                p7 = by.get((model, method, engine, 1e-10, 7.5))
+                p30 = by.get((model, method, engine, 1e-10, 30.0))
+                failed = sum(int(r[10]) for r in (p0, p7, p30) if r)
+                lines.append(
+                    f"| {label}, {method.upper()} | {engine} | {p0[6]} | {p0[7]} | {p0[8]} | "
+                    f"{p7[6] if p7 else '–'} | {p30[6] if p30 else '–'} | "
+                    f"{p30[8] if p30 else '–'} | {failed} | "
+                    f"{_paper(table, family, variant, points)} |")
     return [ReadmeBlock("bench-kinematics", "\n".join(lines))]
 
 
 def bench_optimization(ws: Workspace) -> list[Artifact]:
     command = "python benchmarks/optimization.py"
-    rows = _fields(ws.run(command, cwd=ROOT), 9)
+    rows = _fields(ws.run(command, cwd=ROOT), 10)
     lines = [f"`{command}` (9 points; max \\|Φ_top\\| and failed frames over P0, P7.5 and "
              "P30):", "",
-             "| five-bar, tol 1e-10 | P0 ms/frame | iterations | P30 ms/frame | iterations "
-             "| max \\|Φ_top\\| | failed (solver's verdict) | paper P0 ms/frame |",
-             "|---|---|---|---|---|---|---|---|"]
+             "| five-bar, tol 1e-10 | solver | P0 ms/frame | iterations | P7.5 ms/frame "
+             "| P30 ms/frame | iterations | max \\|Φ_top\\| | failed (solver's verdict) "
+             "| paper P0 ms/frame |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     paper = {("cno-sqp", "tc"): ("CNO", "SQP"), ("mo-tc", "tc"): ("MO", "TC"),
              ("mo-ed", "ed"): ("MO", "ED")}
-    seen: list[tuple[str, str]] = []
+    seen: list[tuple[str, str, str]] = []
     for r in rows:
-        if (r[0], r[1]) not in seen:
-            seen.append((r[0], r[1]))
-    for method, objective in seen:
-        by = {float(r[2]): r for r in rows if (r[0], r[1]) == (method, objective)}
-        p0, p30 = by[0.0], by[30.0]
-        top = max(float(r[6]) for r in by.values())
-        failed = sum(int(r[8]) for r in by.values())
+        if (r[0], r[1], r[2]) not in seen:
+            seen.append((r[0], r[1], r[2]))
+    for method, objective, solver in seen:
+        by = {float(r[3]): r for r in rows if (r[0], r[1], r[2]) == (method, objective, solver)}
+        p0, p7, p30 = by[0.0], by[7.5], by[30.0]
+        top = max(float(r[7]) for r in by.values())
+        failed = sum(int(r[9]) for r in by.values())
         family_variant = paper.get((method, objective))
         ref = _paper("table2", *family_variant, ("9", "8")) if family_variant else "–"
         name = method.upper() + (f" ({objective})" if method.startswith("cno") else "")
-        lines.append(f"| {name} | {p0[4]} | {p0[5]} | {p30[4]} | {p30[5]} | {top:.2g} | "
-                     f"{failed} | {ref} |")
+        lines.append(f"| {name} | {solver} | {p0[5]} | {p0[6]} | {p7[5]} | {p30[5]} | "
+                     f"{p30[6]} | {top:.2g} | {failed} | {ref} |")
     return [ReadmeBlock("bench-optimization", "\n".join(lines))]
 
 

@@ -77,8 +77,10 @@ class SolveOptions:
              "step is below 1 mm / 1 mrad, then exact.")
     engine: str = _option(
         "auto", choices=("auto", "compiled", "numpy"),
-        help="NRM's per-frame arithmetic: compiled kernels (numba), the same iteration in "
-             "numpy, or auto: compiled where numba is installed and no body is reduced.")
+        help="Per-frame arithmetic of NRM and of the structured CNO-SQP: compiled kernels "
+             "(numba), the same iteration in numpy (equal to 1e-12), or auto: compiled for "
+             "trials of 1000 frames or more (200 for CNO-SQP), or once numba is loaded in the "
+             "process (loading it costs ~0.25 s once), where no body is reduced.")
     skip_unsolvable: bool = _option(
         False, help="Report frames whose remaining markers cannot determine the model as "
                     "unsolved and go on, instead of stopping with an error.")
