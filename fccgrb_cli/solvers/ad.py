@@ -92,6 +92,7 @@ def solve_ad(system: System, time: np.ndarray, theta: np.ndarray, theta_d: np.nd
     iterations = np.zeros(n, dtype=int)
     seconds = np.zeros(n)
     converged = np.zeros(n, dtype=bool)
+    phi = np.zeros((n, system.n_rows))
     q = assemble(system, q_guess, theta[0], tol, max_iter, drives.ref[0])
     qd = qdd = np.zeros(nq)
     for f in range(n):
@@ -104,11 +105,11 @@ def solve_ad(system: System, time: np.ndarray, theta: np.ndarray, theta_d: np.nd
         q = it.q
         qd, qdd = frame_rates(system, q, drive)
         seconds[f] = clock.perf_counter() - started
+        phi[f] = system.residual(q, drive)
         out["q"][f], out["qd"][f], out["qdd"][f] = q, qd, qdd
         iterations[f], converged[f] = it.iterations, it.converged
         if progress is not None:
             progress(f + 1, n)
-    phi = Stacked(system).residual(out["q"], drives)
     return _result(system, time, out["q"], out["qd"], out["qdd"], drives, phi,
                    iterations, seconds, converged, tol)
 
