@@ -84,7 +84,7 @@ def test_same_optimum_as_slsqp_on_the_five_bar(level: float) -> None:
     ours = run(system, time, markers, engine="numpy")
     reference = run(system, time, markers, optimizer="scipy", tol=1e-14)
     assert ours.converged.all() and reference.converged.all()
-    assert all(m == "stabilized SQP: converged" for m in ours.status)
+    assert all(m == "stabilized SQP: converged successfully" for m in ours.status)
     assert np.abs(ours.theta - reference.theta).max() < np.radians(1e-5)
     assert np.abs(ours.q - reference.q).max() < 1e-8
     assert ours.phi_top_max.max() <= 1e-11

@@ -49,6 +49,7 @@ METHODS = ("cno-sqp", "cno-ip", "mo-tc", "mo-ed")
 PARALLEL_INITS = ("same", "chunks", "nrm")
 REJOINED = 1e-6
 SQP_COMPILED_FROM = 200
+CONVERGED = "stabilized SQP: converged successfully"
 
 
 @dataclass(frozen=True)
@@ -132,7 +133,7 @@ def structured_cno_frame(problem: FrameProblem, q0: np.ndarray, tol: float) -> F
     if not within_bounds(problem, it.q):
         return FrameOutcome(it.q, it.iterations, False,
                             "stabilized SQP: the optimum lies outside the bounds")
-    return FrameOutcome(it.q, it.iterations, True, "stabilized SQP: converged")
+    return FrameOutcome(it.q, it.iterations, True, CONVERGED)
 
 
 def within_bounds(problem: FrameProblem, q: np.ndarray) -> bool:

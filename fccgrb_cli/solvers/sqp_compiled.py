@@ -15,7 +15,7 @@ from fccgrb_cli.solvers.frame_problem import FrameProblem
 from fccgrb_cli.solvers.initial import initial_guess
 from fccgrb_cli.solvers.nrm import row_weights
 from fccgrb_cli.solvers.nrm_compiled import BLOCK, sparse_of
-from fccgrb_cli.solvers.optimize import FrameRecord, Settings, solve_frame
+from fccgrb_cli.solvers.optimize import CONVERGED, FrameRecord, Settings, solve_frame
 from fccgrb_cli.system import System
 
 SQP_HISTORY = 3
@@ -59,9 +59,9 @@ def run_frames_compiled(system: System, settings: Settings, targets: np.ndarray,
         if progress is not None:
             progress(g, n)
         f = g
-    return [fallback.get(k) or FrameRecord(q_all[k], int(iterations[k]), True,
-                                           "stabilized SQP: converged", float(seconds[k]),
-                                           float(phi_norm[k]), float(phi_top[k]))
+    return [fallback.get(k) or FrameRecord(q_all[k], int(iterations[k]), True, CONVERGED,
+                                           float(seconds[k]), float(phi_norm[k]),
+                                           float(phi_top[k]))
             for k in range(n)]
 
 
