@@ -145,6 +145,14 @@ def assert_same(a, b, tol: float = 1e-10) -> None:
         assert a.messages == b.messages
     assert np.abs(a.phi_top_max[ok] - b.phi_top_max[ok]).max(initial=0.0) < 1e-12
     assert np.abs(a.phi_norm[ok] - b.phi_norm[ok]).max(initial=0.0) < 1e-10
+    if same.all():
+        # the rates (kernels.rates_frames against rates.py's LU / QR) where the frame and its
+        # neighbours converged (central differences reach one frame each way)
+        steady = ok & np.r_[ok[1:], True] & np.r_[True, ok[:-1]]
+        for x, y in ((a.qd, b.qd), (a.qdd, b.qdd)):
+            assert np.array_equal(np.isnan(x), np.isnan(y))
+            assert np.nanmax(np.abs(x[steady] - y[steady]), initial=0.0) \
+                <= 1e-10 * np.nanmax(np.abs(x))
 
 
 @pytest.mark.parametrize("name", BUNDLED)
@@ -234,3 +242,30 @@ def test_engines_agree_on_the_gait_trial() -> None:
     runs = [solve_trial(model, trial, SolveOptions(engine=e, dynamics=False))
             for e in ("numpy", "compiled")]
     assert_same(runs[0].result, runs[1].result)
+
+
+@given(structures(floating=True), st.integers(0, 20))
+def test_compiled_rates_on_moving_bases_and_gaps(structure, gap: int) -> None:
+    """rates.py's least squares (a floating base's differenced rates are not exactly rigid)
+    and the kernels' normal equations with θ held: the same q̇ and q̈; NaN frames stay NaN."""
+    from fccgrb_cli.solvers.rates import central_derivatives, consistent_rates
+    from fccgrb_cli.system.constraints import floating_bases
+
+    case = build_case(structure)
+    t = T0 + np.arange(24) / RATE
+    ref = reference(case, t)
+    model = parse_model(case.text, "generated.yaml").with_form("full")
+    system = compile_system(model, angles="coordinate", track=True)
+    result = solve_nrm(system, t, ref.markers, NrmSettings(engine="numpy"))
+    q = result.q.copy()
+    q[gap] = np.nan
+    layout = system.layout
+    columns = np.concatenate([np.arange(layout.n_body_q)[layout.q_slice(b)]
+                              for b in floating_bases(model)])
+    base = (columns, *central_derivatives(q[:, columns] + 1e-4 * np.sin(t)[:, None],
+                                          t[1] - t[0]))
+    numpy = consistent_rates(system, q, result.theta_d, result.theta_dd, base)
+    compiled = consistent_rates(system, q, result.theta_d, result.theta_dd, base, compiled=True)
+    for x, y in zip(numpy, compiled, strict=True):
+        assert np.array_equal(np.isnan(x), np.isnan(y)) and np.isnan(x[gap]).all()
+        assert np.nanmax(np.abs(x - y)) <= 1e-10 * np.nanmax(np.abs(x))

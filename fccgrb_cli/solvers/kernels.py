@@ -133,7 +133,16 @@ def cholesky_solve(first: np.ndarray, N: np.ndarray, L: np.ndarray, rhs: np.ndar
                    out: np.ndarray) -> bool:
     """Solve N out = rhs with N = LLᵀ factored inside its envelope (row i from column
     first[i]); False where N is not positive definite."""
-    n = len(rhs)
+    if not cholesky(first, N, L):
+        return False
+    substitute(first, L, rhs, out)
+    return True
+
+
+@njit(cache=True)
+def cholesky(first: np.ndarray, N: np.ndarray, L: np.ndarray) -> bool:
+    """N = LLᵀ inside the envelope (the lower triangle of N is read)."""
+    n = len(first)
     for i in range(n):
         fi = first[i]
         for j in range(fi, i):
@@ -148,6 +157,13 @@ def cholesky_solve(first: np.ndarray, N: np.ndarray, L: np.ndarray, rhs: np.ndar
         if not total > 0.0:
             return False
         L[i, i] = np.sqrt(total)
+    return True
+
+
+@njit(cache=True)
+def substitute(first: np.ndarray, L: np.ndarray, rhs: np.ndarray, out: np.ndarray) -> None:
+    """out = (LLᵀ)⁻¹ rhs, forward then backward within the envelope."""
+    n = len(rhs)
     for i in range(n):
         total = rhs[i]
         for k in range(first[i], i):
@@ -158,7 +174,6 @@ def cholesky_solve(first: np.ndarray, N: np.ndarray, L: np.ndarray, rhs: np.ndar
         value = out[i]
         for k in range(first[i], i):
             out[k] -= L[i, k] * value
-    return True
 
 
 @njit(cache=True)
@@ -452,3 +467,110 @@ def solve_frames_sqp(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
         phi_norm[f] = np.sqrt(total)
         phi_top[f] = top
     return stop, DONE
+
+
+@njit(cache=True)
+def rates_frames(s: SparseSystem, q_all: np.ndarray, theta_d: np.ndarray,
+                 theta_dd: np.ndarray, base_cols: np.ndarray, base_d: np.ndarray,
+                 base_dd: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> None:
+    """Consistent q̇ and q̈ of every frame (fccgrb_cli/solvers/rates.py): with θ̇, θ̈ given,
+    the body rates solve Φ_top,b q̇_b = −Φ_top,θ θ̇ and Φ_top,b q̈_b = γ_top − Φ_top,θ θ̈, with a
+    floating base's differenced rates as extra rows, in the least-squares sense (exact where
+    they are consistent, as rates.py's LU or QR). Normal equations on NRM's envelope with the
+    θ rows and columns set to the identity: one factorization per frame serves both. Frames
+    with a NaN are left NaN."""
+    n_rows, nq, nb = len(s.c_const) + len(s.dot_c), s.nq, s.nb
+    F, Fd = np.empty(len(s.f0)), np.empty(len(s.f0))
+    values = np.empty(len(s.j_col))
+    N, L = np.zeros((nq, nq)), np.zeros((nq, nq))
+    w, rhs, gamma = np.zeros(n_rows), np.zeros(n_rows), np.zeros(n_rows)
+    g, out = np.empty(nq), np.empty(nq)
+    inverse = np.empty(nq, dtype=np.int64)
+    for p in range(nq):
+        inverse[s.perm[p]] = p
+    for r in s.top_rows:
+        w[r] = 1.0
+    for f in range(len(q_all)):
+        q = q_all[f]
+        if not (np.isfinite(q).all() and np.isfinite(theta_d[f]).all()
+                and np.isfinite(theta_dd[f]).all()):
+            continue
+        features(s, q, F)
+        jacobian(s, q, F, values)
+        _moved_to_rhs(s, values, gamma, theta_d[f], rhs, zero_first=True)
+        normal_equations(s, values, rhs, w, N, g)
+        for k in range(nq - nb):  # θ fixed: its row and column of N become the identity
+            p = inverse[nb + k]
+            for j in range(s.first[p], p):
+                N[p, j] = 0.0
+            for i in range(p + 1, nq):
+                if s.first[i] <= p:
+                    N[i, p] = 0.0
+            N[p, p] = 1.0
+        for j in range(len(base_cols)):
+            p = inverse[base_cols[j]]
+            N[p, p] += 1.0
+            g[p] += base_d[f, j]
+        for k in range(nq - nb):
+            g[inverse[nb + k]] = theta_d[f, k]
+        if not cholesky(s.first, N, L):
+            continue
+        substitute(s.first, L, g, out)
+        for p in range(nq):
+            qd[f, s.perm[p]] = out[p]
+        qd[f, nb:] = theta_d[f]  # as given, also where a base rate is NaN
+        _gamma_top(s, q, qd[f], Fd, gamma)
+        _moved_to_rhs(s, values, gamma, theta_dd[f], rhs, zero_first=False)
+        for p in range(nq):
+            g[p] = 0.0
+        for r in s.top_rows:
+            for m in range(s.j_ptr[r], s.j_ptr[r + 1]):
+                g[s.j_col[m]] += values[m] * rhs[r]
+        for j in range(len(base_cols)):
+            g[inverse[base_cols[j]]] += base_dd[f, j]
+        for k in range(nq - nb):
+            g[inverse[nb + k]] = theta_dd[f, k]
+        substitute(s.first, L, g, out)
+        for p in range(nq):
+            qdd[f, s.perm[p]] = out[p]
+        qdd[f, nb:] = theta_dd[f]
+
+
+@njit(cache=True)
+def _moved_to_rhs(s: SparseSystem, values: np.ndarray, gamma: np.ndarray, rate: np.ndarray,
+                  rhs: np.ndarray, zero_first: bool) -> None:
+    """rhs_r = γ_r − Φ_r,θ · rate on the topological rows (γ taken as 0 when ``zero_first``)."""
+    nb = s.nb
+    for r in s.top_rows:
+        total = 0.0 if zero_first else gamma[r]
+        for m in range(s.j_ptr[r], s.j_ptr[r + 1]):
+            column = s.perm[s.j_col[m]]
+            if column >= nb:
+                total -= values[m] * rate[column - nb]
+        rhs[r] = total
+
+
+@njit(cache=True)
+def _gamma_top(s: SparseSystem, q: np.ndarray, qd: np.ndarray, Fd: np.ndarray,
+               gamma: np.ndarray) -> None:
+    """γ of the topological rows of a mixed system with fully-defined bodies: 0 on the linear
+    rows, −2Ḟ_a·Ḟ_b on the dot rows, + g″(θ)θ̇² on an angle's or distance's row (−cos θ θ̇²,
+    0) and − sin θ θ̇² on a sine row (System.gamma)."""
+    for i in range(len(Fd)):
+        total = 0.0
+        for k in range(s.a_ptr[i], s.a_ptr[i + 1]):
+            total += s.a_val[k] * qd[s.a_col[k]]
+        Fd[i] = total
+    for r in range(s.n_lin):
+        gamma[r] = 0.0
+    for i in range(len(s.dot_a)):
+        a, b = 3 * s.dot_a[i], 3 * s.dot_b[i]
+        gamma[s.n_lin + i] = -2.0 * (Fd[a] * Fd[b] + Fd[a + 1] * Fd[b + 1]
+                                     + Fd[a + 2] * Fd[b + 2])
+    nb = s.nb
+    for k in range(len(s.angle_rows)):
+        if not s.distance[k]:
+            gamma[s.n_lin + s.angle_rows[k]] -= np.cos(q[nb + k]) * qd[nb + k] ** 2
+    for j in range(len(s.sine_rows)):
+        k = s.sine_of[j]
+        gamma[s.n_lin + s.sine_rows[j]] -= np.sin(q[nb + k]) * qd[nb + k] ** 2

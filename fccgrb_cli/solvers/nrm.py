@@ -232,12 +232,13 @@ def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray,
 
 def mixed_result(system: System, time: np.ndarray, q_all: np.ndarray, stats: FrameStats, *,
                  method: str, tol: float, messages: list[str] | tuple[str, ...] = (),
-                 wall_s: float = float("nan")) -> KinematicResult:
+                 wall_s: float = float("nan"), compiled: bool = False) -> KinematicResult:
     """The result of any mixed-coordinate method: θ from q, θ̇ and θ̈ by central differences,
     consistent q̇ and q̈, and warnings for angles near 0 or π. A signed angle is the same
     configuration every 2π: frames solved apart (in parallel, or from a fresh guess after a gap)
     are brought onto one continuous count of turns, starting from the first solved frame's
-    angle in (−π, π] (as the markers give it)."""
+    angle in (−π, π] (as the markers give it). ``compiled``: the rates through the compiled
+    kernels (a solve that ran in them)."""
     n_body = system.layout.n_body_q
     full = n_body + np.flatnonzero(system.full_angles)
     if len(full):
@@ -252,7 +253,7 @@ def mixed_result(system: System, time: np.ndarray, q_all: np.ndarray, stats: Fra
     columns = np.concatenate([np.arange(n_body)[system.layout.q_slice(b)]
                               for b in floating_bases(system.model)] or [np.zeros(0, int)])
     base = (columns, *central_derivatives(q_all[:, columns], dt)) if columns.size else None
-    qd, qdd = consistent_rates(system, q_all, theta_d, theta_dd, base)
+    qd, qdd = consistent_rates(system, q_all, theta_d, theta_dd, base, compiled=compiled)
     return KinematicResult(
         method=method, tol=tol, time=np.asarray(time, dtype=float), q=q_all, qd=qd, qdd=qdd,
         theta=theta, theta_d=theta_d, theta_dd=theta_dd, angle_names=system.layout.angle_names,

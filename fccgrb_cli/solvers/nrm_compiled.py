@@ -82,7 +82,7 @@ def solve_compiled(system: System, time: np.ndarray, targets: np.ndarray,
         FrameStats(state.iterations, state.seconds, state.phi_norm, state.phi_top,
                    state.converged),
         method=settings.method, tol=settings.tol,
-        messages=state.messages(time, missing, labels, source))
+        messages=state.messages(time, missing, labels, source), compiled=True)
 
 
 class Frames:

@@ -208,7 +208,8 @@ def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
     label = settings.method + ("-ed" if settings.method.startswith("cno")
                                and settings.objective == "ed" else "")
     init = settings.init
-    if not settings.parallel and compiled_sqp(system, settings, n):
+    compiled = not settings.parallel and compiled_sqp(system, settings, n)
+    if compiled:
         from fccgrb_cli.solvers.sqp_compiled import run_frames_compiled
 
         records = run_frames_compiled(system, settings, targets, progress)
@@ -236,7 +237,7 @@ def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
                        np.array([r.converged for r in records]),
                        tuple(r.message for r in records))
     return mixed_result(system, time, np.array([r.q for r in records]), stats, method=label,
-                        tol=settings.tol, messages=messages, wall_s=wall)
+                        tol=settings.tol, messages=messages, wall_s=wall, compiled=compiled)
 
 
 def compiled_sqp(system: System, settings: Settings, n_frames: int) -> bool:

@@ -35,12 +35,16 @@ def central_derivatives(y: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarra
 
 
 def consistent_rates(system: System, q: np.ndarray, theta_d: np.ndarray, theta_dd: np.ndarray,
-                     base: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-                     ) -> tuple[np.ndarray, np.ndarray]:
+                     base: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, *,
+                     compiled: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """q̇, q̈ (frames × nq) of a mixed system given θ̇, θ̈ (frames × n_angles); NaN where the
     frame or its neighbours were left unsolved. A floating base's rates are not fixed by the
     topology: ``base`` = (its coordinates' columns, their q̇ and q̈ by central differences)
-    joins the equations (least squares: the differenced rates need not be exactly rigid)."""
+    joins the equations (least squares: the differenced rates need not be exactly rigid).
+    ``compiled``: the same equations in the compiled kernels (kernels.rates_frames), for
+    systems the kernels take."""
+    if compiled:
+        return _compiled_rates(system, q, theta_d, theta_dd, base)
     n_body = system.layout.n_body_q
     top = system.masks()["topology"]
     columns = base[0] if base is not None else np.zeros(0, dtype=int)
@@ -58,4 +62,21 @@ def consistent_rates(system: System, q: np.ndarray, theta_d: np.ndarray, theta_d
         qd[f, :n_body] = linear_solve(Jb, np.concatenate([-Jt @ theta_d[f], base_d]))
         gamma = system.gamma(q[f], qd[f], Drive())[top]
         qdd[f, :n_body] = linear_solve(Jb, np.concatenate([gamma - Jt @ theta_dd[f], base_dd]))
+    return qd, qdd
+
+
+def _compiled_rates(system: System, q: np.ndarray, theta_d: np.ndarray, theta_dd: np.ndarray,
+                    base: tuple[np.ndarray, np.ndarray, np.ndarray] | None
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    from fccgrb_cli.solvers.kernels import rates_frames
+    from fccgrb_cli.solvers.nrm_compiled import sparse_of
+
+    n = len(q)
+    columns = np.asarray(base[0] if base is not None else np.zeros(0), dtype=np.int64)
+    base_d = base[1] if base is not None else np.zeros((n, 0))
+    base_dd = base[2] if base is not None else np.zeros((n, 0))
+    qd, qdd = np.full_like(q, np.nan), np.full_like(q, np.nan)
+    rates_frames(sparse_of(system), np.ascontiguousarray(q), np.ascontiguousarray(theta_d),
+                 np.ascontiguousarray(theta_dd), columns, np.ascontiguousarray(base_d),
+                 np.ascontiguousarray(base_dd), qd, qdd)
     return qd, qdd
