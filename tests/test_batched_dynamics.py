@@ -197,3 +197,16 @@ def test_stacked_solves_equal_linear_solve() -> None:
             np.testing.assert_allclose(y[f], linear_solve(J[f].T, c[f]), rtol=0, atol=1e-9)
         if J.shape[1] == J.shape[2] and not np.isclose(np.linalg.det(J), 0).any():
             np.testing.assert_allclose(np.einsum("fij,fj->fi", J, x), b, atol=1e-10)
+
+
+def test_blocks_of_frames_give_the_same_answers(five_bar_run, monkeypatch) -> None:
+    """Long trials are stacked block by block (memory); a block size that splits the 300 frames
+    unevenly changes nothing (frames are independent)."""
+    from fccgrb_cli.solvers import batched
+
+    model, result = five_bar_run
+    whole = classical_dynamics(model, result, cutoff=6.0, batched=True)
+    monkeypatch.setattr(batched, "BLOCK", 37)
+    assert len(batched.blocks(result.n_frames)) == 9
+    pieces = classical_dynamics(model, result, cutoff=6.0, batched=True)
+    assert_same(whole, pieces, tol=1e-12)

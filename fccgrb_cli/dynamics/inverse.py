@@ -20,7 +20,7 @@ import numpy as np
 
 from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.dynamics.mass import gravity_forces, mass_matrix
-from fccgrb_cli.solvers.batched import Stacked, factor
+from fccgrb_cli.solvers.batched import Stacked, blocks, factor
 from fccgrb_cli.solvers.newton import linear_solve
 from fccgrb_cli.system import System
 
@@ -90,9 +90,12 @@ def _stacked(system: System, M: np.ndarray, g: np.ndarray, q: np.ndarray, qd: np
         power += load.power(x[:, s:s + 12], xd[:, s:s + 12], frames)
     rhs_x = forces - xdd @ M.T
     rhs = rhs_x if xq is None else np.einsum("fxq,fx->fq", xq, rhs_x)
-    J = stacked.jacobian(q)
-    lam = factor(J).solve_transposed(rhs)
-    residual = np.linalg.norm(np.einsum("frq,fr->fq", J, lam) - rhs, axis=1)
+    lam, residual = np.empty((n, system.n_rows)), np.empty(n)
+    for block in blocks(n):
+        J = stacked.jacobian(q[block])
+        lam[block] = factor(J).solve_transposed(rhs[block])
+        residual[block] = np.linalg.norm(np.einsum("frq,fr->fq", J, lam[block]) - rhs[block],
+                                         axis=1)
     return lam, residual, x, xd, power
 
 

@@ -18,7 +18,7 @@ import numpy as np
 
 from fccgrb_cli.blas import single_threaded
 from fccgrb_cli.errors import InputError
-from fccgrb_cli.solvers.batched import Drives, Stacked, factor, newton_stacked
+from fccgrb_cli.solvers.batched import Drives, Stacked, blocks, factor, newton_stacked
 from fccgrb_cli.solvers.newton import linear_solve, newton_raphson
 from fccgrb_cli.solvers.result import KinematicResult
 from fccgrb_cli.system import Drive, System
@@ -135,10 +135,11 @@ def solve_ad_batched(system: System, time: np.ndarray, theta: np.ndarray, theta_
     iterations = np.zeros(n, dtype=int)
     converged = np.zeros(n, dtype=bool)
     finite = np.flatnonzero(np.isfinite(q).all(axis=1))
-    if len(finite):
-        it = newton_stacked(stacked, q[finite], drives.take(finite), tol,
+    for block in blocks(len(finite)):
+        frames = finite[block]
+        it = newton_stacked(stacked, q[frames], drives.take(frames), tol,
                             min(BATCH_ITER, max_iter))
-        q[finite], iterations[finite], converged[finite] = it.q, it.iterations, it.converged
+        q[frames], iterations[frames], converged[frames] = it.q, it.iterations, it.converged
     for f in np.flatnonzero(~converged):
         if f == 0:
             start = assemble(system, guesses[0], theta[0], tol, max_iter, drives.ref[0])
@@ -149,10 +150,13 @@ def solve_ad_batched(system: System, time: np.ndarray, theta: np.ndarray, theta_
         one = newton_raphson(system, start, drives.frame(f), tol, max_iter)
         q[f], converged[f] = one.q, one.converged
         iterations[f] += one.iterations
-    phi, J = stacked.evaluate(q, drives)
-    rates = factor(J)
-    qd = rates.solve(stacked.nu(drives))
-    qdd = rates.solve(stacked.gamma(q, qd, drives))
+    phi, qd, qdd = np.empty((n, system.n_rows)), np.empty_like(q), np.empty_like(q)
+    for block in blocks(n):
+        some = drives.take(np.arange(n)[block])
+        phi[block], J = stacked.evaluate(q[block], some)
+        rates = factor(J)
+        qd[block] = rates.solve(stacked.nu(some))
+        qdd[block] = rates.solve(stacked.gamma(q[block], qd[block], some))
     seconds = np.full(n, (clock.perf_counter() - started) / max(n, 1))
     if progress is not None:
         progress(n, n)

@@ -28,6 +28,13 @@ from fccgrb_cli.system.layout import skew
 # A column of R below this fraction of the largest (QR without pivoting) may hide a rank
 # deficiency: such a frame is left to linear_solve's rank-revealing least squares.
 RANK_GUARD = 1e-8
+BLOCK = 1024  # frames per stack: stacks of Φ_q and their factors cost ~60 kB a frame
+
+
+def blocks(n: int) -> list[slice]:
+    """Consecutive slices of at most ``BLOCK`` frames covering ``n``: stacked work is done block
+    by block, so a long trial's memory stays that of one block (frames are independent)."""
+    return [slice(start, min(n, start + BLOCK)) for start in range(0, n, BLOCK)]
 
 
 @dataclass(frozen=True)
