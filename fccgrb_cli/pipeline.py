@@ -391,7 +391,8 @@ def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResul
     if cutoff is not None:
         loads = [load.lowpassed(trial.rate, cutoff, options.filter_order) for load in loads]
     return classical_dynamics(model, result, cutoff=None if baseline else cutoff,
-                              order=options.filter_order, loads=loads, tol=options.tol)
+                              order=options.filter_order, loads=loads, tol=options.tol,
+                              engine=options.engine)
 
 
 def _quality_advice(result: KinematicResult) -> list[str]:

@@ -75,7 +75,7 @@ def test_pieces_equal_the_dense_system(name: str) -> None:
         ref = rng.standard_normal((system.n_targets, 3))
         w = rng.uniform(0.1, 2.0, n_rows)
         F, phi = np.empty(len(s.f0)), np.empty(n_rows)
-        kernels.residual(s, q, ref, F, phi)
+        kernels.residual(s, q, q[s.nb:], ref, F, phi)
         phi_dense, J_dense = system.evaluate(q, Drive(ref=ref))
         assert np.abs(phi - phi_dense).max() < 1e-13
         values = np.empty(len(s.j_col))
@@ -269,3 +269,89 @@ def test_compiled_rates_on_moving_bases_and_gaps(structure, gap: int) -> None:
     for x, y in zip(numpy, compiled, strict=True):
         assert np.array_equal(np.isnan(x), np.isnan(y)) and np.isnan(x[gap]).all()
         assert np.nanmax(np.abs(x - y)) <= 1e-10 * np.nanmax(np.abs(x))
+
+
+def assert_same_dynamics(a, b) -> None:
+    """The classical model's motion and inverse dynamics from the two engines (LU / QR against
+    normal equations on the envelope): equal to rounding, relative to each quantity's size."""
+    for name in ("q", "qd", "qdd"):
+        x, y = getattr(a.kinematics, name), getattr(b.kinematics, name)
+        assert np.nanmax(np.abs(x - y)) <= 1e-10 * np.nanmax(np.abs(x)), name
+    assert (a.kinematics.converged == b.kinematics.converged).all()
+    for name in ("lam", "joint_moments", "kinetic", "external_power"):
+        x, y = getattr(a.inverse, name), getattr(b.inverse, name)
+        assert np.nanmax(np.abs(x - y)) <= 1e-9 * max(np.nanmax(np.abs(x)), 1e-12), name
+    assert b.inverse.residual.max() <= 1e-9 * np.abs(b.inverse.lam).max()
+
+
+@pytest.mark.parametrize("name", ["five_bar", "crank_rocker", "slider", "rssr"])
+def test_compiled_dynamics_equal_numpy(name: str) -> None:
+    from fccgrb_cli.dynamics import ExternalLoad
+    from fccgrb_cli.dynamics.convert import classical_dynamics
+
+    model, system = mixed(name)
+    truth = synthesize(model)
+    markers = perturb(truth.markers, truth.labels, truth.rate, 20e-3, seed=5)[:120]
+    result = solve_nrm(system, truth.result.time[:120], markers, NrmSettings())
+    rng = np.random.default_rng(1)
+    body = model.bodies[-1].name
+    push = ExternalLoad("push", body, rng.normal(0, 20, (120, 3)), rng.normal(0, 0.3, (120, 3)),
+                        rng.normal(0, 0.05, (120, 3)))
+    numpy = classical_dynamics(model, result, cutoff=6.0, loads=[push], engine="numpy")
+    compiled = classical_dynamics(model, result, cutoff=6.0, loads=[push], engine="compiled")
+    assert compiled.kinematics.converged.all()
+    assert_same_dynamics(numpy, compiled)
+
+
+@given(structures(floating=True))
+def test_compiled_dynamics_on_moving_bases(structure) -> None:
+    """A floating base's drivers make Φ_q taller than wide: least squares in rates.py and
+    min-norm multipliers, normal equations in the kernels."""
+    from fccgrb_cli.dynamics.convert import classical_dynamics
+
+    case = build_case(structure)
+    t = T0 + np.arange(24) / RATE
+    ref = reference(case, t)
+    model = parse_model(case.text, "generated.yaml").with_form("full")
+    system = compile_system(model, angles="coordinate", track=True)
+    result = solve_nrm(system, t, ref.markers, NrmSettings(tol=1e-12))
+    assert_same_dynamics(classical_dynamics(model, result, tol=1e-12, engine="numpy"),
+                         classical_dynamics(model, result, tol=1e-12, engine="compiled"))
+
+
+@pytest.mark.skipif(not GAIT.exists(), reason="the shared data folder is not here")
+def test_compiled_dynamics_on_the_gait_trial() -> None:
+    from fccgrb_cli.anatomy.calibrate import calibrate
+    from fccgrb_cli.io.trial import read_trial
+    from fccgrb_cli.options import SolveOptions
+    from fccgrb_cli.pipeline import solve_trial
+
+    trial = read_trial(GAIT)
+    cal = calibrate(load_model(MODELS / "lower_limb.yaml"), trial, mass=67.0)
+    model = parse_model(cal.text, "personal.yaml")
+    runs = [solve_trial(model, trial, SolveOptions(engine=e)) for e in ("numpy", "compiled")]
+    assert_same_dynamics(runs[0].dynamics, runs[1].dynamics)
+    clinical = [r.clinical.moments for r in runs]
+    assert np.nanmax(np.abs(clinical[0] - clinical[1])) <= 1e-9 * np.nanmax(np.abs(clinical[0]))
+
+
+def test_frames_the_compiled_batch_leaves_take_the_frame_by_frame_path(monkeypatch) -> None:
+    """One Newton iteration in the kernels (most frames unconverged) and a frame without a
+    guess: they go through solve_ad's own path, and the answers are the sequential ones."""
+    from dataclasses import replace
+
+    from fccgrb_cli.dynamics.convert import classical_dynamics
+    from fccgrb_cli.solvers import ad
+
+    model, system = mixed("five_bar")
+    truth = synthesize(model)
+    markers = perturb(truth.markers, truth.labels, truth.rate, 20e-3, seed=5)[:60]
+    result = solve_nrm(system, truth.result.time[:60], markers, NrmSettings())
+    sequential = classical_dynamics(model, result, cutoff=6.0, batched=False)
+    monkeypatch.setattr(ad, "BATCH_ITER", 1)
+    holed = result.q.copy()
+    holed[7] = np.nan
+    compiled = classical_dynamics(model, replace(result, q=holed), cutoff=6.0,
+                                  engine="compiled")
+    assert (compiled.kinematics.iterations > 1).sum() > 30
+    assert_same_dynamics(sequential, compiled)

@@ -13,7 +13,7 @@ from fccgrb_cli.model import Model
 from fccgrb_cli.solvers.baseline import driven_by
 from fccgrb_cli.solvers.batched import Stacked
 from fccgrb_cli.solvers.result import KinematicResult
-from fccgrb_cli.system import compile_system
+from fccgrb_cli.system import System, compile_system
 
 
 @dataclass(frozen=True)
@@ -28,7 +28,8 @@ class Dynamics:
 
 def classical_dynamics(model: Model, result: KinematicResult, *, cutoff: float | None = None,
                        order: int = 2, loads: Sequence[ExternalLoad] = (),
-                       tol: float = 1e-10, batched: bool | None = None) -> Dynamics:
+                       tol: float = 1e-10, batched: bool | None = None,
+                       engine: str = "numpy") -> Dynamics:
     """Drive the classical model with the run's angles and solve its inverse dynamics.
 
     ``batched`` True: every frame at once, each starting from the run's own body coordinates
@@ -38,16 +39,36 @@ def classical_dynamics(model: Model, result: KinematicResult, *, cutoff: float |
     square. A taller Φ_q (a signed angle's sine row, a floating base's drivers beside its
     rigid-body rows) takes least squares: stacked QR costs as much per frame as LAPACK's
     frame-by-frame one and the batch's guesses need more Gauss–Newton iterations there (the
-    lower-limb gait trial: 4 per frame against 2.8), so it stays frame by frame."""
+    lower-limb gait trial: 4 per frame against 2.8), so it stays frame by frame. ``engine``
+    ('numpy', 'compiled' or 'auto', as SolveOptions.engine): the compiled kernels solve the
+    batch frame by frame in machine code (any Φ_q of full column rank) where they take the
+    model."""
     system = compile_system(model, angles="driver")
+    compiled = kernels_for(system, engine, len(result.time))
     if batched is None:
-        batched = system.n_rows == system.nq
+        batched = compiled or system.n_rows == system.nq
     n_body = system.layout.n_body_q
     body_q = result.q[:, :n_body]
     base = Stacked(system).base_reference(body_q)
     kinematics = driven_by(system, result.time, result.theta, body_q[0].copy(), cutoff=cutoff,
                            order=order, tol=tol, method=result.method, base=base,
-                           guesses=body_q if batched else None)
+                           guesses=body_q if batched else None,
+                           compiled=compiled and batched)
     inverse = inverse_dynamics(system, kinematics.q, kinematics.qd, kinematics.qdd,
-                               kinematics.theta, loads, batched=batched)
+                               kinematics.theta, loads, batched=batched,
+                               compiled=compiled and batched)
     return Dynamics(kinematics, inverse, tuple(loads), cutoff)
+
+
+def kernels_for(system: System, engine: str, n_frames: int) -> bool:
+    """Whether the classical model's batch runs in the compiled kernels: as
+    NrmSettings.compiled decides for NRM (fully-defined bodies; 'auto' once numba is loaded
+    or for long trials)."""
+    import sys
+
+    from fccgrb_cli.solvers.nrm import COMPILED_FROM, numba_available
+    from fccgrb_cli.system.sparse import compilable
+
+    if engine == "numpy" or not compilable(system) or not numba_available():
+        return False
+    return engine == "compiled" or "numba" in sys.modules or n_frames >= COMPILED_FROM

@@ -47,16 +47,19 @@ class InverseDynamics:
 
 def inverse_dynamics(system: System, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
                      theta: np.ndarray, loads: Sequence[ExternalLoad] = (), *,
-                     batched: bool = True) -> InverseDynamics:
+                     batched: bool = True, compiled: bool = False) -> InverseDynamics:
     """λ and τ for every frame of an AD system's motion (q, q̇, q̈: frames × nq; θ the drivers):
-    all frames at once on stacked arrays (``batched``), or frame by frame (the reference)."""
+    all frames at once on stacked arrays (``batched``), or frame by frame (the reference);
+    ``compiled`` (with ``batched``): the multipliers' solves in the compiled kernels."""
     if system.mixed:
         raise ValueError("inverse_dynamics needs the classical system (angles='driver')")
     model = system.model
     M = mass_matrix(model)
     g = gravity_forces(model)
-    multipliers = _stacked if batched else _frame_by_frame
-    lam, residual, xs, xds, power = multipliers(system, M, g, q, qd, qdd, loads)
+    if batched:
+        lam, residual, xs, xds, power = _stacked(system, M, g, q, qd, qdd, loads, compiled)
+    else:
+        lam, residual, xs, xds, power = _frame_by_frame(system, M, g, q, qd, qdd, loads)
     driver_rows = system.n_linear_rows + system.angle_rows
     bases, force, moment = _base_wrenches(system, xs, lam)
     moments = -system.g_terms(theta)[1] * lam[:, driver_rows]
@@ -74,7 +77,8 @@ Multipliers = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
 def _stacked(system: System, M: np.ndarray, g: np.ndarray, q: np.ndarray, qd: np.ndarray,
-             qdd: np.ndarray, loads: Sequence[ExternalLoad]) -> Multipliers:
+             qdd: np.ndarray, loads: Sequence[ExternalLoad], compiled: bool = False
+             ) -> Multipliers:
     """λ (frames × rows), ‖Φ_qᵀλ − rhs‖, x, ẋ and the loads' power of every frame at once:
     ẍ = X_q q̈ + V̇ q̇, rhs = X_qᵀ (g_x + Σ loads − M_x ẍ), Φ_qᵀ λ = rhs by stacked solves."""
     stacked = Stacked(system)
@@ -91,6 +95,13 @@ def _stacked(system: System, M: np.ndarray, g: np.ndarray, q: np.ndarray, qd: np
     rhs_x = forces - xdd @ M.T
     rhs = rhs_x if xq is None else np.einsum("fxq,fx->fq", xq, rhs_x)
     lam, residual = np.empty((n, system.n_rows)), np.empty(n)
+    if compiled:
+        from fccgrb_cli.solvers.kernels import multipliers_frames
+        from fccgrb_cli.solvers.nrm_compiled import sparse_of
+
+        multipliers_frames(sparse_of(system), np.ascontiguousarray(q),
+                           np.ascontiguousarray(rhs), lam, residual)
+        return lam, residual, x, xd, power
     for block in blocks(n):
         J = stacked.jacobian(q[block])
         lam[block] = factor(J).solve_transposed(rhs[block])

@@ -118,7 +118,8 @@ def solve_ad(system: System, time: np.ndarray, theta: np.ndarray, theta_d: np.nd
 def solve_ad_batched(system: System, time: np.ndarray, theta: np.ndarray, theta_d: np.ndarray,
                      theta_dd: np.ndarray, guesses: np.ndarray, *, tol: float = 1e-10,
                      max_iter: int = 50, base: Base | None = None,
-                     progress: Callable[[int, int], None] | None = None) -> KinematicResult:
+                     progress: Callable[[int, int], None] | None = None,
+                     compiled: bool = False) -> KinematicResult:
     """``solve_ad`` with every frame solved at once from its own guess (``guesses``: frames
     × nq, e.g. the mixed-coordinate solution's body coordinates): Newton–Raphson on the
     stacked frames (``batched.newton_stacked``, ``BATCH_ITER`` iterations), then each frame
@@ -126,7 +127,9 @@ def solve_ad_batched(system: System, time: np.ndarray, theta: np.ndarray, theta_
     order: assembled from its guess (the first frame) or extrapolated from the previous
     frame's q, q̇, q̈. Velocities and accelerations by stacked solves of Φ_q q̇ = ν and
     Φ_q q̈ = γ. Same answers as ``solve_ad`` wherever both reach the configuration the guesses
-    lie by; ``time_s`` is the whole solve's time shared evenly among the frames."""
+    lie by; ``time_s`` is the whole solve's time shared evenly among the frames. ``compiled``:
+    each frame's Newton iterations and rates in the compiled kernels (kernels.driven_frames)
+    instead of the stacked numpy arrays, the same equations."""
     drives = stacked_drives(system, theta, theta_d, theta_dd, base)
     stacked = Stacked(system)
     started = clock.perf_counter()
@@ -135,7 +138,19 @@ def solve_ad_batched(system: System, time: np.ndarray, theta: np.ndarray, theta_
     iterations = np.zeros(n, dtype=int)
     converged = np.zeros(n, dtype=bool)
     finite = np.flatnonzero(np.isfinite(q).all(axis=1))
-    for block in blocks(len(finite)):
+    done = np.zeros(n, dtype=bool)  # q, q̇, q̈ and Φ in place (the compiled kernels')
+    phi, qd, qdd = np.empty((n, system.n_rows)), np.empty_like(q), np.empty_like(q)
+    if compiled:
+        from fccgrb_cli.solvers.kernels import driven_frames
+        from fccgrb_cli.solvers.nrm_compiled import sparse_of
+
+        arrays = (drives.theta, drives.theta_d, drives.theta_dd, drives.ref, drives.ref_d,
+                  drives.ref_dd)
+        driven_frames(sparse_of(system), q, *(np.ascontiguousarray(a, dtype=float)
+                                              for a in arrays),
+                      tol, min(BATCH_ITER, max_iter), q, qd, qdd, phi, iterations, converged)
+        done[:] = converged
+    for block in blocks(len(finite)) if not compiled else ():
         frames = finite[block]
         it = newton_stacked(stacked, q[frames], drives.take(frames), tol,
                             min(BATCH_ITER, max_iter))
@@ -144,19 +159,20 @@ def solve_ad_batched(system: System, time: np.ndarray, theta: np.ndarray, theta_
         if f == 0:
             start = assemble(system, guesses[0], theta[0], tol, max_iter, drives.ref[0])
         else:
-            qd, qdd = frame_rates(system, q[f - 1], drives.frame(f - 1))
+            velocity, acceleration = frame_rates(system, q[f - 1], drives.frame(f - 1))
             dt = time[f] - time[f - 1]
-            start = q[f - 1] + qd * dt + 0.5 * qdd * dt * dt
+            start = q[f - 1] + velocity * dt + 0.5 * acceleration * dt * dt
         one = newton_raphson(system, start, drives.frame(f), tol, max_iter)
         q[f], converged[f] = one.q, one.converged
         iterations[f] += one.iterations
-    phi, qd, qdd = np.empty((n, system.n_rows)), np.empty_like(q), np.empty_like(q)
-    for block in blocks(n):
-        some = drives.take(np.arange(n)[block])
-        phi[block], J = stacked.evaluate(q[block], some)
+    rest = np.flatnonzero(~done)
+    for block in blocks(len(rest)):
+        frames = rest[block]
+        some = drives.take(frames)
+        phi[frames], J = stacked.evaluate(q[frames], some)
         rates = factor(J)
-        qd[block] = rates.solve(stacked.nu(some))
-        qdd[block] = rates.solve(stacked.gamma(q[block], qd[block], some))
+        qd[frames] = rates.solve(stacked.nu(some))
+        qdd[frames] = rates.solve(stacked.gamma(q[frames], qd[frames], some))
     seconds = np.full(n, (clock.perf_counter() - started) / max(n, 1))
     if progress is not None:
         progress(n, n)

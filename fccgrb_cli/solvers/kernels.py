@@ -41,12 +41,12 @@ def features(s: SparseSystem, q: np.ndarray, F: np.ndarray) -> None:
 
 
 @njit(cache=True)
-def residual(s: SparseSystem, q: np.ndarray, ref: np.ndarray, F: np.ndarray,
-             phi: np.ndarray) -> None:
+def residual(s: SparseSystem, q: np.ndarray, theta: np.ndarray, ref: np.ndarray,
+             F: np.ndarray, phi: np.ndarray) -> None:
     """Φ: linear and tracking rows from the constant rows, dot rows F_a·F_b − c − g(θ), a signed
-    angle's sine row − sin θ (FORMULATION §2)."""
+    angle's sine row − sin θ (FORMULATION §2); θ is q's tail in a mixed system, the drivers'
+    θ* in a classical one."""
     features(s, q, F)
-    nb = s.nb
     for r in range(s.n_lin):
         total = s.c_const[r]
         for k in range(s.j_ptr[r], s.j_ptr[r + 1]):
@@ -59,11 +59,10 @@ def residual(s: SparseSystem, q: np.ndarray, ref: np.ndarray, F: np.ndarray,
         a, b = 3 * s.dot_a[i], 3 * s.dot_b[i]
         phi[s.n_lin + i] = F[a] * F[b] + F[a + 1] * F[b + 1] + F[a + 2] * F[b + 2] - s.dot_c[i]
     for k in range(len(s.angle_rows)):
-        theta = q[nb + k]
-        g = theta if s.distance[k] else np.cos(theta)
+        g = theta[k] if s.distance[k] else np.cos(theta[k])
         phi[s.n_lin + s.angle_rows[k]] -= g
     for j in range(len(s.sine_rows)):
-        phi[s.n_lin + s.sine_rows[j]] -= np.sin(q[nb + s.sine_of[j]])
+        phi[s.n_lin + s.sine_rows[j]] -= np.sin(theta[s.sine_of[j]])
 
 
 @njit(cache=True)
@@ -74,9 +73,9 @@ def jacobian(s: SparseSystem, q: np.ndarray, F: np.ndarray, values: np.ndarray) 
     for k in range(len(s.scat_pos)):
         values[s.scat_pos[k]] += s.scat_coef[k] * F[s.scat_feat[k]]
     nb = s.nb
-    for k in range(len(s.angle_rows)):
+    for k in range(len(s.ang_pos)):  # mixed systems only (a classical one has no θ columns)
         values[s.ang_pos[k]] = -1.0 if s.distance[k] else np.sin(q[nb + k])
-    for j in range(len(s.sine_rows)):
+    for j in range(len(s.sin_pos)):
         values[s.sin_pos[j]] = -np.cos(q[nb + s.sine_of[j]])
 
 
@@ -196,7 +195,7 @@ def gauss_newton(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, w: np.ndarray
     n_rows, nq = len(w), s.nq
     F, phi, values, trial_phi, c, N, L, g, step_p, step, trial = ws
     q[:] = q0
-    residual(s, q, ref, F, phi)
+    residual(s, q, q[s.nb:], ref, F, phi)
     jacobian(s, q, F, values)
     cost = cost_of(phi, w)
     size = previous = np.inf
@@ -235,13 +234,13 @@ def gauss_newton(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, w: np.ndarray
         alpha = 1.0
         for i in range(nq):
             trial[i] = q[i] + step[i]
-        residual(s, trial, ref, F, trial_phi)
+        residual(s, trial, trial[s.nb:], ref, F, trial_phi)
         trial_cost = cost_of(trial_phi, w)
         while trial_cost > cost + 2e-4 * alpha * slope + ROUNDING * cost and alpha >= 1e-3:
             alpha *= 0.5
             for i in range(nq):
                 trial[i] = q[i] + alpha * step[i]
-            residual(s, trial, ref, F, trial_phi)
+            residual(s, trial, trial[s.nb:], ref, F, trial_phi)
             trial_cost = cost_of(trial_phi, w)
         q[:] = trial
         phi[:] = trial_phi
@@ -322,7 +321,7 @@ def solve_frames(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
                 state[0] = count + 1
         else:
             state[0] = 0
-        residual(s, q, y, F, phi)
+        residual(s, q, q[s.nb:], y, F, phi)
         total, top = 0.0, 0.0
         for r in range(n_rows):
             if w[r] > 0.0:
@@ -345,7 +344,7 @@ def stabilized_sqp(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, w: np.ndarr
     shift[:] = 0.0
     size = np.inf
     for k in range(max_iter + 1):
-        residual(s, q, ref, F, phi)
+        residual(s, q, q[s.nb:], ref, F, phi)
         violation = 0.0
         for r in s.top_rows:
             violation = max(violation, abs(phi[r]))
@@ -430,7 +429,7 @@ def solve_frames_sqp(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
                 y[t, d] = 0.0 if gone else targets[f, t, d]
                 w[row] = 0.0 if gone else 2.0 * DELTA * point_weights[t]
                 active[row] = 0.0 if gone else 1.0
-        residual(s, q0, y, F, phi)
+        residual(s, q0, q0[s.nb:], y, F, phi)
         before = 0
         violation = 0.0
         for r in s.top_rows:
@@ -457,7 +456,7 @@ def solve_frames_sqp(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
         else:
             history[count] = q
             state[0] = count + 1
-        residual(s, q, y, F, phi)
+        residual(s, q, q[s.nb:], y, F, phi)
         total, top = 0.0, 0.0
         for r in range(n_rows):
             if active[r] > 0.0:
@@ -574,3 +573,165 @@ def _gamma_top(s: SparseSystem, q: np.ndarray, qd: np.ndarray, Fd: np.ndarray,
     for j in range(len(s.sine_rows)):
         k = s.sine_of[j]
         gamma[s.n_lin + s.sine_rows[j]] -= np.sin(q[nb + k]) * qd[nb + k] ** 2
+
+
+@njit(cache=True)
+def driven_frames(s: SparseSystem, guesses: np.ndarray, theta: np.ndarray,
+                  theta_d: np.ndarray, theta_dd: np.ndarray, ref: np.ndarray,
+                  ref_d: np.ndarray, ref_dd: np.ndarray, tol: float, max_iter: int,
+                  q_out: np.ndarray, qd_out: np.ndarray, qdd_out: np.ndarray,
+                  phi_out: np.ndarray, iterations: np.ndarray,
+                  converged: np.ndarray) -> None:
+    """The classical model driven by θ*(t) (and a floating base's features), every frame from
+    its own guess moved by the previous frame's correction (solution − guess: the drivers'
+    filtering and the WLS topology misfit change slowly; 3.8 → ~2 iterations a frame on the
+    five-bar sample): Newton–Raphson Φ_q Δq = −Φ until ‖Δq‖∞ < tol (newton.newton_raphson), then
+    Φ_q q̇ = ν and Φ_q q̈ = γ (FORMULATION §3), each through the normal equations on the
+    envelope (Φ_q square, or taller with full column rank: the same solution as LU or least
+    squares). Frames that do not converge are left for Python (converged False)."""
+    n_rows, nq = phi_out.shape[1], s.nq
+    F, Fd = np.empty(len(s.f0)), np.empty(len(s.f0))
+    values = np.empty(len(s.j_col))
+    N, L = np.zeros((nq, nq)), np.zeros((nq, nq))
+    w, phi, rhs = np.ones(n_rows), np.empty(n_rows), np.empty(n_rows)
+    g, out, q = np.empty(nq), np.empty(nq), np.empty(nq)
+    offset = np.zeros(nq)  # the last frame's solution minus its guess
+    for f in range(len(guesses)):
+        if not np.isfinite(guesses[f]).all():
+            offset[:] = 0.0
+            continue
+        q[:] = guesses[f] + offset
+        ok = False
+        for k in range(1, max_iter + 1):
+            residual(s, q, theta[f], ref[f], F, phi)
+            jacobian(s, q, F, values)
+            normal_equations(s, values, phi, w, N, g)
+            if not cholesky(s.first, N, L):
+                break
+            substitute(s.first, L, g, out)
+            size = 0.0
+            for p in range(nq):
+                q[s.perm[p]] -= out[p]
+                size = max(size, abs(out[p]))
+            iterations[f] = k
+            if not np.isfinite(size):
+                break
+            if size < tol:
+                ok = True
+                break
+        if not ok:
+            offset[:] = 0.0
+            continue
+        residual(s, q, theta[f], ref[f], F, phi)
+        jacobian(s, q, F, values)
+        normal_equations(s, values, phi, w, N, g)
+        if not cholesky(s.first, N, L):
+            offset[:] = 0.0
+            continue
+        offset[:] = q - guesses[f]
+        converged[f] = True
+        q_out[f] = q
+        phi_out[f] = phi
+        _driven_nu(s, theta[f], theta_d[f], ref_d[f], rhs)
+        _transposed_product(s, values, rhs, g)
+        substitute(s.first, L, g, out)
+        for p in range(nq):
+            qd_out[f, s.perm[p]] = out[p]
+        _driven_gamma(s, qd_out[f], theta[f], theta_d[f], theta_dd[f], ref_dd[f], Fd, rhs)
+        _transposed_product(s, values, rhs, g)
+        substitute(s.first, L, g, out)
+        for p in range(nq):
+            qdd_out[f, s.perm[p]] = out[p]
+
+
+@njit(cache=True)
+def multipliers_frames(s: SparseSystem, q_all: np.ndarray, rhs: np.ndarray, lam: np.ndarray,
+                       misfit: np.ndarray) -> None:
+    """λ with Φ_qᵀλ = rhs for every frame of a classical motion (the inverse dynamics, Eq. of
+    FORMULATION §4): λ = Φ_q (Φ_qᵀΦ_q)⁻¹ rhs, the solution for a square Φ_q and the
+    minimum-norm one for a taller Φ_q of full column rank; ``misfit`` = ‖Φ_qᵀλ − rhs‖."""
+    n_rows, nq = lam.shape[1], s.nq
+    F = np.empty(len(s.f0))
+    values = np.empty(len(s.j_col))
+    N, L = np.zeros((nq, nq)), np.zeros((nq, nq))
+    w, zero = np.ones(n_rows), np.zeros(n_rows)
+    g, out, back = np.empty(nq), np.empty(nq), np.empty(nq)
+    for f in range(len(q_all)):
+        features(s, q_all[f], F)
+        jacobian(s, q_all[f], F, values)
+        normal_equations(s, values, zero, w, N, g)
+        if not cholesky(s.first, N, L):
+            lam[f] = np.nan
+            continue
+        for p in range(nq):
+            g[p] = rhs[f, s.perm[p]]
+        substitute(s.first, L, g, out)
+        for r in range(n_rows):
+            total = 0.0
+            for m in range(s.j_ptr[r], s.j_ptr[r + 1]):
+                total += values[m] * out[s.j_col[m]]
+            lam[f, r] = total
+        _transposed_product(s, values, lam[f], back)
+        total = 0.0
+        for p in range(nq):
+            total += (back[p] - g[p]) ** 2
+        misfit[f] = np.sqrt(total)
+
+
+@njit(cache=True)
+def _transposed_product(s: SparseSystem, values: np.ndarray, v: np.ndarray,
+                        out: np.ndarray) -> None:
+    """out = Φ_qᵀ v (factor order)."""
+    out[:] = 0.0
+    for r in range(len(v)):
+        for m in range(s.j_ptr[r], s.j_ptr[r + 1]):
+            out[s.j_col[m]] += values[m] * v[r]
+
+
+@njit(cache=True)
+def _driven_nu(s: SparseSystem, theta: np.ndarray, theta_d: np.ndarray, ref_d: np.ndarray,
+               nu: np.ndarray) -> None:
+    """ν = −Φ_t of a classical system (System.nu): the base drivers' ṙ*, g′(θ*) θ̇* on an
+    angle's or distance's row, cos θ* θ̇* on a sine row."""
+    nu[:] = 0.0
+    for t in range(len(s.trk_slot)):
+        for d in range(3):
+            nu[s.trk_start + 3 * t + d] = ref_d[s.trk_slot[t], d]
+    for k in range(len(s.angle_rows)):
+        g1 = 1.0 if s.distance[k] else -np.sin(theta[k])
+        nu[s.n_lin + s.angle_rows[k]] = g1 * theta_d[k]
+    for j in range(len(s.sine_rows)):
+        k = s.sine_of[j]
+        nu[s.n_lin + s.sine_rows[j]] = np.cos(theta[k]) * theta_d[k]
+
+
+@njit(cache=True)
+def _driven_gamma(s: SparseSystem, qd: np.ndarray, theta: np.ndarray, theta_d: np.ndarray,
+                  theta_dd: np.ndarray, ref_dd: np.ndarray, Fd: np.ndarray,
+                  gamma: np.ndarray) -> None:
+    """γ of a classical system with fully-defined bodies (System.gamma): −2Ḟ_a·Ḟ_b on the dot
+    rows, g″(θ*)θ̇*² + g′(θ*)θ̈* on an angle's row, −sin θ* θ̇*² + cos θ* θ̈* on a sine row,
+    the base drivers' r̈*."""
+    for i in range(len(Fd)):
+        total = 0.0
+        for k in range(s.a_ptr[i], s.a_ptr[i + 1]):
+            total += s.a_val[k] * qd[s.a_col[k]]
+        Fd[i] = total
+    gamma[:] = 0.0
+    for t in range(len(s.trk_slot)):
+        for d in range(3):
+            gamma[s.trk_start + 3 * t + d] = ref_dd[s.trk_slot[t], d]
+    for i in range(len(s.dot_a)):
+        a, b = 3 * s.dot_a[i], 3 * s.dot_b[i]
+        gamma[s.n_lin + i] = -2.0 * (Fd[a] * Fd[b] + Fd[a + 1] * Fd[b + 1]
+                                     + Fd[a + 2] * Fd[b + 2])
+    for k in range(len(s.angle_rows)):
+        if s.distance[k]:
+            gamma[s.n_lin + s.angle_rows[k]] += theta_dd[k]
+        else:
+            gamma[s.n_lin + s.angle_rows[k]] -= (np.cos(theta[k]) * theta_d[k] ** 2
+                                                 + np.sin(theta[k]) * theta_dd[k])
+    for j in range(len(s.sine_rows)):
+        k = s.sine_of[j]
+        gamma[s.n_lin + s.sine_rows[j]] += (-np.sin(theta[k]) * theta_d[k] ** 2
+                                            + np.cos(theta[k]) * theta_dd[k])

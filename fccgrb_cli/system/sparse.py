@@ -65,23 +65,32 @@ class SparseSystem(NamedTuple):
 
 
 def supported(system: System) -> bool:
-    """The kernels take mixed coordinates with tracking and fully-defined bodies (a reduced body's
-    w = u × v makes Φ_q depend on q through X_q: those systems keep the numpy path)."""
+    """The NRM and SQP kernels take mixed coordinates with tracking and fully-defined bodies
+    (a reduced body's w = u × v makes Φ_q depend on q through X_q: those systems keep the numpy
+    path)."""
+    return system.mixed and system.n_targets > 0 and compilable(system)
+
+
+def compilable(system: System) -> bool:
+    """Fully-defined bodies only: x is q's body part (the classical model's kernels need no
+    more; the mixed ones need tracking too, see :func:`supported`)."""
     layout = system.layout
-    return (system.mixed and system.n_targets > 0 and not len(layout.reduced_w)
-            and layout.n_body_q == layout.nx)
+    return not len(layout.reduced_w) and layout.n_body_q == layout.nx
 
 
 def sparse_system(system: System) -> SparseSystem:
-    """The arrays of :class:`SparseSystem` for ``system`` (see :func:`supported`)."""
-    if not supported(system):
-        raise ValueError("sparse_system needs mixed coordinates, tracking and no reduced body")
+    """The arrays of :class:`SparseSystem` for ``system``: mixed (see :func:`supported`) or
+    classical, angles as drivers (no θ columns; θ* comes with each frame)."""
+    if not compilable(system) or (system.mixed and not system.n_targets):
+        raise ValueError("sparse_system needs fully-defined bodies (and tracking when mixed)")
     nq, nb, n_rows = system.nq, system.layout.n_body_q, system.n_rows
     n_lin = system.n_linear_rows
-    n_ang = len(system.angle_rows)
+    n_ang = len(system.angle_rows) if system.mixed else 0
+    sine_rows = system.sine_rows if system.mixed else np.zeros(0, dtype=int)
+    sine_of = system.sine_of if system.mixed else np.zeros(0, dtype=int)
 
-    mixed_rows = n_lin + np.concatenate([system.angle_rows, system.sine_rows]).astype(int)
-    mixed_cols = nb + np.concatenate([np.arange(n_ang), system.sine_of]).astype(int)
+    mixed_rows = n_lin + np.concatenate([system.angle_rows[:n_ang], sine_rows]).astype(int)
+    mixed_cols = nb + np.concatenate([np.arange(n_ang), sine_of]).astype(int)
     pattern = np.zeros((n_rows, nq), dtype=bool)
     pattern.flat[system.scatter_index] = True
     pattern[:n_lin, :nb] |= system.J_const != 0.0
@@ -120,10 +129,10 @@ def sparse_system(system: System) -> SparseSystem:
         j_ptr=_pointers(rows, n_rows), j_col=inverse[cols], j_const=j_const,
         scat_pos=position[scat_rows, scat_cols],
         scat_coef=system.scatter_coef.copy(), scat_feat=system.scatter_gather.astype(np.int64),
-        ang_pos=position[n_lin + system.angle_rows, nb + np.arange(n_ang)],
-        sin_pos=position[n_lin + system.sine_rows, nb + system.sine_of],
+        ang_pos=position[n_lin + system.angle_rows[:n_ang], nb + np.arange(n_ang)],
+        sin_pos=position[n_lin + sine_rows, nb + sine_of],
         perm=perm, first=first,
-        ang_diag=inverse[nb + np.arange(n_ang)], sin_diag=inverse[nb + system.sine_of],
+        ang_diag=inverse[nb + np.arange(n_ang)], sin_diag=inverse[nb + sine_of],
         h_row=hess_rows, h_col=hess_cols, h_coef=hess_coef, h_dot=hess_dot,
         top_rows=np.flatnonzero(system.masks()["topology"]),
     )
