@@ -78,6 +78,7 @@ class C3DLayout:
     first_frame: int           # the announced range, for messages
     last_frame: int
     frames_from: str           # where the count comes from ("header", "POINT:FRAMES", …)
+    point_scale: float = -1.0  # POINT:SCALE (integer data: the unit of a stored word)
 
     @property
     def frame_bytes(self) -> int:
@@ -171,7 +172,7 @@ def read_layout(path: str | Path) -> C3DLayout:
         analog = int(number("ANALOG:USED", 0)) * round(number("ANALOG:RATE", 0.0) / rate)
     frames, first, last, source = _frame_count(params, first, last)
     layout = C3DLayout(size, processor, float_data, points, analog, data_start,
-                       frames, first, last, source)
+                       frames, first, last, source, number("POINT:SCALE", scale))
     beyond = size - data_offset - frames * layout.frame_bytes  # bytes after the last frame
     if frames == WORD_LIMIT and source in ("header", "POINT:FRAMES") and beyond >= BLOCK:
         raise InputError(f"{path}: POINT:FRAMES is {WORD_LIMIT}, the most a 16-bit word counts, "
@@ -245,3 +246,34 @@ def _parameters(section: bytes, processor: str) -> dict[str, Parameter]:
             break
         pos = following
     return {f"{groups[g]}:{name}": p for (g, name), p in found.items() if g in groups}
+
+
+def read_points(path: str | Path, layout: C3DLayout, frames: int,
+                chunk: int = 8192) -> np.ndarray:
+    """The 3D points of the first ``frames`` frames (frames × points × 3, the file's units, NaN
+    where the residual word is negative), read from the data section itself in chunks of
+    frames (a memory map: nothing else of the file is loaded). For files past ezc3d's 65535
+    frames; 32-bit floats of any processor, or 16-bit integers times |POINT:SCALE|."""
+    size = 4 if layout.float_data else 2
+    words = layout.frame_bytes // size
+    if layout.float_data:
+        dtype = {"Intel": "<f4", "MIPS": ">f4", "DEC": "<u4"}[layout.processor]
+    else:
+        dtype = ">i2" if layout.processor == "MIPS" else "<i2"
+    raw = np.memmap(path, dtype=dtype, mode="r", offset=layout.data_offset,
+                    shape=(frames, words))
+    out = np.empty((frames, layout.points, 3))
+    for start in range(0, frames, chunk):
+        block = np.asarray(raw[start:start + chunk, :4 * layout.points])
+        if layout.processor == "DEC" and layout.float_data:
+            values = decode_floats(block.tobytes(), "DEC").reshape(block.shape)
+        else:
+            values = block.astype(float)
+        if not layout.float_data:
+            values[..., :] *= abs(layout.point_scale)
+        values = values.reshape(len(block), layout.points, 4)
+        xyz = values[..., :3]
+        xyz[values[..., 3] < 0] = np.nan
+        out[start:start + len(block)] = xyz
+    del raw
+    return out

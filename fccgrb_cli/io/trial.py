@@ -18,7 +18,7 @@ import numpy as np
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.atomic import atomic_path
 from fccgrb_cli.io.c3d import UNIT_SCALE, write_markers
-from fccgrb_cli.io.c3d_header import TRUNCATED, read_layout
+from fccgrb_cli.io.c3d_header import TRUNCATED, WORD_LIMIT, read_layout, read_points
 
 
 @dataclass(frozen=True)
@@ -98,6 +98,8 @@ def read_c3d(path: Path, accept_truncated: bool = False) -> Trial:
     residuals = c3d["data"]["meta_points"].get("residuals")
     if residuals is not None and residuals.size:
         xyz[np.transpose(residuals[0], (1, 0)) < 0] = np.nan
+    if xyz.shape[0] == WORD_LIMIT < frames:  # ezc3d counts frames in a 16-bit word
+        xyz = read_points(path, layout, frames) * scale
     if xyz.shape[0] != frames:
         raise InputError(f"{path}: ezc3d read {xyz.shape[0]} frames where the file holds "
                          f"{frames} ({layout.announced()})")
