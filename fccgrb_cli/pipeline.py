@@ -300,7 +300,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
                      options.seed, only=options.perturb_markers or None)
     system, result = _kinematics(model, trial, inputs, options, truth, progress)
     which = [(tp.body, tp.point) for tp in model.tracked_points]
-    points = np.array([system.point_positions(q, which) for q in result.q])
+    points = points_along(system, result.q, which)
     result = assessed(result, points, inputs)
     warnings: list[str] = [*trial.warnings, *_quality_advice(result)]
     notes: list[str] = []
@@ -424,8 +424,24 @@ def run_name(method: str, ad_drivers: str, cutoff: float | None, level_m: float,
 
 def _body_points(system: System, q: np.ndarray, body: str) -> np.ndarray:
     """Positions (frames × points × 3) of every named point of a body along a solution."""
-    which = [(body, name) for name in system.model.body(body).points]
-    return np.array([system.point_positions(qf, which) for qf in q])
+    return points_along(system, q, [(body, name) for name in system.model.body(body).points])
+
+
+def points_along(system: System, q: np.ndarray, which: list[tuple[str, str]]) -> np.ndarray:
+    """System.point_positions of every frame at once (frames × points × 3): r + l₁u + l₂v + l₃w
+    of each (body, point) on the frames' x = S V q (Eq. 2, 5)."""
+    lay = system.layout
+    x = np.empty((len(q), lay.nx))
+    x[:, lay.copy_x] = q[:, lay.copy_q]
+    if len(lay.reduced_w):
+        x[:, lay.reduced_w] = np.cross(q[:, lay.reduced_u], q[:, lay.reduced_v])
+    out = np.empty((len(q), len(which), 3))
+    for k, (body, point) in enumerate(which):
+        local = system.model.body(body).points[point].local
+        r, u, v, w = x[:, system.layout.x_offset(body) + np.arange(12)].reshape(-1, 4, 3) \
+            .transpose(1, 0, 2)
+        out[:, k] = r + local[0] * u + local[1] * v + local[2] * w
+    return out
 
 
 def plate_loads(model: Model, trial: Trial, warnings: list[str],

@@ -355,3 +355,19 @@ def test_frames_the_compiled_batch_leaves_take_the_frame_by_frame_path(monkeypat
                                   engine="compiled")
     assert (compiled.kinematics.iterations > 1).sum() > 30
     assert_same_dynamics(sequential, compiled)
+
+
+@pytest.mark.parametrize("form", ["full", "reduced"])
+def test_points_along_a_solution_equal_point_positions(form: str) -> None:
+    """pipeline.points_along (every frame at once) against System.point_positions frame by
+    frame, with a frame left unsolved (NaN)."""
+    from fccgrb_cli.pipeline import points_along
+
+    model = load_model(MODELS / "five_bar.yaml").with_form(form)
+    truth = synthesize(model)
+    system = compile_system(model, angles="coordinate", track=True)
+    q = solve_nrm(system, truth.result.time[:12], truth.markers[:12], NrmSettings()).q.copy()
+    q[3] = np.nan
+    which = [(b.name, p) for b in model.bodies for p in b.points]
+    one_by_one = np.array([system.point_positions(qf, which) for qf in q])
+    assert np.array_equal(points_along(system, q, which), one_by_one, equal_nan=True)
