@@ -27,10 +27,9 @@ gets exactly these arrays. Solvers:
 
 Timings (``time.perf_counter``; best of ``--repeat`` runs, the run with the smallest ms/frame;
 the answers of every repeat are identical). Before any timing, one untimed solve of each fccgrb
-method on the P0 markers: one-time start-up (numba loading its cached kernels) is left out, and
-every level runs on the same engine (fccgrb's 'auto' engine takes the compiled kernels once they
-are loaded in the process, as in a session that solves more than one trial), not on whichever
-engine the previous row happened to load:
+method on the P0 markers: one-time start-up (numba loading its cached kernels) is left out.
+fccgrb runs on its compiled engine (``engine="compiled"``; 'auto' takes it from 1000 frames, 200
+for CNO-SQP, and these are 300-frame trials):
 
 - fccgrb ms/frame: the mean of the solver's own per-frame times (``KinematicResult.time_s``):
   one frame's warm-start prediction (frame 0: the initial guess from the markers) and iterations
@@ -153,9 +152,10 @@ def run_fccgrb(method: str, system: System, time_s: np.ndarray, markers: np.ndar
     public solver functions."""
     started = time.perf_counter()
     if method == "nrm-wls":
-        result = solve_nrm(system, time_s, markers, NrmSettings(1e-3, 1e-10))
+        result = solve_nrm(system, time_s, markers, NrmSettings(1e-3, 1e-10, engine="compiled"))
     elif method == "cno-sqp":
-        result = solve_optimization(system, time_s, markers, Settings("cno-sqp", "tc"))
+        result = solve_optimization(system, time_s, markers,
+                                    Settings("cno-sqp", "tc", engine="compiled"))
     else:
         raise ValueError(f"method {method!r}: expected nrm-wls or cno-sqp")
     call = time.perf_counter() - started

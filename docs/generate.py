@@ -20,8 +20,10 @@ Parts and their blocks:
 * ``tables`` (minutes): ``sweeps`` (configs/sweeps/table1.yaml and table2.yaml → docs/table1.md,
   docs/table2.md and the README's sweep paragraph), ``gait-methods`` (CNO-SQP against NRM-WLS on
   the walking trial).
-* ``benchmarks`` (minutes): ``bench-kinematics``, ``bench-optimization``, ``bench-gait``: the
-  performance tables from benchmarks/*.py.
+* ``benchmarks`` (minutes): ``bench-kinematics``, ``bench-optimization``, ``bench-gait``,
+  ``bench-dynamics``, ``bench-peers`` (OpenSim's IK beside ours where ``opensim`` is
+  installed), ``bench-long`` (a 10-minute trial under /usr/bin/time -v): the performance
+  tables from benchmarks/*.py.
 * ``figures``: ``figures`` (the Figure 8 case: docs/point_P6.png, ed_P6.png, angle_J4_uv.png,
   velocity_P6_x.png via ``fccgrb plot``, and the commands that make them) and ``figure8-seeds``
   (the end point's distance to the truth over three seeds).
@@ -446,6 +448,25 @@ def bench_gait(ws: Workspace) -> list[Artifact]:
     return [ReadmeBlock("bench-gait", f"```console\n$ {command}\n{out}\n```")]
 
 
+def bench_dynamics(ws: Workspace) -> list[Artifact]:
+    command = "python benchmarks/dynamics.py"
+    out = ws.run(command, cwd=ROOT)
+    return [ReadmeBlock("bench-dynamics", f"```console\n$ {command}\n{out}\n```")]
+
+
+def bench_peers(ws: Workspace) -> list[Artifact]:
+    command = "python benchmarks/peers.py"
+    out = ws.run(command, cwd=ROOT)
+    return [ReadmeBlock("bench-peers", f"```console\n$ {command}\n{out}\n```")]
+
+
+def bench_long(ws: Workspace) -> list[Artifact]:
+    _need_gait_trial()
+    command = "python benchmarks/long_trial.py"
+    out = ws.run(command, cwd=ROOT)
+    return [ReadmeBlock("bench-long", f"```console\n$ {command}\n{out}\n```")]
+
+
 @dataclass(frozen=True)
 class Block:
     name: str
@@ -464,6 +485,9 @@ BLOCKS = {b.name: b for b in (
     Block("bench-kinematics", "benchmarks", bench_kinematics, "README performance table"),
     Block("bench-optimization", "benchmarks", bench_optimization, "README performance table"),
     Block("bench-gait", "benchmarks", bench_gait, "README gait speed"),
+    Block("bench-dynamics", "benchmarks", bench_dynamics, "README dynamics stage speed"),
+    Block("bench-peers", "benchmarks", bench_peers, "README: against OpenSim's IK"),
+    Block("bench-long", "benchmarks", bench_long, "README: a 10-minute trial"),
     Block("figures", "figures", figures, "docs/*.png of the Figure 8 case and their commands"),
     Block("figure8-seeds", "figures", figure8_seeds, "README: P6's distance over seeds"),
 )}

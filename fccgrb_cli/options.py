@@ -79,8 +79,8 @@ class SolveOptions:
         "auto", choices=("auto", "compiled", "numpy"),
         help="Per-frame arithmetic of NRM and of the structured CNO-SQP: compiled kernels "
              "(numba), the same iteration in numpy (equal to 1e-12), or auto: compiled for "
-             "trials of 1000 frames or more (200 for CNO-SQP), or once numba is loaded in the "
-             "process (loading it costs ~0.25 s once), where no body is reduced.")
+             "trials of 1000 frames or more (200 for CNO-SQP; loading numba costs ~0.25 s "
+             "once), where no body is reduced.")
     skip_unsolvable: bool = _option(
         False, help="Report frames whose remaining markers cannot determine the model as "
                     "unsolved and go on, instead of stopping with an error.")

@@ -62,13 +62,11 @@ def classical_dynamics(model: Model, result: KinematicResult, *, cutoff: float |
 
 def kernels_for(system: System, engine: str, n_frames: int) -> bool:
     """Whether the classical model's batch runs in the compiled kernels: as
-    NrmSettings.compiled decides for NRM (fully-defined bodies; 'auto' once numba is loaded
-    or for long trials)."""
-    import sys
-
+    NrmSettings.compiled decides for NRM (fully-defined bodies; 'auto' for trials of
+    COMPILED_FROM frames or more)."""
     from fccgrb_cli.solvers.nrm import COMPILED_FROM, numba_available
     from fccgrb_cli.system.sparse import compilable
 
     if engine == "numpy" or not compilable(system) or not numba_available():
         return False
-    return engine == "compiled" or "numba" in sys.modules or n_frames >= COMPILED_FROM
+    return engine == "compiled" or n_frames >= COMPILED_FROM

@@ -386,7 +386,8 @@ def stabilized_sqp(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, w: np.ndarr
 @njit(cache=True)
 def solve_frames_sqp(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
                      point_weights: np.ndarray, nrm_w: np.ndarray, lower: np.ndarray,
-                     upper: np.ndarray, tol: float, extrapolate: bool, start: int, stop: int,
+                     upper: np.ndarray, tol: float, max_iter: int, extrapolate: bool,
+                     start: int, stop: int,
                      guess: np.ndarray, use_guess: bool, history: np.ndarray, state: np.ndarray,
                      q_all: np.ndarray, iterations: np.ndarray, phi_norm: np.ndarray,
                      phi_top: np.ndarray, converged: np.ndarray) -> tuple[int, int]:
@@ -437,9 +438,9 @@ def solve_frames_sqp(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
         if violation > FAR:
             for r in range(n_rows):
                 w_nrm[r] = nrm_w[r] * active[r]
-            before, _ = gauss_newton(s, q0, y, w_nrm, tol, 50, 2, q, ws)
+            before, _ = gauss_newton(s, q0, y, w_nrm, tol, min(max_iter, 50), 2, q, ws)
             q0[:] = q
-        k, ok = stabilized_sqp(s, q0, y, w, tol, MAX_SQP, q, ws)
+        k, ok = stabilized_sqp(s, q0, y, w, tol, min(max_iter, MAX_SQP), q, ws)
         k += before
         for i in range(nq):
             ok = ok and lower[i] <= q[i] <= upper[i]

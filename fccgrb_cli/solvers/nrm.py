@@ -8,7 +8,6 @@ A marker missing in a frame (NaN) drops its tracking rows for that frame only.
 
 from __future__ import annotations
 
-import sys
 import time as clock
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -125,9 +124,10 @@ class NrmSettings:
 
     def compiled(self, system: System, n_frames: int) -> bool:
         """Whether this solve runs in the compiled kernels. 'auto' takes them for trials of
-        ``COMPILED_FROM`` frames or more, or once numba is loaded in this process: loading
-        numba and the cached machine code costs ~0.25 s once per process, about what the numpy
-        path spends on 500–700 five-bar frames."""
+        ``COMPILED_FROM`` frames or more: loading numba and the cached machine code costs
+        ~0.25 s once per process, about what the numpy path spends on 500–700 five-bar frames.
+        The choice depends on the trial and the model only, never on what the process loaded
+        before, so that a CLI run, a sweep cell and an API call give the same bits."""
         if self.engine == "numpy":
             return False
         from fccgrb_cli.system.sparse import supported
@@ -139,11 +139,7 @@ class NrmSettings:
             if not numba_available():
                 raise InputError("--engine compiled needs numba (pip install numba)")
             return True
-        if not supported(system):
-            return False
-        if "numba" in sys.modules:
-            return True
-        return n_frames >= COMPILED_FROM and numba_available()
+        return supported(system) and n_frames >= COMPILED_FROM and numba_available()
 
 
 def numba_available() -> bool:

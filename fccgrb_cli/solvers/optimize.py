@@ -40,6 +40,7 @@ from fccgrb_cli.solvers.nrm import (
 from fccgrb_cli.solvers.quality import flags_of
 from fccgrb_cli.solvers.result import FrameStats, KinematicResult
 from fccgrb_cli.solvers.sqp import FAR, sqp_weights, stabilized_sqp
+from fccgrb_cli.solvers.sqp import MAX_ITER as MAX_SQP
 from fccgrb_cli.system import System
 
 if TYPE_CHECKING:
@@ -97,7 +98,7 @@ class FrameRecord:
 
 def _optimize(problem: FrameProblem, settings: Settings, q0: np.ndarray) -> FrameOutcome:
     if settings.structured:
-        out = structured_cno_frame(problem, q0, settings.tol)
+        out = structured_cno_frame(problem, q0, settings.tol, settings.max_iter)
         if out.converged:
             return out
         scipy = _optimize(problem, replace(settings, optimizer="scipy"), q0)
@@ -113,7 +114,8 @@ def _optimize(problem: FrameProblem, settings: Settings, q0: np.ndarray) -> Fram
                             max_iter=settings.max_iter)
 
 
-def structured_cno_frame(problem: FrameProblem, q0: np.ndarray, tol: float) -> FrameOutcome:
+def structured_cno_frame(problem: FrameProblem, q0: np.ndarray, tol: float,
+                         max_iter: int = MAX_SQP) -> FrameOutcome:
     """One CNO-TC frame by the stabilized SQP, judged against the problem's bounds. A guess far
     off the constraints (a rigid fit: the first frame, or after a failure) first goes through
     NRM-WLS, whose line search the SQP lacks; from the previous frames' extrapolation the SQP
@@ -122,10 +124,10 @@ def structured_cno_frame(problem: FrameProblem, q0: np.ndarray, tol: float) -> F
     before = 0
     if np.abs(problem.constraints(q0)).max(initial=0.0) > FAR:
         weights = without_gaps(row_weights(system, 1e-3), system, problem.missing)
-        start = gauss_newton(system, q0, problem.drive, weights, tol, 50, "auto")
+        start = gauss_newton(system, q0, problem.drive, weights, tol, min(max_iter, 50), "auto")
         q0, before = start.q, start.iterations
     it = stabilized_sqp(system, q0, problem.drive, sqp_weights(system, problem.point_weights),
-                        tol)
+                        tol, min(max_iter, MAX_SQP))
     it = Iterate(it.q, before + it.iterations, it.converged)
     if not it.converged:
         return FrameOutcome(it.q, it.iterations, False,

@@ -44,8 +44,8 @@ def run_frames_compiled(system: System, settings: Settings, targets: np.ndarray,
         started = clock.perf_counter()
         g, reason = kernels.solve_frames_sqp(
             s, targets, missing, weights, row_weights(system, 1e-3), lower, upper, settings.tol,
-            settings.warm_start != "previous", f, min(n, f + BLOCK), guess, use_guess, history,
-            state, q_all, iterations, phi_norm, phi_top, converged)
+            settings.max_iter, settings.warm_start != "previous", f, min(n, f + BLOCK), guess,
+            use_guess, history, state, q_all, iterations, phi_norm, phi_top, converged)
         if g > f:
             seconds[f:g] = (clock.perf_counter() - started) / (g - f)
         use_guess = False
