@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from fccgrb_cli.solvers.newton import NEAR, ROUNDING, SLOW
+from fccgrb_cli.solvers.newton import LARGE, NEAR, ROUNDING, SLOW
 from fccgrb_cli.solvers.sqp import DELTA, FAR, FEASIBLE_TOP
 from fccgrb_cli.solvers.sqp import MAX_ITER as MAX_SQP
 from fccgrb_cli.system.sparse import SparseSystem
@@ -201,7 +201,11 @@ def gauss_newton(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, w: np.ndarray
     size = previous = np.inf
     exact = hessian == 1
     for k in range(1, max_iter + 1):
-        exact = exact or (hessian == 2 and (size < NEAR or size > SLOW * previous))
+        largest = 0.0
+        for r in range(n_rows):
+            largest = max(largest, abs(w[r] * phi[r]))
+        near = size < NEAR and largest > LARGE
+        exact = exact or (hessian == 2 and (near or size > SLOW * previous))
         normal_equations(s, values, phi, w, N, g)
         for i in range(nq):
             g[i] = -g[i]
