@@ -228,11 +228,10 @@ class System:
         w = u × v; MCR rows add −c_k g″(θ_k) on the diagonal (c_k cos θ_k for an angle, nothing
         for a distance)."""
         layout = self.layout
-        n_bodies = len(layout.body_names)
         dots = c[self.n_linear_rows:]
-        K = np.bincount(self.hess_index, self.hess_coef * dots[self.hess_row],
-                        minlength=16 * n_bodies * n_bodies).reshape(4 * n_bodies, 4 * n_bodies)
-        Sx = np.kron(K, np.eye(3))
+        index, coef, row = self._hessian_scatter
+        nx = layout.nx
+        Sx = np.bincount(index, coef * dots[row], minlength=nx * nx).reshape(nx, nx)
         xq = layout.expand_jacobian(q)
         H = np.zeros((self.nq, self.nq))
         nb = layout.n_body_q
@@ -253,6 +252,16 @@ class System:
             k = nb + self.sine_of
             H[k, k] += dots[self.sine_rows] * np.sin(q[k])
         return H
+
+    @cached_property
+    def _hessian_scatter(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """kron(K, I3) of residual_hessian as flat indices into the nx × nx x-Hessian: each
+        term of K at (a, b) lands on (3a + d, 3b + d), d = 0, 1, 2."""
+        side = 4 * len(self.layout.body_names)
+        ka, kb = np.divmod(self.hess_index, side)
+        d = np.arange(3)
+        index = ((3 * ka[:, None] + d) * self.layout.nx + 3 * kb[:, None] + d).ravel()
+        return index, np.repeat(self.hess_coef, 3), np.repeat(self.hess_row, 3)
 
     # --- reading the solution ------------------------------------------------------------------
     def point_positions(self, q: np.ndarray, which: list[tuple[str, str]]) -> np.ndarray:
