@@ -139,3 +139,17 @@ def test_a_frame_the_sqp_cannot_solve_goes_to_slsqp(monkeypatch) -> None:
     assert all(re.match(r"stabilized SQP: no convergence in \d+ iterations; SLSQP: ", m)
                for m in result.status), result.status
     assert np.abs(result.q - reference.q).max() < 1e-12
+
+
+def test_frames_the_compiled_sqp_cannot_solve_take_the_same_way_out() -> None:
+    """An iteration cap of 2: the kernels' SQP fails on most frames, which go back to Python
+    (SLSQP, then the retry from NRM-WLS) exactly as the numpy path's do; the history carried
+    on between frames is the same."""
+    system, time, markers = case("five_bar", 30e-3, 12)
+    numpy = run(system, time, markers, engine="numpy", max_iter=2)
+    compiled = run(system, time, markers, engine="compiled", max_iter=2)
+    assert sum("SLSQP" in m for m in compiled.status) >= 6
+    assert numpy.status == compiled.status
+    assert (numpy.converged == compiled.converged).all()
+    assert (numpy.iterations == compiled.iterations).all()
+    assert np.abs(numpy.q - compiled.q).max() < 1e-9

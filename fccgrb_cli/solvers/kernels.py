@@ -285,11 +285,7 @@ def solve_frames(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
         elif not extrapolate:
             q0[:] = history[count - 1]
         else:
-            points = min(count, 5 if state[1] <= 5 else 3)
-            coef = _EXTRAPOLATION[points - 1]
-            q0[:] = 0.0
-            for j in range(points):
-                q0 += coef[j] * history[count - 1 - j]
+            _extrapolated(history, count, min(count, 5 if state[1] <= 5 else 3), q0)
         key = pattern_of[f]
         if solvable[key] == UNKNOWN:
             guess[:] = q0
@@ -315,26 +311,44 @@ def solve_frames(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
         iterations[f] = k
         converged[f] = ok
         state[1] = k
-        if ok:
-            if count == 5:
-                for j in range(4):
-                    history[j] = history[j + 1]
-                history[4] = q
-            else:
-                history[count] = q
-                state[0] = count + 1
-        else:
-            state[0] = 0
-        residual(s, q, q[s.nb:], y, F, phi)
-        total, top = 0.0, 0.0
-        for r in range(n_rows):
-            if w[r] > 0.0:
-                total += phi[r] * phi[r]
-        for r in s.top_rows:
-            top = max(top, abs(phi[r]))
-        phi_norm[f] = np.sqrt(total)
-        phi_top[f] = top
+        state[0] = pushed(history, count, q) if ok else 0
+        phi_norm[f], phi_top[f] = _statistics(s, q, y, w, F, phi)
     return stop, DONE
+
+
+@njit(cache=True)
+def _extrapolated(history: np.ndarray, count: int, points: int, out: np.ndarray) -> None:
+    """nrm.predict: the polynomial through the last ``points`` of ``count`` solutions."""
+    coef = _EXTRAPOLATION[points - 1]
+    out[:] = 0.0
+    for j in range(points):
+        out += coef[j] * history[count - 1 - j]
+
+
+@njit(cache=True)
+def pushed(history: np.ndarray, count: int, q: np.ndarray) -> int:
+    """``q`` appended to the history (the oldest dropped when full); the new count."""
+    if count == len(history):
+        for j in range(count - 1):
+            history[j] = history[j + 1]
+        history[count - 1] = q
+        return count
+    history[count] = q
+    return count + 1
+
+
+@njit(cache=True)
+def _statistics(s: SparseSystem, q: np.ndarray, y: np.ndarray, keep: np.ndarray,
+                F: np.ndarray, phi: np.ndarray) -> tuple[float, float]:
+    """‖Φ‖ over the rows where ``keep`` > 0 and max |Φ_top| at a frame's solution."""
+    residual(s, q, q[s.nb:], y, F, phi)
+    total, top = 0.0, 0.0
+    for r in range(len(phi)):
+        if keep[r] > 0.0:
+            total += phi[r] * phi[r]
+    for r in s.top_rows:
+        top = max(top, abs(phi[r]))
+    return np.sqrt(total), top
 
 
 @njit(cache=True)
@@ -403,6 +417,7 @@ def solve_frames_sqp(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
     ws = workspace(s, n_rows)
     w = np.empty(n_rows)
     w_nrm = np.empty(n_rows)
+    start_q = np.empty(s.nq)
     active = np.empty(n_rows)
     y = np.empty((targets.shape[1], 3))
     q0 = np.empty(nq)
@@ -423,10 +438,7 @@ def solve_frames_sqp(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
         elif not extrapolate:
             q0[:] = history[count - 1]
         else:
-            coef = _EXTRAPOLATION[count - 1]
-            q0[:] = 0.0
-            for j in range(count):
-                q0 += coef[j] * history[count - 1 - j]
+            _extrapolated(history, count, count, q0)
         for t in range(targets.shape[1]):
             gone = missing[f, t]
             for d in range(3):
@@ -439,12 +451,13 @@ def solve_frames_sqp(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
         violation = 0.0
         for r in s.top_rows:
             violation = max(violation, abs(phi[r]))
-        if violation > FAR:
+        start_q[:] = q0
+        if violation > FAR:  # a guess far off the constraints: NRM-WLS first (optimize.py)
             for r in range(n_rows):
                 w_nrm[r] = nrm_w[r] * active[r]
             before, _ = gauss_newton(s, q0, y, w_nrm, tol, min(max_iter, 50), 2, q, ws)
-            q0[:] = q
-        k, ok = stabilized_sqp(s, q0, y, w, tol, min(max_iter, MAX_SQP), q, ws)
+            start_q[:] = q
+        k, ok = stabilized_sqp(s, start_q, y, w, tol, min(max_iter, MAX_SQP), q, ws)
         k += before
         for i in range(nq):
             ok = ok and lower[i] <= q[i] <= upper[i]
@@ -454,22 +467,8 @@ def solve_frames_sqp(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
             guess[:] = q0
             return f, NEED_FALLBACK
         converged[f] = True
-        if count == 3:
-            history[0] = history[1]
-            history[1] = history[2]
-            history[2] = q
-        else:
-            history[count] = q
-            state[0] = count + 1
-        residual(s, q, q[s.nb:], y, F, phi)
-        total, top = 0.0, 0.0
-        for r in range(n_rows):
-            if active[r] > 0.0:
-                total += phi[r] * phi[r]
-        for r in s.top_rows:
-            top = max(top, abs(phi[r]))
-        phi_norm[f] = np.sqrt(total)
-        phi_top[f] = top
+        state[0] = pushed(history, count, q)
+        phi_norm[f], phi_top[f] = _statistics(s, q, y, active, F, phi)
     return stop, DONE
 
 

@@ -54,7 +54,8 @@ def run_frames_compiled(system: System, settings: Settings, targets: np.ndarray,
         elif reason == kernels.NEED_FALLBACK:
             record = solve_frame(system, settings, guess.copy(), targets[g])
             fallback[g] = record
-            state[0] = _pushed(history, int(state[0]), record.q) if record.converged else 0
+            state[0] = kernels.pushed(history, int(state[0]), record.q) \
+                if record.converged else 0
             g += 1
         if progress is not None:
             progress(g, n)
@@ -64,11 +65,3 @@ def run_frames_compiled(system: System, settings: Settings, targets: np.ndarray,
                                            float(phi_top[k]))
             for k in range(n)]
 
-
-def _pushed(history: np.ndarray, count: int, q: np.ndarray) -> int:
-    if count == len(history):
-        history[:-1] = history[1:].copy()
-        history[-1] = q
-        return count
-    history[count] = q
-    return count + 1
