@@ -278,14 +278,10 @@ def solve_frames(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
     phi = np.empty(n_rows)
     for f in range(start, stop):
         count = state[0]
-        if use_guess and f == start:
-            q0[:] = guess
-        elif count == 0:
+        points = min(count, 5 if state[1] <= 5 else 3)
+        if not _warm_start(use_guess and f == start, guess, history, count, points,
+                           extrapolate, q0):
             return f, NEED_GUESS
-        elif not extrapolate:
-            q0[:] = history[count - 1]
-        else:
-            _extrapolated(history, count, min(count, 5 if state[1] <= 5 else 3), q0)
         key = pattern_of[f]
         if solvable[key] == UNKNOWN:
             guess[:] = q0
@@ -317,12 +313,24 @@ def solve_frames(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
 
 
 @njit(cache=True)
-def _extrapolated(history: np.ndarray, count: int, points: int, out: np.ndarray) -> None:
-    """nrm.predict: the polynomial through the last ``points`` of ``count`` solutions."""
+def _warm_start(given: bool, guess: np.ndarray, history: np.ndarray, count: int, points: int,
+                extrapolate: bool, out: np.ndarray) -> bool:
+    """A frame's starting point in ``out`` (nrm.predict): Python's ``guess`` where given, else
+    the last solution ('previous') or the polynomial through the last ``points`` of the
+    ``count`` solutions; False when there is no history (Python supplies the guess)."""
+    if given:
+        out[:] = guess
+        return True
+    if count == 0:
+        return False
+    if not extrapolate:
+        out[:] = history[count - 1]
+        return True
     coef = _EXTRAPOLATION[points - 1]
     out[:] = 0.0
     for j in range(points):
         out += coef[j] * history[count - 1 - j]
+    return True
 
 
 @njit(cache=True)
@@ -431,14 +439,9 @@ def solve_frames_sqp(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
         w[r] = 1.0
     for f in range(start, stop):
         count = state[0]
-        if use_guess and f == start:
-            q0[:] = guess
-        elif count == 0:
+        if not _warm_start(use_guess and f == start, guess, history, count, count,
+                           extrapolate, q0):
             return f, NEED_GUESS
-        elif not extrapolate:
-            q0[:] = history[count - 1]
-        else:
-            _extrapolated(history, count, count, q0)
         for t in range(targets.shape[1]):
             gone = missing[f, t]
             for d in range(3):
