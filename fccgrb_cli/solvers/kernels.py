@@ -120,10 +120,10 @@ def add_hessian(s: SparseSystem, q: np.ndarray, c: np.ndarray, N: np.ndarray) ->
     nb = s.nb
     for k in range(len(s.angle_rows)):
         if not s.distance[k]:
-            p = s.ang_diag[k]
+            p = s.inverse[nb + k]
             N[p, p] += c[s.n_lin + s.angle_rows[k]] * np.cos(q[nb + k])
     for j in range(len(s.sine_rows)):
-        p = s.sin_diag[j]
+        p = s.inverse[nb + s.sine_of[j]]
         N[p, p] += c[s.n_lin + s.sine_rows[j]] * np.sin(q[nb + s.sine_of[j]])
 
 
@@ -491,9 +491,7 @@ def rates_frames(s: SparseSystem, q_all: np.ndarray, theta_d: np.ndarray,
     N, L = np.zeros((nq, nq)), np.zeros((nq, nq))
     w, rhs, gamma = np.zeros(n_rows), np.zeros(n_rows), np.zeros(n_rows)
     g, out = np.empty(nq), np.empty(nq)
-    inverse = np.empty(nq, dtype=np.int64)
-    for p in range(nq):
-        inverse[s.perm[p]] = p
+    inverse = s.inverse
     for r in s.top_rows:
         w[r] = 1.0
     for f in range(len(q_all)):

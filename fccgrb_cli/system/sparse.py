@@ -24,8 +24,8 @@ class SparseSystem(NamedTuple):
     ``j_const``: the constant values (linear and tracking rows, zero elsewhere); ``scat_pos``,
     ``scat_coef``, ``scat_feat``: each dot row's value += coef · F_flat[feat] (Eq. 2–3);
     ``ang_pos``/``sin_pos``: where the mixed coordinates' entries −g′(θ) and −cos θ sit;
-    ``first``: each row's first column in the factor's envelope; ``ang_diag``/``sin_diag``:
-    the mixed coordinates' places on the diagonal in that order; ``h_*``: the Hessian's
+    ``first``: each row's first column in the factor's envelope; ``inverse``: each column of q
+    at its place in that order (perm's inverse); ``h_*``: the Hessian's
     lower-triangle terms (row, column, coefficient, dot row)."""
 
     nq: int
@@ -55,8 +55,7 @@ class SparseSystem(NamedTuple):
     sin_pos: np.ndarray
     perm: np.ndarray
     first: np.ndarray
-    ang_diag: np.ndarray
-    sin_diag: np.ndarray
+    inverse: np.ndarray
     h_row: np.ndarray
     h_col: np.ndarray
     h_coef: np.ndarray
@@ -132,7 +131,7 @@ def sparse_system(system: System) -> SparseSystem:
         ang_pos=position[n_lin + system.angle_rows[:n_ang], nb + np.arange(n_ang)],
         sin_pos=position[n_lin + sine_rows, nb + sine_of],
         perm=perm, first=first,
-        ang_diag=inverse[nb + np.arange(n_ang)], sin_diag=inverse[nb + sine_of],
+        inverse=inverse.astype(np.int64),
         h_row=hess_rows, h_col=hess_cols, h_coef=hess_coef, h_dot=hess_dot,
         top_rows=np.flatnonzero(system.masks()["topology"]),
     )
