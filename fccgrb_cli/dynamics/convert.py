@@ -61,12 +61,10 @@ def classical_dynamics(model: Model, result: KinematicResult, *, cutoff: float |
 
 
 def kernels_for(system: System, engine: str, n_frames: int) -> bool:
-    """Whether the classical model's batch runs in the compiled kernels: as
-    NrmSettings.compiled decides for NRM (fully-defined bodies; 'auto' for trials of
-    COMPILED_FROM frames or more)."""
-    from fccgrb_cli.solvers.nrm import COMPILED_FROM, numba_available
+    """Whether the classical model's batch runs in the compiled kernels (nrm.use_kernels);
+    where they cannot take the model, or numba is missing, it stays in numpy even with
+    'compiled' (the kinematic stage has already said so when it ran in them)."""
+    from fccgrb_cli.solvers.nrm import numba_available, use_kernels
     from fccgrb_cli.system.sparse import compilable
 
-    if engine == "numpy" or not compilable(system) or not numba_available():
-        return False
-    return engine == "compiled" or n_frames >= COMPILED_FROM
+    return compilable(system) and numba_available() and use_kernels(engine, True, n_frames)

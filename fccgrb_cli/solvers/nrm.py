@@ -123,23 +123,30 @@ class NrmSettings:
                    o.max_iter or 50, o.warm_start, o.hessian, o.skip_unsolvable, o.engine)
 
     def compiled(self, system: System, n_frames: int) -> bool:
-        """Whether this solve runs in the compiled kernels. 'auto' takes them for trials of
-        ``COMPILED_FROM`` frames or more: loading numba and the cached machine code costs
-        ~0.25 s once per process, about what the numpy path spends on 500–700 five-bar frames.
-        The choice depends on the trial and the model only, never on what the process loaded
-        before, so that a CLI run, a sweep cell and an API call give the same bits."""
-        if self.engine == "numpy":
-            return False
+        """Whether this solve runs in the compiled kernels (see :func:`use_kernels`)."""
         from fccgrb_cli.system.sparse import supported
 
-        if self.engine == "compiled":
-            if not supported(system):
-                raise InputError("--engine compiled: the compiled kernels take models without "
-                                 "reduced bodies (form: full); use --engine numpy or auto")
-            if not numba_available():
-                raise InputError("--engine compiled needs numba (pip install numba)")
-            return True
-        return supported(system) and n_frames >= COMPILED_FROM and numba_available()
+        return use_kernels(self.engine, supported(system), n_frames)
+
+
+def use_kernels(engine: str, takes: bool, n_frames: int, threshold: int = COMPILED_FROM
+                ) -> bool:
+    """Whether a solve runs in the compiled kernels, ``takes`` saying whether they take the
+    model (no reduced body). 'compiled' insists (one-line errors where they cannot); 'auto'
+    takes them for trials of ``threshold`` frames or more: loading numba and the cached machine
+    code costs ~0.25 s once per process, about what the numpy path spends on 500–700 five-bar
+    frames. The choice depends on the trial and the model only, never on what the process
+    loaded before, so that a CLI run, a sweep cell and an API call give the same bits."""
+    if engine == "numpy":
+        return False
+    if engine == "compiled":
+        if not takes:
+            raise InputError("--engine compiled: the compiled kernels take models without "
+                             "reduced bodies (form: full); use --engine numpy or auto")
+        if not numba_available():
+            raise InputError("--engine compiled needs numba (pip install numba)")
+        return True
+    return takes and n_frames >= threshold and numba_available()
 
 
 def numba_available() -> bool:

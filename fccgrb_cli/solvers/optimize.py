@@ -29,12 +29,12 @@ from fccgrb_cli.solvers.goal import FrameOutcome, solve_goal_frame
 from fccgrb_cli.solvers.initial import initial_guess
 from fccgrb_cli.solvers.newton import Iterate, gauss_newton
 from fccgrb_cli.solvers.nrm import (
-    COMPILED_FROM,
     NrmSettings,
     mixed_result,
     predict,
     row_weights,
     solve_nrm,
+    use_kernels,
     without_gaps,
 )
 from fccgrb_cli.solvers.quality import flags_of
@@ -243,13 +243,13 @@ def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
 
 
 def compiled_sqp(system: System, settings: Settings, n_frames: int) -> bool:
-    """Whether the sequential structured CNO-SQP runs in the compiled kernels: as
-    NrmSettings.compiled decides, from ``SQP_COMPILED_FROM`` frames (its numpy path costs
-    ~1 ms a frame, so numba's ~0.25 s start pays from a few hundred)."""
-    if not settings.structured:
-        return False
-    nrm = NrmSettings(engine=settings.engine)
-    return nrm.compiled(system, n_frames * COMPILED_FROM // SQP_COMPILED_FROM)
+    """Whether the sequential structured CNO-SQP runs in the compiled kernels (nrm.use_kernels),
+    'auto' from ``SQP_COMPILED_FROM`` frames (its numpy path costs ~1 ms a frame, so numba's
+    ~0.25 s start pays from a few hundred)."""
+    from fccgrb_cli.system.sparse import supported
+
+    return settings.structured and use_kernels(settings.engine, supported(system), n_frames,
+                                               SQP_COMPILED_FROM)
 
 
 def _parallel(system: System, time: np.ndarray, targets: np.ndarray, settings: Settings,
