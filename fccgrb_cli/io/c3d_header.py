@@ -270,7 +270,7 @@ def read_points(path: str | Path, layout: C3DLayout, frames: int,
         else:
             values = block.astype(float)
         if not layout.float_data:
-            values[..., :] *= abs(layout.point_scale)
+            values *= abs(layout.point_scale)
         values = values.reshape(len(block), layout.points, 4)
         xyz = values[..., :3]
         xyz[values[..., 3] < 0] = np.nan

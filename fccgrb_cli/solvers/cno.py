@@ -39,8 +39,7 @@ def solve_cno_frame(problem: FrameProblem, q0: np.ndarray, *, algorithm: str, ob
         return judged(res, len(q0), lambda q: scaled(q)[1], problem.constraints,
                       problem.constraints_jacobian)
     else:
-        lower = np.array([-np.inf if lo is None else lo for lo, _ in problem.bounds()])
-        upper = np.array([np.inf if hi is None else hi for _, hi in problem.bounds()])
+        lower, upper = problem.bound_arrays()
         hess = (lambda q: scale * problem.tc_hessian(q)) if objective == "tc" else None
         eq = NonlinearConstraint(problem.constraints, 0.0, 0.0,
                                  jac=problem.constraints_jacobian,

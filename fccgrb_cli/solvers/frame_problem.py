@@ -113,6 +113,12 @@ class FrameProblem:
         keep[self.trk] = self.active
         return float(np.linalg.norm(phi[keep])), float(np.abs(phi[self.top]).max())
 
+    def bound_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`bounds` as lower and upper arrays (±inf where free)."""
+        bounds = self.bounds()
+        return (np.array([-np.inf if lo is None else lo for lo, _ in bounds]),
+                np.array([np.inf if hi is None else hi for _, hi in bounds]))
+
     def bounds(self) -> list[tuple[float | None, float | None]]:
         """Unit-vector components in [−1.1, 1.1], angles in [2°, 178°], positions, distance
         coordinates and signed angles (``range: full``) free. The 0.1

@@ -50,6 +50,7 @@ def solve_compiled(system: System, time: np.ndarray, targets: np.ndarray,
     targets = np.ascontiguousarray(targets, dtype=float)
     missing = ~np.all(np.isfinite(targets), axis=2)
     patterns, pattern_of = np.unique(missing, axis=0, return_inverse=True)
+    pattern_of = pattern_of.ravel().astype(np.int64)
     state = Frames(n, nq, len(patterns))
     base_w = row_weights(system, settings.tracking_weight)
     guess, use_guess = np.zeros(nq), False
@@ -58,7 +59,7 @@ def solve_compiled(system: System, time: np.ndarray, targets: np.ndarray,
         stop = min(n, f + BLOCK)
         started = clock.perf_counter()
         g, reason = kernels.solve_frames(
-            s, targets, missing, pattern_of.ravel().astype(np.int64), state.solvable, base_w,
+            s, targets, missing, pattern_of, state.solvable, base_w,
             settings.tol, settings.max_iter, HESSIAN_CODES[settings.hessian],
             settings.warm_start != "previous", f, stop, guess, use_guess, state.history,
             state.counts, state.q, state.iterations, state.phi_norm, state.phi_top,
@@ -70,7 +71,7 @@ def solve_compiled(system: System, time: np.ndarray, targets: np.ndarray,
             guess, use_guess = initial_guess(system, targets[g]), True
         elif reason == kernels.NEED_RANK:
             ok = solvable(system, guess, without_gaps(base_w, system, missing[g]))
-            state.solvable[pattern_of.ravel()[g]] = kernels.SOLVABLE if ok else kernels.UNSOLVABLE
+            state.solvable[pattern_of[g]] = kernels.SOLVABLE if ok else kernels.UNSOLVABLE
             if not ok and not settings.skip_unsolvable:
                 raise InputError(unsolvable_text(g, time, missing[g], labels, source))
             use_guess = True

@@ -139,8 +139,7 @@ def structured_cno_frame(problem: FrameProblem, q0: np.ndarray, tol: float,
 
 
 def within_bounds(problem: FrameProblem, q: np.ndarray) -> bool:
-    lower = np.array([-np.inf if lo is None else lo for lo, _ in problem.bounds()])
-    upper = np.array([np.inf if hi is None else hi for _, hi in problem.bounds()])
+    lower, upper = problem.bound_arrays()
     return bool(np.all((q >= lower) & (q <= upper)))
 
 

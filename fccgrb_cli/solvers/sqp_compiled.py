@@ -30,9 +30,8 @@ def run_frames_compiled(system: System, settings: Settings, targets: np.ndarray,
     targets = np.ascontiguousarray(targets, dtype=float)
     missing = ~np.all(np.isfinite(targets), axis=2)
     weights = np.array([1.0 if w is None else w for w in system.trk_weight])
-    bounds = FrameProblem(system, targets[0]).bounds()
-    lower = np.array([-np.inf if lo is None else lo for lo, _ in bounds])
-    upper = np.array([np.inf if hi is None else hi for _, hi in bounds])
+    lower, upper = FrameProblem(system, targets[0]).bound_arrays()
+    nrm_weights = row_weights(system, 1e-3)
     q_all, iterations = np.zeros((n, nq)), np.zeros(n, dtype=np.int64)
     phi_norm, phi_top = np.full(n, np.nan), np.full(n, np.nan)
     converged, seconds = np.zeros(n, dtype=bool), np.zeros(n)
@@ -43,7 +42,7 @@ def run_frames_compiled(system: System, settings: Settings, targets: np.ndarray,
     while f < n:
         started = clock.perf_counter()
         g, reason = kernels.solve_frames_sqp(
-            s, targets, missing, weights, row_weights(system, 1e-3), lower, upper, settings.tol,
+            s, targets, missing, weights, nrm_weights, lower, upper, settings.tol,
             settings.max_iter, settings.warm_start != "previous", f, min(n, f + BLOCK), guess,
             use_guess, history, state, q_all, iterations, phi_norm, phi_top, converged)
         if g > f:
