@@ -128,8 +128,8 @@ def test_a_frame_the_sqp_cannot_solve_goes_to_slsqp(monkeypatch) -> None:
     system, time, markers = case("five_bar", 7.5e-3, 8)
     real = optimize.stabilized_sqp
 
-    def capped(system, q0, drive, weights, tol, max_iter=1):
-        out = real(system, q0, drive, weights, tol, max_iter=1)
+    def capped(system, q0, drive, weights, tol, max_iter=1, bounds=None):
+        out = real(system, q0, drive, weights, tol, 1, bounds)
         return Iterate(out.q, out.iterations, out.converged)
 
     monkeypatch.setattr(optimize, "stabilized_sqp", capped)

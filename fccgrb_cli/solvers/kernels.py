@@ -19,7 +19,16 @@ import numpy as np
 from numba import njit
 
 from fccgrb_cli.solvers.newton import LARGE, NEAR, ROUNDING, SLOW
-from fccgrb_cli.solvers.sqp import DELTA, FAR, FEASIBLE_TOP
+from fccgrb_cli.solvers.sqp import (
+    DELTA,
+    FAR,
+    FEASIBLE_TOP,
+    KAPPA,
+    MU_END,
+    MU_START,
+    TAU,
+    THETA,
+)
 from fccgrb_cli.solvers.sqp import MAX_ITER as MAX_SQP
 from fccgrb_cli.system.sparse import SparseSystem
 
@@ -361,20 +370,31 @@ def _statistics(s: SparseSystem, q: np.ndarray, y: np.ndarray, keep: np.ndarray,
 
 @njit(cache=True)
 def stabilized_sqp(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, w: np.ndarray, tol: float,
-                   max_iter: int, q: np.ndarray, ws) -> tuple[int, bool]:
-    """One frame of fccgrb_cli.solvers.sqp.stabilized_sqp (``w`` from sqp_weights): the
-    iterate is left in ``q``; returns (iterations, converged)."""
+                   max_iter: int, q: np.ndarray, ws, lower: np.ndarray, upper: np.ndarray,
+                   interior: bool, z: np.ndarray) -> tuple[int, bool]:
+    """One frame of fccgrb_cli.solvers.sqp.stabilized_sqp (``w`` from sqp_weights); with
+    ``interior``, its interior point on ``lower`` ≤ q ≤ ``upper`` (sqp.Barrier), the bound
+    multipliers z_l, z_u in ``z`` (2 × nq, 0 where unbounded). The iterate is left in ``q``;
+    returns (iterations, converged)."""
     n_rows, nq = len(w), s.nq
     F, phi, values, shifted, shift, N, L, g, step_p, step, _ = ws
     q[:] = q0
     shift[:] = 0.0
+    mu = MU_START if interior else 0.0
+    mu_end = MU_END * tol
+    if interior:
+        for i in range(nq):
+            span = upper[i] - lower[i] if np.isfinite(upper[i] - lower[i]) else 1.0
+            q[i] = min(max(q[i], lower[i] + 1e-6 * span), upper[i] - 1e-6 * span)
+            z[0, i] = mu / (q[i] - lower[i]) if np.isfinite(lower[i]) else 0.0
+            z[1, i] = mu / (upper[i] - q[i]) if np.isfinite(upper[i]) else 0.0
     size = np.inf
     for k in range(max_iter + 1):
         residual(s, q, q[s.nb:], ref, F, phi)
         violation = 0.0
         for r in s.top_rows:
             violation = max(violation, abs(phi[r]))
-        if size < tol and violation <= FEASIBLE_TOP:
+        if size < tol and violation <= FEASIBLE_TOP and mu <= mu_end:
             return k, True
         if k == max_iter:
             break
@@ -382,14 +402,12 @@ def stabilized_sqp(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, w: np.ndarr
         for r in range(n_rows):
             shifted[r] = phi[r] + shift[r]
         normal_equations(s, values, shifted, w, N, g)
-        for i in range(nq):
-            g[i] = -g[i]
+        _negated_with_barrier(s, q, lower, upper, z, mu, N, g)
         add_hessian(s, q, shift, N)
         ok = cholesky_solve(s.first, N, L, g, step_p)
         if not ok:
             normal_equations(s, values, shifted, w, N, g)
-            for i in range(nq):
-                g[i] = -g[i]
+            _negated_with_barrier(s, q, lower, upper, z, mu, N, g)
             ok = cholesky_solve(s.first, N, L, g, step_p)
         if not ok:
             return k + 1, False
@@ -399,28 +417,81 @@ def stabilized_sqp(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, w: np.ndarr
             size = max(size, abs(step_p[p]))
         if not np.isfinite(size):
             return k + 1, False
+        alpha = 1.0
+        if interior:
+            alpha = _barrier_advance(q, step, lower, upper, z, mu)
+            mu = max(mu_end, min(KAPPA * mu, mu**THETA))
         for r in s.top_rows:
-            total = shift[r] + phi[r]
+            total = phi[r]
             for m in range(s.j_ptr[r], s.j_ptr[r + 1]):
                 total += values[m] * step[s.perm[s.j_col[m]]]
-            shift[r] = total
+            shift[r] += alpha * total
         for i in range(nq):
-            q[i] += step[i]
+            q[i] += alpha * step[i]
     return max_iter, False
+
+
+@njit(cache=True)
+def _negated_with_barrier(s: SparseSystem, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                          z: np.ndarray, mu: float, N: np.ndarray, g: np.ndarray) -> None:
+    """g ← −g, and with μ > 0 the barrier's terms (sqp.Barrier.add_terms) in factor order."""
+    for i in range(len(g)):
+        g[i] = -g[i]
+    if mu == 0.0:
+        return
+    for i in range(s.nq):
+        p = s.inverse[i]
+        if np.isfinite(lower[i]):
+            sl = q[i] - lower[i]
+            N[p, p] += DELTA * z[0, i] / sl
+            g[p] += DELTA * mu / sl
+        if np.isfinite(upper[i]):
+            su = upper[i] - q[i]
+            N[p, p] += DELTA * z[1, i] / su
+            g[p] -= DELTA * mu / su
+
+
+@njit(cache=True)
+def _barrier_advance(q: np.ndarray, step: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                     z: np.ndarray, mu: float) -> float:
+    """sqp.Barrier.advance: the bound multipliers' update and the primal step length."""
+    alpha, alpha_z = 1.0, 1.0
+    for side in range(2):
+        for i in range(len(q)):
+            bound = lower[i] if side == 0 else upper[i]
+            if not np.isfinite(bound):
+                continue
+            slack = q[i] - bound if side == 0 else bound - q[i]
+            d = step[i] if side == 0 else -step[i]
+            dz = (mu - z[side, i] * slack - z[side, i] * d) / slack
+            if d < 0.0:
+                alpha = min(alpha, -TAU * slack / d)
+            if dz < 0.0:
+                alpha_z = min(alpha_z, -TAU * z[side, i] / dz)
+    for side in range(2):
+        for i in range(len(q)):
+            bound = lower[i] if side == 0 else upper[i]
+            if not np.isfinite(bound):
+                continue
+            slack = q[i] - bound if side == 0 else bound - q[i]
+            d = step[i] if side == 0 else -step[i]
+            z[side, i] += alpha_z * (mu - z[side, i] * slack - z[side, i] * d) / slack
+    return alpha
 
 
 @njit(cache=True)
 def solve_frames_sqp(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
                      point_weights: np.ndarray, nrm_w: np.ndarray, lower: np.ndarray,
-                     upper: np.ndarray, tol: float, max_iter: int, extrapolate: bool,
-                     start: int, stop: int,
+                     upper: np.ndarray, interior: bool, tol: float, max_iter: int,
+                     extrapolate: bool, start: int, stop: int,
                      guess: np.ndarray, use_guess: bool, history: np.ndarray, state: np.ndarray,
                      q_all: np.ndarray, iterations: np.ndarray, phi_norm: np.ndarray,
                      phi_top: np.ndarray, converged: np.ndarray) -> tuple[int, int]:
     """Frames ``start`` to ``stop`` of the sequential CNO-SQP (optimize._run_frames with the
-    stabilized SQP): each from the quadratic extrapolation of up to 3 solutions (``history``,
-    ``state[0]`` of them). Returns (frame, DONE | NEED_GUESS | NEED_FALLBACK): a frame the SQP
-    cannot solve within the bounds goes back to Python (SLSQP) with its guess in ``guess``."""
+    stabilized SQP; with ``interior``, its interior point): each from the quadratic
+    extrapolation of up to 3 solutions (``history``, ``state[0]`` of them). Returns (frame,
+    DONE | NEED_GUESS | NEED_FALLBACK): a frame the kernel cannot solve within the bounds goes
+    back to Python (SLSQP or trust-constr) with its guess in ``guess``."""
     n_rows, nq = len(s.c_const) + len(s.dot_c), s.nq
     ws = workspace(s, n_rows)
     w = np.empty(n_rows)
@@ -432,6 +503,7 @@ def solve_frames_sqp(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
     q = np.empty(nq)
     F = np.empty(len(s.f0))
     phi = np.empty(n_rows)
+    z = np.zeros((2, nq))
     for r in range(n_rows):
         w[r] = 0.0
         active[r] = 1.0
@@ -460,7 +532,8 @@ def solve_frames_sqp(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
                 w_nrm[r] = nrm_w[r] * active[r]
             before, _ = gauss_newton(s, q0, y, w_nrm, tol, min(max_iter, 50), 2, q, ws)
             start_q[:] = q
-        k, ok = stabilized_sqp(s, start_q, y, w, tol, min(max_iter, MAX_SQP), q, ws)
+        k, ok = stabilized_sqp(s, start_q, y, w, tol, min(max_iter, MAX_SQP), q, ws, lower,
+                               upper, interior, z)
         k += before
         for i in range(nq):
             ok = ok and lower[i] <= q[i] <= upper[i]

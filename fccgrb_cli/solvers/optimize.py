@@ -51,6 +51,7 @@ PARALLEL_INITS = ("same", "chunks", "nrm")
 REJOINED = 1e-6
 SQP_COMPILED_FROM = 200
 CONVERGED = "stabilized SQP: converged successfully"
+CONVERGED_IP = "interior point: converged successfully"
 
 
 @dataclass(frozen=True)
@@ -79,9 +80,10 @@ class Settings:
 
     @property
     def structured(self) -> bool:
-        """CNO-SQP with the TC objective by the engine's stabilized SQP (solvers/sqp.py);
-        everything else, and ``optimizer='scipy'``, through scipy (the paper's reference)."""
-        return (self.optimizer == "structured" and self.method == "cno-sqp"
+        """CNO with the TC objective by the engine's stabilized SQP or its interior point
+        (solvers/sqp.py); everything else, and ``optimizer='scipy'``, through scipy (the
+        paper's reference)."""
+        return (self.optimizer == "structured" and self.method.startswith("cno")
                 and self.objective == "tc")
 
 
@@ -98,12 +100,14 @@ class FrameRecord:
 
 def _optimize(problem: FrameProblem, settings: Settings, q0: np.ndarray) -> FrameOutcome:
     if settings.structured:
-        out = structured_cno_frame(problem, q0, settings.tol, settings.max_iter)
+        out = structured_cno_frame(problem, q0, settings.tol, settings.max_iter,
+                                   interior=settings.method == "cno-ip")
         if out.converged:
             return out
         scipy = _optimize(problem, replace(settings, optimizer="scipy"), q0)
+        name = "trust-constr" if settings.method == "cno-ip" else "SLSQP"
         return FrameOutcome(scipy.q, out.iterations + scipy.iterations, scipy.converged,
-                            f"{out.message}; SLSQP: {scipy.message}")
+                            f"{out.message}; {name}: {scipy.message}")
     if problem.system.redundant_topology:  # SLSQP and trust-constr need independent equalities
         problem.keep_independent(q0)
     if settings.method.startswith("cno"):
@@ -115,11 +119,11 @@ def _optimize(problem: FrameProblem, settings: Settings, q0: np.ndarray) -> Fram
 
 
 def structured_cno_frame(problem: FrameProblem, q0: np.ndarray, tol: float,
-                         max_iter: int = MAX_SQP) -> FrameOutcome:
-    """One CNO-TC frame by the stabilized SQP, judged against the problem's bounds. A guess far
-    off the constraints (a rigid fit: the first frame, or after a failure) first goes through
-    NRM-WLS, whose line search the SQP lacks; from the previous frames' extrapolation the SQP
-    starts at once."""
+                         max_iter: int = MAX_SQP, *, interior: bool = False) -> FrameOutcome:
+    """One CNO-TC frame by the stabilized SQP (``interior``: its interior point, inside the
+    problem's bounds), judged against the problem's bounds. A guess far off the constraints (a
+    rigid fit: the first frame, or after a failure) first goes through NRM-WLS, whose line
+    search the SQP lacks; from the previous frames' extrapolation the SQP starts at once."""
     system = problem.system
     before = 0
     if np.abs(problem.constraints(q0)).max(initial=0.0) > FAR:
@@ -127,15 +131,17 @@ def structured_cno_frame(problem: FrameProblem, q0: np.ndarray, tol: float,
         start = gauss_newton(system, q0, problem.drive, weights, tol, min(max_iter, 50), "auto")
         q0, before = start.q, start.iterations
     it = stabilized_sqp(system, q0, problem.drive, sqp_weights(system, problem.point_weights),
-                        tol, min(max_iter, MAX_SQP))
+                        tol, min(max_iter, MAX_SQP),
+                        problem.bound_arrays() if interior else None)
     it = Iterate(it.q, before + it.iterations, it.converged)
+    name = "interior point" if interior else "stabilized SQP"
     if not it.converged:
         return FrameOutcome(it.q, it.iterations, False,
-                            f"stabilized SQP: no convergence in {it.iterations} iterations")
+                            f"{name}: no convergence in {it.iterations} iterations")
     if not within_bounds(problem, it.q):
         return FrameOutcome(it.q, it.iterations, False,
-                            "stabilized SQP: the optimum lies outside the bounds")
-    return FrameOutcome(it.q, it.iterations, True, CONVERGED)
+                            f"{name}: the optimum lies outside the bounds")
+    return FrameOutcome(it.q, it.iterations, True, CONVERGED_IP if interior else CONVERGED)
 
 
 def within_bounds(problem: FrameProblem, q: np.ndarray) -> bool:

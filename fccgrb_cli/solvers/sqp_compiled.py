@@ -1,7 +1,8 @@
-"""The sequential CNO-SQP (TC objective) through the compiled kernels: frames the stabilized
-SQP solves within the bounds stay in machine code; a frame without a history gets Python's
-initial guess, and a frame the SQP cannot solve goes through the numpy path's
-``solve_frame`` (SLSQP, then the retry from NRM-WLS), exactly as the numpy path would."""
+"""The sequential CNO-SQP and CNO-IP (TC objective) through the compiled kernels: frames the
+stabilized SQP (or its interior point) solves within the bounds stay in machine code; a frame
+without a history gets Python's initial guess, and a frame the kernel cannot solve goes through
+the numpy path's ``solve_frame`` (SLSQP or trust-constr, then the retry from NRM-WLS), exactly
+as the numpy path would."""
 
 from __future__ import annotations
 
@@ -15,7 +16,13 @@ from fccgrb_cli.solvers.frame_problem import FrameProblem
 from fccgrb_cli.solvers.initial import initial_guess
 from fccgrb_cli.solvers.nrm import row_weights
 from fccgrb_cli.solvers.nrm_compiled import BLOCK, sparse_of
-from fccgrb_cli.solvers.optimize import CONVERGED, FrameRecord, Settings, solve_frame
+from fccgrb_cli.solvers.optimize import (
+    CONVERGED,
+    CONVERGED_IP,
+    FrameRecord,
+    Settings,
+    solve_frame,
+)
 from fccgrb_cli.system import System
 
 SQP_HISTORY = 3
@@ -24,7 +31,8 @@ SQP_HISTORY = 3
 def run_frames_compiled(system: System, settings: Settings, targets: np.ndarray,
                         progress: Callable[[int, int], None] | None = None
                         ) -> list[FrameRecord]:
-    """optimize._run_frames over every frame, chained, with the stabilized SQP compiled."""
+    """optimize._run_frames over every frame, chained, with the stabilized SQP (or interior
+    point) compiled."""
     s = sparse_of(system)
     n, nq = len(targets), system.nq
     targets = np.ascontiguousarray(targets, dtype=float)
@@ -37,12 +45,14 @@ def run_frames_compiled(system: System, settings: Settings, targets: np.ndarray,
     converged, seconds = np.zeros(n, dtype=bool), np.zeros(n)
     history, state = np.zeros((SQP_HISTORY, nq)), np.zeros(1, dtype=np.int64)
     fallback: dict[int, FrameRecord] = {}
+    done = CONVERGED_IP if settings.method == "cno-ip" else CONVERGED
     guess, use_guess = initial_guess(system, targets[0]), True
     f = 0
     while f < n:
         started = clock.perf_counter()
         g, reason = kernels.solve_frames_sqp(
-            s, targets, missing, weights, nrm_weights, lower, upper, settings.tol,
+            s, targets, missing, weights, nrm_weights, lower, upper,
+            settings.method == "cno-ip", settings.tol,
             settings.max_iter, settings.warm_start != "previous", f, min(n, f + BLOCK), guess,
             use_guess, history, state, q_all, iterations, phi_norm, phi_top, converged)
         if g > f:
@@ -59,7 +69,7 @@ def run_frames_compiled(system: System, settings: Settings, targets: np.ndarray,
         if progress is not None:
             progress(g, n)
         f = g
-    return [fallback.get(k) or FrameRecord(q_all[k], int(iterations[k]), True, CONVERGED,
+    return [fallback.get(k) or FrameRecord(q_all[k], int(iterations[k]), True, done,
                                            float(seconds[k]), float(phi_norm[k]),
                                            float(phi_top[k]))
             for k in range(n)]
