@@ -45,14 +45,15 @@ class SolveOptions:
              "markers (segment frames fitted, then the angles; see {filter_cutoff}); nrm-ls / "
              "nrm-wls: mixed coordinates by Newton–Raphson on least squares / weighted least "
              "squares; cno-sqp / cno-ip: min of the tracking objective ({objective}) subject to "
-             "the topological equations, by SQP ({optimizer}) or scipy's trust-constr; mo-tc / "
+             "the topological equations, by SQP or an interior point ({optimizer}); mo-tc / "
              "mo-ed: goal attainment over each tracking component / each point's Euclidean "
              "distance.")
     optimizer: str = _option(
         "structured", choices=("structured", "scipy"),
-        help="cno-sqp with the tc objective: the engine's stabilized SQP (Newton on the KKT "
-             "conditions with the exact Lagrangian Hessian; a frame it cannot solve goes to "
-             "SLSQP), or scipy's SLSQP for every frame (the paper's reference).")
+        help="cno-sqp / cno-ip with the tc objective: the engine's stabilized SQP (Newton on "
+             "the KKT conditions with the exact Lagrangian Hessian) or that SQP with a "
+             "primal-dual barrier on the bounds (a frame either cannot solve goes to scipy), or "
+             "scipy's SLSQP / trust-constr for every frame (the paper's reference).")
     objective: str = _option(
         "tc", choices=("tc", "ed"),
         help="CNO objective: weighted sum of squared tracking residuals (tc, m²) or of "
@@ -77,9 +78,9 @@ class SolveOptions:
              "step is below 1 mm / 1 mrad, then exact.")
     engine: str = _option(
         "auto", choices=("auto", "compiled", "numpy"),
-        help="Per-frame arithmetic of NRM and of the structured CNO-SQP: compiled kernels "
-             "(numba), the same iteration in numpy (equal to 1e-12), or auto: compiled for "
-             "trials of 1000 frames or more (200 for CNO-SQP; loading numba costs ~0.25 s "
+        help="Per-frame arithmetic of NRM and of the structured CNO-SQP / CNO-IP: compiled "
+             "kernels (numba), the same iteration in numpy (equal to 1e-12), or auto: compiled "
+             "for trials of 1000 frames or more (200 for CNO; loading numba costs ~0.25 s "
              "once), where no body is reduced.")
     skip_unsolvable: bool = _option(
         False, help="Report frames whose remaining markers cannot determine the model as "
