@@ -7,7 +7,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from fccgrb_cli.dynamics.inverse import InverseDynamics, inverse_dynamics
+from fccgrb_cli.dynamics.inverse import InverseDynamics, KernelInverse, inverse_dynamics
 from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.model import Model
 from fccgrb_cli.solvers.baseline import driven_by
@@ -50,13 +50,16 @@ def classical_dynamics(model: Model, result: KinematicResult, *, cutoff: float |
     n_body = system.layout.n_body_q
     body_q = result.q[:, :n_body]
     base = Stacked(system).base_reference(body_q)
+    compiled = compiled and batched
+    # the kernels solve the multipliers on the factor the drive leaves at each frame
+    solved = KernelInverse.prepare(system, loads, len(body_q)) if compiled else None
     kinematics = driven_by(system, result.time, result.theta, body_q[0].copy(), cutoff=cutoff,
                            order=order, tol=tol, method=result.method, base=base,
-                           guesses=body_q if batched else None,
-                           compiled=compiled and batched)
+                           guesses=body_q if batched else None, compiled=compiled,
+                           inverse=None if solved is None else solved.arrays)
     inverse = inverse_dynamics(system, kinematics.q, kinematics.qd, kinematics.qdd,
-                               kinematics.theta, loads, batched=batched,
-                               compiled=compiled and batched)
+                               kinematics.theta, loads, batched=batched, compiled=compiled,
+                               solved=solved)
     return Dynamics(kinematics, inverse, tuple(loads), cutoff)
 
 

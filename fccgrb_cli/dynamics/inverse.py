@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fccgrb_cli.dynamics.loads import ExternalLoad
-from fccgrb_cli.dynamics.mass import gravity_forces, mass_matrix
+from fccgrb_cli.dynamics.mass import gravity_forces, mass_blocks, mass_matrix
 from fccgrb_cli.solvers.batched import Stacked, blocks, factor
 from fccgrb_cli.solvers.newton import linear_solve
 from fccgrb_cli.system import System
@@ -45,19 +45,45 @@ class InverseDynamics:
     residual_moment: np.ndarray | None = None
 
 
+@dataclass(frozen=True)
+class KernelInverse:
+    """The inverse dynamics as kernels.driven_frames solves it, on the factor it already holds
+    at each frame's solution (its ``inverse`` argument): ``arrays`` = the bodies' K_i (bodies ×
+    4 × 4, M_x = blockdiag(K_i ⊗ I3)), g_x, each load's body (its offset in x) and its force,
+    point and free moment (loads × frames × 3), then what the kernel writes: λ (frames × rows),
+    ‖Φ_qᵀλ − rhs‖, the loads' power and which frames it solved."""
+
+    arrays: tuple
+
+    @classmethod
+    def prepare(cls, system: System, loads: Sequence[ExternalLoad], n: int) -> KernelInverse:
+        """Inputs and empty outputs for ``n`` frames of ``system`` (fully-defined bodies)."""
+        layout = system.layout
+        stack = [np.ascontiguousarray(np.array([getattr(load, name) for load in loads],
+                                               dtype=float).reshape(len(loads), n, 3))
+                 for name in ("force", "point", "moment")]
+        return cls((mass_blocks(system.model), gravity_forces(system.model),
+                    np.array([layout.x_offset(load.body) for load in loads], dtype=np.int64),
+                    *stack, np.full((n, system.n_rows), np.nan), np.full(n, np.nan),
+                    np.zeros(n), np.zeros(n, dtype=bool)))
+
+
 def inverse_dynamics(system: System, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
                      theta: np.ndarray, loads: Sequence[ExternalLoad] = (), *,
-                     batched: bool = True, compiled: bool = False) -> InverseDynamics:
+                     batched: bool = True, compiled: bool = False,
+                     solved: KernelInverse | None = None) -> InverseDynamics:
     """λ and τ for every frame of an AD system's motion (q, q̇, q̈: frames × nq; θ the drivers):
     all frames at once on stacked arrays (``batched``), or frame by frame (the reference);
-    ``compiled`` (with ``batched``): the multipliers' solves in the compiled kernels."""
+    ``compiled`` (with ``batched``): the multipliers' solves in the compiled kernels, ``solved``
+    holding those the drive's kernel already did (the other frames are solved here)."""
     if system.mixed:
         raise ValueError("inverse_dynamics needs the classical system (angles='driver')")
     model = system.model
     M = mass_matrix(model)
     g = gravity_forces(model)
     if batched:
-        lam, residual, xs, xds, power = _stacked(system, M, g, q, qd, qdd, loads, compiled)
+        lam, residual, xs, xds, power = _stacked(system, M, g, q, qd, qdd, loads, compiled,
+                                                 solved)
     else:
         lam, residual, xs, xds, power = _frame_by_frame(system, M, g, q, qd, qdd, loads)
     driver_rows = system.n_linear_rows + system.angle_rows
@@ -68,7 +94,7 @@ def inverse_dynamics(system: System, q: np.ndarray, qd: np.ndarray, qdd: np.ndar
         moments[:, k] -= np.cos(theta[:, k]) * lam[:, system.n_linear_rows + system.sine_rows]
     return InverseDynamics(
         angle_names=tuple(a.name for a in model.angles), row_labels=system.labels, lam=lam,
-        joint_moments=moments, kinetic=0.5 * np.einsum("fi,ij,fj->f", xds, M, xds),
+        joint_moments=moments, kinetic=0.5 * np.einsum("fi,fi->f", xds @ M, xds),
         potential=-(xs @ g), external_power=power, residual=residual, base_names=bases,
         residual_force=force, residual_moment=moment)
 
@@ -77,36 +103,48 @@ Multipliers = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
 def _stacked(system: System, M: np.ndarray, g: np.ndarray, q: np.ndarray, qd: np.ndarray,
-             qdd: np.ndarray, loads: Sequence[ExternalLoad], compiled: bool = False
-             ) -> Multipliers:
+             qdd: np.ndarray, loads: Sequence[ExternalLoad], compiled: bool = False,
+             solved: KernelInverse | None = None) -> Multipliers:
     """λ (frames × rows), ‖Φ_qᵀλ − rhs‖, x, ẋ and the loads' power of every frame at once:
-    ẍ = X_q q̈ + V̇ q̇, rhs = X_qᵀ (g_x + Σ loads − M_x ẍ), Φ_qᵀ λ = rhs by stacked solves."""
+    ẍ = X_q q̈ + V̇ q̇, rhs = X_qᵀ (g_x + Σ loads − M_x ẍ), Φ_qᵀ λ = rhs by stacked solves; the
+    frames ``solved`` by the drive's kernel are taken from it."""
     stacked = Stacked(system)
     n = len(q)
-    frames = np.arange(n)
-    x, xd, xq = stacked.expand(q), stacked.expand_rate(q, qd), stacked.expand_jacobian(q)
+    x, xd = stacked.expand(q), stacked.expand_rate(q, qd)
+    if solved is not None:
+        *_, lam, residual, power, done = solved.arrays
+        frames = np.flatnonzero(~done)
+    else:
+        lam, residual, power = np.empty((n, system.n_rows)), np.empty(n), np.zeros(n)
+        frames = np.arange(n)
+    if not len(frames):
+        return lam, residual, x, xd, power
+    q, qd, qdd = q[frames], qd[frames], qdd[frames]
+    xq = stacked.expand_jacobian(q)
     xdd = (qdd if xq is None else np.einsum("fxq,fq->fx", xq, qdd)) + stacked.expand_bias(qd)
-    forces = np.tile(g, (n, 1))
-    power = np.zeros(n)
+    forces = np.tile(g, (len(frames), 1))
+    power[frames] = 0.0
     for load in loads:
         s = system.layout.x_offset(load.body)
-        forces[:, s:s + 12] += load.generalized(x[:, s:s + 12], frames)
-        power += load.power(x[:, s:s + 12], xd[:, s:s + 12], frames)
+        forces[:, s:s + 12] += load.generalized(x[frames, s:s + 12], frames)
+        power[frames] += load.power(x[frames, s:s + 12], xd[frames, s:s + 12], frames)
     rhs_x = forces - xdd @ M.T
     rhs = rhs_x if xq is None else np.einsum("fxq,fx->fq", xq, rhs_x)
-    lam, residual = np.empty((n, system.n_rows)), np.empty(n)
     if compiled:
         from fccgrb_cli.solvers.kernels import multipliers_frames
         from fccgrb_cli.solvers.nrm_compiled import sparse_of
 
+        some, misfit = np.empty((len(frames), system.n_rows)), np.empty(len(frames))
         multipliers_frames(sparse_of(system), np.ascontiguousarray(q),
-                           np.ascontiguousarray(rhs), lam, residual)
+                           np.ascontiguousarray(rhs), some, misfit)
+        lam[frames], residual[frames] = some, misfit
         return lam, residual, x, xd, power
-    for block in blocks(n):
+    for block in blocks(len(frames)):
         J = stacked.jacobian(q[block])
-        lam[block] = factor(J).solve_transposed(rhs[block])
-        residual[block] = np.linalg.norm(np.einsum("frq,fr->fq", J, lam[block]) - rhs[block],
-                                         axis=1)
+        some = factor(J).solve_transposed(rhs[block])
+        lam[frames[block]] = some
+        residual[frames[block]] = np.linalg.norm(np.einsum("frq,fr->fq", J, some) - rhs[block],
+                                                 axis=1)
     return lam, residual, x, xd, power
 
 

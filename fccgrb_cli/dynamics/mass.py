@@ -36,9 +36,14 @@ def _inertias(model: Model) -> list[Inertia]:
     return [b.inertia for b in model.bodies]
 
 
+def mass_blocks(model: Model) -> np.ndarray:
+    """Every body's K (bodies × 4 × 4), in the order of x."""
+    return np.array([inertia_coefficients(i) for i in _inertias(model)]).reshape(-1, 4, 4)
+
+
 def mass_matrix(model: Model) -> np.ndarray:
     """M_x = blockdiag(K_i ⊗ I3) (nx × nx), constant."""
-    blocks = [np.kron(inertia_coefficients(i), np.eye(3)) for i in _inertias(model)]
+    blocks = [np.kron(K, np.eye(3)) for K in mass_blocks(model)]
     n = 12 * len(blocks)
     M = np.zeros((n, n))
     for k, block in enumerate(blocks):

@@ -119,7 +119,7 @@ def solve_ad_batched(system: System, time: np.ndarray, theta: np.ndarray, theta_
                      theta_dd: np.ndarray, guesses: np.ndarray, *, tol: float = 1e-10,
                      max_iter: int = 50, base: Base | None = None,
                      progress: Callable[[int, int], None] | None = None,
-                     compiled: bool = False) -> KinematicResult:
+                     compiled: bool = False, inverse: tuple | None = None) -> KinematicResult:
     """``solve_ad`` with every frame solved at once from its own guess (``guesses``: frames
     × nq, e.g. the mixed-coordinate solution's body coordinates): Newton–Raphson on the
     stacked frames (``batched.newton_stacked``, ``BATCH_ITER`` iterations), then each frame
@@ -129,7 +129,9 @@ def solve_ad_batched(system: System, time: np.ndarray, theta: np.ndarray, theta_
     Φ_q q̈ = γ. Same answers as ``solve_ad`` wherever both reach the configuration the guesses
     lie by; ``time_s`` is the whole solve's time shared evenly among the frames. ``compiled``:
     each frame's Newton iterations and rates in the compiled kernels (kernels.driven_frames)
-    instead of the stacked numpy arrays, the same equations."""
+    instead of the stacked numpy arrays, the same equations; ``inverse``: the kernels'
+    inverse-dynamics arrays (dynamics.inverse.KernelInverse), filled for the frames they
+    solve."""
     drives = stacked_drives(system, theta, theta_d, theta_dd, base)
     stacked = Stacked(system)
     started = clock.perf_counter()
@@ -141,14 +143,15 @@ def solve_ad_batched(system: System, time: np.ndarray, theta: np.ndarray, theta_
     done = np.zeros(n, dtype=bool)  # q, q̇, q̈ and Φ in place (the compiled kernels')
     phi, qd, qdd = np.empty((n, system.n_rows)), np.empty_like(q), np.empty_like(q)
     if compiled:
-        from fccgrb_cli.solvers.kernels import driven_frames
+        from fccgrb_cli.solvers.kernels import NO_INVERSE, driven_frames
         from fccgrb_cli.solvers.nrm_compiled import sparse_of
 
         arrays = (drives.theta, drives.theta_d, drives.theta_dd, drives.ref, drives.ref_d,
                   drives.ref_dd)
         driven_frames(sparse_of(system), q, *(np.ascontiguousarray(a, dtype=float)
                                               for a in arrays),
-                      tol, min(BATCH_ITER, max_iter), q, qd, qdd, phi, iterations, converged)
+                      tol, min(BATCH_ITER, max_iter), q, qd, qdd, phi, iterations, converged,
+                      NO_INVERSE if inverse is None else inverse)
         done[:] = converged
     for block in blocks(len(finite)) if not compiled else ():
         frames = finite[block]

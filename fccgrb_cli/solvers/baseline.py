@@ -40,12 +40,13 @@ def driven_by(model_system: System, time: np.ndarray, theta: np.ndarray, q_guess
               cutoff: float | None, order: int, tol: float, method: str,
               base: np.ndarray | None = None,
               progress: Callable[[int, int], None] | None = None,
-              guesses: np.ndarray | None = None, compiled: bool = False) -> KinematicResult:
+              guesses: np.ndarray | None = None, compiled: bool = False,
+              inverse: tuple | None = None) -> KinematicResult:
     """AD analysis with drivers θ(t) (optionally low-passed), θ̇ and θ̈ by central differences;
     a floating base follows ``base`` (frames × slots × 3), filtered and differentiated alike.
     With ``guesses`` (frames × nq, one starting point per frame) all frames are solved at once
-    (``solve_ad_batched``, in the compiled kernels with ``compiled``); without, frame by frame
-    from ``q_guess`` (``solve_ad``)."""
+    (``solve_ad_batched``, in the compiled kernels with ``compiled``, which also fill
+    ``inverse``); without, frame by frame from ``q_guess`` (``solve_ad``)."""
     rate = 1.0 / float(time[1] - time[0]) if len(time) > 1 else 1.0
     if cutoff is not None:
         theta = lowpass(theta, rate, cutoff, order)
@@ -63,7 +64,7 @@ def driven_by(model_system: System, time: np.ndarray, theta: np.ndarray, q_guess
     else:
         result = solve_ad_batched(model_system, time, theta, theta_d, theta_dd, guesses,
                                   tol=tol, base=base_rates, progress=progress,
-                                  compiled=compiled)
+                                  compiled=compiled, inverse=inverse)
     return KinematicResult(**{**result.__dict__, "method": method})
 
 

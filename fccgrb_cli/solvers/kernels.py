@@ -34,6 +34,14 @@ from fccgrb_cli.system.sparse import SparseSystem
 
 DONE, NEED_GUESS, NEED_RANK, NEED_FALLBACK = 0, 1, 2, 3
 UNKNOWN, UNSOLVABLE, SOLVABLE = -1, 0, 1
+# A chord step (an earlier point's factor) is kept while it is at most this fraction of the step
+# before it; slower, Φ_q is factored afresh (driven_frames).
+CHORD_RATE = 0.1
+# driven_frames without the inverse dynamics: mass blocks, g_x, the loads' bodies, forces,
+# points and moments, then λ, misfit, power and the frames done (all empty).
+NO_INVERSE = (np.zeros((0, 4, 4)), np.zeros(0), np.zeros(0, dtype=np.int64),
+              np.zeros((0, 0, 3)), np.zeros((0, 0, 3)), np.zeros((0, 0, 3)), np.zeros((0, 0)),
+              np.zeros(0), np.zeros(0), np.zeros(0, dtype=np.bool_))
 _EXTRAPOLATION = np.array([[1.0, 0.0, 0.0, 0.0, 0.0], [2.0, -1.0, 0.0, 0.0, 0.0],
                            [3.0, -3.0, 1.0, 0.0, 0.0], [4.0, -6.0, 4.0, -1.0, 0.0],
                            [5.0, -10.0, 10.0, -5.0, 1.0]])
@@ -491,7 +499,8 @@ def solve_frames_sqp(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
     stabilized SQP; with ``interior``, its interior point): each from the quadratic
     extrapolation of up to 3 solutions (``history``, ``state[0]`` of them). Returns (frame,
     DONE | NEED_GUESS | NEED_FALLBACK): a frame the kernel cannot solve within the bounds goes
-    back to Python (SLSQP or trust-constr) with its guess in ``guess``."""
+    back to Python (SLSQP or trust-constr) with its guess in ``guess``, the kernel's iterate in
+    ``q_all``, its iterations and whether it converged (outside the bounds) in ``converged``."""
     n_rows, nq = len(s.c_const) + len(s.dot_c), s.nq
     ws = workspace(s, n_rows)
     w = np.empty(n_rows)
@@ -535,6 +544,7 @@ def solve_frames_sqp(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
         k, ok = stabilized_sqp(s, start_q, y, w, tol, min(max_iter, MAX_SQP), q, ws, lower,
                                upper, interior, z)
         k += before
+        converged[f] = ok
         for i in range(nq):
             ok = ok and lower[i] <= q[i] <= upper[i]
         q_all[f] = q
@@ -542,7 +552,6 @@ def solve_frames_sqp(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
         if not ok:
             guess[:] = q0
             return f, NEED_FALLBACK
-        converged[f] = True
         state[0] = pushed(history, count, q)
         phi_norm[f], phi_top[f] = _statistics(s, q, y, active, F, phi)
     return stop, DONE
@@ -658,55 +667,88 @@ def driven_frames(s: SparseSystem, guesses: np.ndarray, theta: np.ndarray,
                   theta_d: np.ndarray, theta_dd: np.ndarray, ref: np.ndarray,
                   ref_d: np.ndarray, ref_dd: np.ndarray, tol: float, max_iter: int,
                   q_out: np.ndarray, qd_out: np.ndarray, qdd_out: np.ndarray,
-                  phi_out: np.ndarray, iterations: np.ndarray,
-                  converged: np.ndarray) -> None:
+                  phi_out: np.ndarray, iterations: np.ndarray, converged: np.ndarray,
+                  inverse) -> None:
     """The classical model driven by θ*(t) (and a floating base's features), every frame from
-    its own guess moved by the previous frame's correction (solution − guess: the drivers'
-    filtering and the WLS topology misfit change slowly; 3.8 → ~2 iterations a frame on the
-    five-bar sample): Newton–Raphson Φ_q Δq = −Φ until ‖Δq‖∞ < tol (newton.newton_raphson), then
-    Φ_q q̇ = ν and Φ_q q̈ = γ (FORMULATION §3), each through the normal equations on the
-    envelope (Φ_q square, or taller with full column rank: the same solution as LU or least
-    squares). Frames that do not converge are left for Python (converged False)."""
+    its own guess moved by the correction (solution − guess) of the frames before it,
+    extrapolated linearly (the drivers' filtering and the WLS topology misfit change slowly;
+    7e-6 → 1e-6 m on the five-bar sample at P30): Newton–Raphson on Φ = 0 until a step
+    ‖Δq‖∞ < tol (newton.newton_raphson), then Φ_q q̇ = ν and Φ_q q̈ = γ (FORMULATION §3) and,
+    with ``inverse`` (see :data:`NO_INVERSE`), the multipliers of the inverse dynamics
+    (FORMULATION §4), all through the normal equations on the envelope (Φ_q square, or taller
+    with full column rank: the same solution as LU or least squares).
+
+    The factorization at each frame's solution serves q̇, q̈ and λ and, where Φ_q is square,
+    the next frame's Newton iteration as a chord (simplified Newton) matrix: frames 10 ms apart
+    move Φ_q little, so the chord steps contract fast; where a step shrinks by less than
+    ``CHORD_RATE`` of the one before, Φ_q is evaluated and factored afresh at the current
+    point. A chord step below tol ends the iteration only where its contraction is known (the
+    error left is then ≤ rate · tol), so the solution agrees with full Newton's to far below
+    tol. (A taller Φ_q keeps full Gauss–Newton: where its equations are not all met, a chord
+    matrix's fixed point J_Lᵀ Φ = 0 is not the least-squares one Φ_qᵀ Φ = 0.) Frames that do
+    not converge within ``max_iter`` steps are left for Python (converged False); frames with
+    a non-finite guess are skipped."""
     n_rows, nq = phi_out.shape[1], s.nq
+    square = n_rows == nq
     F, Fd = np.empty(len(s.f0)), np.empty(len(s.f0))
     values = np.empty(len(s.j_col))
     N, L = np.zeros((nq, nq)), np.zeros((nq, nq))
     w, phi, rhs = np.ones(n_rows), np.empty(n_rows), np.empty(n_rows)
-    g, out, q = np.empty(nq), np.empty(nq), np.empty(nq)
-    offset = np.zeros(nq)  # the last frame's solution minus its guess
+    g, out, q, total = np.empty(nq), np.empty(nq), np.empty(nq), np.empty(nq)
+    offset, older = np.zeros(nq), np.zeros(nq)  # the last two frames' solution − guess
+    known = 0  # how many of them there are (consecutive frames solved)
+    factored = False  # L holds the factor of Φ_qᵀΦ_q at some point, ``values`` its Φ_q
     for f in range(len(guesses)):
         if not np.isfinite(guesses[f]).all():
-            offset[:] = 0.0
+            known = 0
             continue
-        q[:] = guesses[f] + offset
+        q[:] = guesses[f]
+        if known:
+            q += offset
+        if known > 1:
+            q += offset - older
         ok = False
+        previous = np.inf
         for k in range(1, max_iter + 1):
             residual(s, q, theta[f], ref[f], F, phi)
-            jacobian(s, q, F, values)
-            normal_equations(s, values, phi, w, N, g)
-            if not cholesky(s.first, N, L):
-                break
-            substitute(s.first, L, g, out)
-            size = 0.0
+            size = np.inf
+            chord = factored and square
+            if chord:  # the factor of an earlier point: kept while its steps contract fast
+                _transposed_product(s, values, phi, g)
+                substitute(s.first, L, g, out)
+                size = _largest(out)
+                chord = size <= CHORD_RATE * previous or (previous == np.inf and size < np.inf)
+            if not chord:
+                jacobian(s, q, F, values)
+                normal_equations(s, values, phi, w, N, g)
+                factored = cholesky(s.first, N, L)
+                if not factored:
+                    break
+                substitute(s.first, L, g, out)
+                size = _largest(out)
             for p in range(nq):
                 q[s.perm[p]] -= out[p]
-                size = max(size, abs(out[p]))
             iterations[f] = k
             if not np.isfinite(size):
+                factored = False
                 break
-            if size < tol:
+            if size < tol and (not chord or previous < np.inf):
                 ok = True
                 break
+            previous = size
         if not ok:
-            offset[:] = 0.0
+            known = 0
             continue
         residual(s, q, theta[f], ref[f], F, phi)
         jacobian(s, q, F, values)
         normal_equations(s, values, phi, w, N, g)
-        if not cholesky(s.first, N, L):
-            offset[:] = 0.0
+        factored = cholesky(s.first, N, L)
+        if not factored:
+            known = 0
             continue
+        older[:] = offset
         offset[:] = q - guesses[f]
+        known += 1
         converged[f] = True
         q_out[f] = q
         phi_out[f] = phi
@@ -720,6 +762,85 @@ def driven_frames(s: SparseSystem, guesses: np.ndarray, theta: np.ndarray,
         substitute(s.first, L, g, out)
         for p in range(nq):
             qdd_out[f, s.perm[p]] = out[p]
+        if len(inverse[-1]):
+            _frame_multipliers(s, values, L, f, q_out[f], qd_out[f], qdd_out[f], inverse,
+                               total, g, out)
+
+
+@njit(cache=True)
+def _largest(v: np.ndarray) -> float:
+    """‖v‖∞, inf where v holds a NaN."""
+    size = 0.0
+    for i in range(len(v)):
+        a = abs(v[i])
+        if a > size:
+            size = a
+        elif a != a:
+            return np.inf
+    return size
+
+
+@njit(cache=True)
+def _frame_multipliers(s: SparseSystem, values: np.ndarray, L: np.ndarray, f: int,
+                       q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, inverse,
+                       total: np.ndarray, rhs: np.ndarray, y: np.ndarray) -> None:
+    """One frame of the inverse dynamics on the factor of its Φ_qᵀΦ_q (inverse.py, x = q):
+    rhs = g_x + Σ C_Pᵀf + ½ n × (u, v, w) − M_x q̈ with M_x = blockdiag(K_i ⊗ I3), λ = Φ_q
+    (Φ_qᵀΦ_q)⁻¹ rhs (exact, or min-norm for a taller Φ_q of full column rank), the misfit
+    ‖Φ_qᵀλ − rhs‖ and the loads' power f · ṙ_P + n · ω (= Q_load · ẋ, loads.py)."""
+    mass, gravity, load_at, force, point, moment, lam, misfit, power, solved = inverse
+    nq = s.nq
+    for b in range(len(mass)):
+        for i in range(4):
+            for d in range(3):
+                acc = gravity[12 * b + 3 * i + d]
+                for j in range(4):
+                    acc -= mass[b, i, j] * qdd[12 * b + 3 * j + d]
+                total[12 * b + 3 * i + d] = acc
+    work = 0.0
+    for k in range(len(load_at)):
+        _load_forces(q[load_at[k]:load_at[k] + 12], force[k, f], point[k, f], moment[k, f],
+                     y)
+        for i in range(12):
+            total[load_at[k] + i] += y[i]
+            work += y[i] * qd[load_at[k] + i]
+    power[f] = work
+    for p in range(nq):
+        rhs[p] = total[s.perm[p]]
+    substitute(s.first, L, rhs, y)
+    n_rows = lam.shape[1]
+    for r in range(n_rows):
+        acc = 0.0
+        for m in range(s.j_ptr[r], s.j_ptr[r + 1]):
+            acc += values[m] * y[s.j_col[m]]
+        lam[f, r] = acc
+    _transposed_product(s, values, lam[f], y)
+    acc = 0.0
+    for p in range(nq):
+        acc += (y[p] - rhs[p]) ** 2
+    misfit[f] = np.sqrt(acc)
+    solved[f] = True
+
+
+@njit(cache=True)
+def _load_forces(x: np.ndarray, force: np.ndarray, point: np.ndarray, moment: np.ndarray,
+                 out: np.ndarray) -> None:
+    """ExternalLoad.generalized at one frame (loads.py): [f, a f + ½ n × u, b f + ½ n × v,
+    c f + ½ n × w] on the body's x = [r, u, v, w], (a, b, c) solving [u v w] (a, b, c) = P − r
+    (Cramer's rule)."""
+    dx, dy, dz = point[0] - x[0], point[1] - x[1], point[2] - x[2]
+    ux, uy, uz, vx, vy, vz, wx, wy, wz = x[3], x[4], x[5], x[6], x[7], x[8], x[9], x[10], x[11]
+    det = ux * (vy * wz - vz * wy) - vx * (uy * wz - uz * wy) + wx * (uy * vz - uz * vy)
+    local = ((dx * (vy * wz - vz * wy) - vx * (dy * wz - dz * wy) + wx * (dy * vz - dz * vy)) / det,
+             (ux * (dy * wz - dz * wy) - dx * (uy * wz - uz * wy) + wx * (uy * dz - uz * dy)) / det,
+             (ux * (vy * dz - vz * dy) - vx * (uy * dz - uz * dy) + dx * (uy * vz - uz * vy)) / det)
+    for i in range(3):
+        out[i] = force[i]
+    for axis in range(3):
+        e = 3 + 3 * axis
+        out[e] = local[axis] * force[0] + 0.5 * (moment[1] * x[e + 2] - moment[2] * x[e + 1])
+        out[e + 1] = local[axis] * force[1] + 0.5 * (moment[2] * x[e] - moment[0] * x[e + 2])
+        out[e + 2] = local[axis] * force[2] + 0.5 * (moment[0] * x[e + 1] - moment[1] * x[e])
 
 
 @njit(cache=True)
