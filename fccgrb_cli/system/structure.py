@@ -10,7 +10,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.model import Model
@@ -75,6 +74,8 @@ def dependent_rows(J: np.ndarray, labels: tuple[str, ...]) -> tuple[str, ...]:
     rank = _rank(J)
     if rank == J.shape[0]:
         return ()
+    import scipy.linalg  # 0.1 s to import: only for a model with redundant equations
+
     _, _, pivots = scipy.linalg.qr(J.T, pivoting=True, mode="economic")
     return tuple(labels[k] for k in sorted(pivots[rank:]))
 
