@@ -66,13 +66,15 @@ class Stacked:
     """A compiled classical ``System`` (angles='driver') evaluated on stacks of frames: q
     (frames × nq) → Φ (frames × rows), Φ_q (frames × rows × nq), ν, γ. Same rows, columns and
     conventions as the System's one-frame methods (see compiled.py's module docstring for the
-    formulas); mixed systems are not handled."""
+    formulas).
+
+    A mixed system is evaluated with its angles held as drivers (``drives.theta`` the solved
+    θ): Φ_q is then its body columns, and ν, γ with the drives' θ̇, θ̈ are the right-hand sides
+    Φ_q,body q̇_b = −Φ_θ θ̇ and Φ_q,body q̈_b = γ − Φ_θ θ̈ of its consistent rates (rates.py; an
+    angle's row gives g′(θ) θ̇ and g″(θ) θ̇² + g′(θ) θ̈ either way); its tracking rows take
+    the drives' ``ref`` as the classical base rows do."""
 
     system: System
-
-    def __post_init__(self) -> None:
-        if self.system.mixed:
-            raise ValueError("Stacked needs a system compiled with angles='driver'")
 
     @cached_property
     def _dot_blocks(self) -> np.ndarray:

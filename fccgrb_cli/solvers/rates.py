@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from fccgrb_cli.solvers.newton import linear_solve
-from fccgrb_cli.system import Drive, System
+from fccgrb_cli.solvers.batched import Drives, Stacked, blocks, factor
+from fccgrb_cli.system import System
 
 
 def central_derivatives(y: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -41,27 +41,38 @@ def consistent_rates(system: System, q: np.ndarray, theta_d: np.ndarray, theta_d
     frame or its neighbours were left unsolved. A floating base's rates are not fixed by the
     topology: ``base`` = (its coordinates' columns, their q̇ and q̈ by central differences)
     joins the equations (least squares: the differenced rates need not be exactly rigid).
-    ``compiled``: the same equations in the compiled kernels (kernels.rates_frames), for
+    Every frame at once on stacked arrays (batched.Stacked with the solved θ as drivers; LU
+    for a square Φ_top,b, QR or ``linear_solve`` frame by frame otherwise, as ``factor``
+    does); ``compiled``: the same equations in the compiled kernels (kernels.rates_frames), for
     systems the kernels take."""
     if compiled:
         return _compiled_rates(system, q, theta_d, theta_dd, base)
     n_body = system.layout.n_body_q
     top = system.masks()["topology"]
     columns = base[0] if base is not None else np.zeros(0, dtype=int)
-    select = np.zeros((len(columns), n_body))
-    select[np.arange(len(columns)), columns] = 1.0
     qd, qdd = np.full_like(q, np.nan), np.full_like(q, np.nan)
-    for f in range(len(q)):
-        if not (np.isfinite(q[f]).all() and np.isfinite(theta_d[f]).all()
-                and np.isfinite(theta_dd[f]).all()):
-            continue
-        J = system.jacobian(q[f])[top]
-        Jb, Jt = np.vstack([J[:, :n_body], select]), J[:, n_body:]
-        base_d, base_dd = (base[1][f], base[2][f]) if base is not None else ((), ())
-        qd[f, n_body:], qdd[f, n_body:] = theta_d[f], theta_dd[f]
-        qd[f, :n_body] = linear_solve(Jb, np.concatenate([-Jt @ theta_d[f], base_d]))
-        gamma = system.gamma(q[f], qd[f], Drive())[top]
-        qdd[f, :n_body] = linear_solve(Jb, np.concatenate([gamma - Jt @ theta_dd[f], base_dd]))
+    solved = np.flatnonzero(np.isfinite(q).all(axis=1) & np.isfinite(theta_d).all(axis=1)
+                            & np.isfinite(theta_dd).all(axis=1))
+    stacked = Stacked(system)
+    slots = int(system.trk_slot.max()) + 1 if len(system.trk_slot) else 0
+    for block in blocks(len(solved)):
+        frames = solved[block]
+        n = len(frames)
+        unmoved = np.zeros((n, slots, 3))  # the tracking rows, not among the topology's
+        drives = Drives(q[frames, n_body:], theta_d[frames], theta_dd[frames], unmoved,
+                        unmoved, unmoved)
+        body = q[frames, :n_body]
+        J = stacked.jacobian(body)[:, top]
+        rows = np.zeros((n, len(columns), n_body))
+        rows[:, np.arange(len(columns)), columns] = 1.0
+        rates = factor(np.concatenate([J, rows], axis=1))
+        base_d, base_dd = ((base[1][frames], base[2][frames]) if base is not None
+                           else (np.zeros((n, 0)), np.zeros((n, 0))))
+        qd[frames, n_body:], qdd[frames, n_body:] = theta_d[frames], theta_dd[frames]
+        qd[frames, :n_body] = rates.solve(np.concatenate([stacked.nu(drives)[:, top], base_d],
+                                                         axis=1))
+        gamma = stacked.gamma(body, qd[frames, :n_body], drives)[:, top]
+        qdd[frames, :n_body] = rates.solve(np.concatenate([gamma, base_dd], axis=1))
     return qd, qdd
 
 
