@@ -49,11 +49,14 @@ class SolveOptions:
              "mo-ed: goal attainment over each tracking component / each point's Euclidean "
              "distance.")
     optimizer: str = _option(
-        "structured", choices=("structured", "scipy"),
-        help="cno-sqp / cno-ip with the tc objective: the engine's stabilized SQP (Newton on "
-             "the KKT conditions with the exact Lagrangian Hessian) or that SQP with a "
-             "primal-dual barrier on the bounds (a frame either cannot solve goes to scipy), or "
-             "scipy's SLSQP / trust-constr for every frame (the paper's reference).")
+        "auto", choices=("auto", "structured", "scipy"),
+        help="structured: the engine's own optimizers — cno-sqp / cno-ip with the tc objective "
+             "by a stabilized SQP (Newton on the KKT conditions with the exact Lagrangian "
+             "Hessian) or that SQP with a primal-dual barrier on the bounds, mo-tc / mo-ed by "
+             "an active-set SQP (a frame either cannot solve goes to scipy); scipy: SLSQP / "
+             "trust-constr for every frame (the paper's reference); auto: structured for CNO, "
+             "scipy for MO (whose optimum on noisy markers is not a point: the structured "
+             "method's smoother path along it escapes the jump flag on some frames).")
     objective: str = _option(
         "tc", choices=("tc", "ed"),
         help="CNO objective: weighted sum of squared tracking residuals (tc, m²) or of "

@@ -26,6 +26,9 @@ from fccgrb_cli.blas import limit_this_process, single_threaded
 from fccgrb_cli.solvers.cno import solve_cno_frame
 from fccgrb_cli.solvers.frame_problem import FrameProblem
 from fccgrb_cli.solvers.goal import FrameOutcome, solve_goal_frame
+from fccgrb_cli.solvers.goal_sqp import FAR as FAR_GOAL
+from fccgrb_cli.solvers.goal_sqp import MAX_ITER as MAX_GOAL
+from fccgrb_cli.solvers.goal_sqp import active_set_sqp
 from fccgrb_cli.solvers.initial import initial_guess
 from fccgrb_cli.solvers.newton import Iterate, gauss_newton
 from fccgrb_cli.solvers.nrm import (
@@ -50,8 +53,10 @@ METHODS = ("cno-sqp", "cno-ip", "mo-tc", "mo-ed")
 PARALLEL_INITS = ("same", "chunks", "nrm")
 REJOINED = 1e-6
 SQP_COMPILED_FROM = 200
-CONVERGED = "stabilized SQP: converged successfully"
-CONVERGED_IP = "interior point: converged successfully"
+STRUCTURED = {method: (name, f"{name}: converged successfully") for method, name in
+              (("cno-sqp", "stabilized SQP"), ("cno-ip", "interior point"),
+               ("mo-tc", "active-set SQP"), ("mo-ed", "active-set SQP"))}
+CONVERGED = STRUCTURED["cno-sqp"][1]
 
 
 @dataclass(frozen=True)
@@ -70,7 +75,7 @@ class Settings:
     workers: int | None = None
     init: str = "nrm"
     nrm_weight: float = 1e-3
-    optimizer: str = "structured"
+    optimizer: str = "auto"
     engine: str = "auto"
 
     @classmethod
@@ -80,11 +85,23 @@ class Settings:
 
     @property
     def structured(self) -> bool:
-        """CNO with the TC objective by the engine's stabilized SQP or its interior point
-        (solvers/sqp.py); everything else, and ``optimizer='scipy'``, through scipy (the
-        paper's reference)."""
-        return (self.optimizer == "structured" and self.method.startswith("cno")
-                and self.objective == "tc")
+        """Whether the engine's own optimizer runs: CNO with the TC objective by the stabilized
+        SQP or its interior point (solvers/sqp.py), goal attainment by the active-set SQP
+        (solvers/goal_sqp.py). 'auto' takes it for CNO only: goal attainment's optimum on noisy
+        markers is a face, the structured method's point on it drifts smoothly from frame to
+        frame where SLSQP's jumps, and the jump flag (solvers/quality.py) that marks MO's
+        frames as untrustworthy then misses some (4 frames of the five-bar at 30 mm, whose
+        joint moments are 3–3.5× NRM-WLS's worst); 'structured' takes it for MO too. CNO-ED,
+        and ``optimizer='scipy'``, run through scipy (the paper's reference)."""
+        if self.optimizer == "scipy" or (self.method.startswith("cno")
+                                         and self.objective != "tc"):
+            return False
+        return self.optimizer == "structured" or self.method.startswith("cno")
+
+    @property
+    def reference(self) -> str:
+        """The scipy method a structured frame falls back to."""
+        return "trust-constr" if self.method == "cno-ip" else "SLSQP"
 
 
 @dataclass(frozen=True)
@@ -98,16 +115,17 @@ class FrameRecord:
     phi_top: float
 
 
-def _optimize(problem: FrameProblem, settings: Settings, q0: np.ndarray) -> FrameOutcome:
+def _optimize(problem: FrameProblem, settings: Settings, q0: np.ndarray,
+              attempt: Iterate | None = None) -> FrameOutcome:
+    """One frame from q0; ``attempt``: the structured optimizer's result from q0 where the
+    compiled kernels already ran it."""
     if settings.structured:
-        out = structured_cno_frame(problem, q0, settings.tol, settings.max_iter,
-                                   interior=settings.method == "cno-ip")
+        out = verdict(problem, settings, attempt or structured_frame(problem, settings, q0))
         if out.converged:
             return out
         scipy = _optimize(problem, replace(settings, optimizer="scipy"), q0)
-        name = "trust-constr" if settings.method == "cno-ip" else "SLSQP"
         return FrameOutcome(scipy.q, out.iterations + scipy.iterations, scipy.converged,
-                            f"{out.message}; {name}: {scipy.message}")
+                            f"{out.message}; {settings.reference}: {scipy.message}")
     if problem.system.redundant_topology:  # SLSQP and trust-constr need independent equalities
         problem.keep_independent(q0)
     if settings.method.startswith("cno"):
@@ -118,30 +136,39 @@ def _optimize(problem: FrameProblem, settings: Settings, q0: np.ndarray) -> Fram
                             max_iter=settings.max_iter)
 
 
-def structured_cno_frame(problem: FrameProblem, q0: np.ndarray, tol: float,
-                         max_iter: int = MAX_SQP, *, interior: bool = False) -> FrameOutcome:
-    """One CNO-TC frame by the stabilized SQP (``interior``: its interior point, inside the
-    problem's bounds), judged against the problem's bounds. A guess far off the constraints (a
-    rigid fit: the first frame, or after a failure) first goes through NRM-WLS, whose line
-    search the SQP lacks; from the previous frames' extrapolation the SQP starts at once."""
-    system = problem.system
+def structured_frame(problem: FrameProblem, settings: Settings, q0: np.ndarray) -> Iterate:
+    """One frame by the engine's structured optimizer (the stabilized SQP, its interior point
+    inside the problem's bounds, or goal attainment's active-set SQP). A guess far off the
+    constraints (a rigid fit: the first frame, or after a failure) first goes through NRM-WLS,
+    whose line search these iterations lack; from the previous frames' extrapolation they start
+    at once."""
+    system, tol, max_iter = problem.system, settings.tol, settings.max_iter
     before = 0
-    if np.abs(problem.constraints(q0)).max(initial=0.0) > FAR:
+    goal = settings.method.startswith("mo")
+    if np.abs(problem.constraints(q0)).max(initial=0.0) > (FAR_GOAL if goal else FAR):
         weights = without_gaps(row_weights(system, 1e-3), system, problem.missing)
         start = gauss_newton(system, q0, problem.drive, weights, tol, min(max_iter, 50), "auto")
         q0, before = start.q, start.iterations
-    it = stabilized_sqp(system, q0, problem.drive, sqp_weights(system, problem.point_weights),
-                        tol, min(max_iter, MAX_SQP),
-                        problem.bound_arrays() if interior else None)
-    it = Iterate(it.q, before + it.iterations, it.converged)
-    name = "interior point" if interior else "stabilized SQP"
+    interior = settings.method == "cno-ip"
+    if goal:
+        it, _ = active_set_sqp(problem, q0, settings.method[3:], tol, min(max_iter, MAX_GOAL))
+    else:
+        it = stabilized_sqp(system, q0, problem.drive,
+                            sqp_weights(system, problem.point_weights), tol,
+                            min(max_iter, MAX_SQP), problem.bound_arrays() if interior else None)
+    return Iterate(it.q, before + it.iterations, it.converged)
+
+
+def verdict(problem: FrameProblem, settings: Settings, it: Iterate) -> FrameOutcome:
+    """A structured optimizer's iterate judged: converged, and inside the problem's bounds."""
+    name, done = STRUCTURED[settings.method]
     if not it.converged:
         return FrameOutcome(it.q, it.iterations, False,
                             f"{name}: no convergence in {it.iterations} iterations")
     if not within_bounds(problem, it.q):
         return FrameOutcome(it.q, it.iterations, False,
                             f"{name}: the optimum lies outside the bounds")
-    return FrameOutcome(it.q, it.iterations, True, CONVERGED_IP if interior else CONVERGED)
+    return FrameOutcome(it.q, it.iterations, True, done)
 
 
 def within_bounds(problem: FrameProblem, q: np.ndarray) -> bool:
@@ -149,13 +176,15 @@ def within_bounds(problem: FrameProblem, q: np.ndarray) -> bool:
     return bool(np.all((q >= lower) & (q <= upper)))
 
 
-def solve_frame(system: System, settings: Settings, q0: np.ndarray, y: np.ndarray) -> FrameRecord:
-    """One frame with the chosen optimizer, timed, with its statistics. A frame the optimizer
-    fails from q0 is retried once from that frame's NRM-WLS solution (goal attainment's optimum
-    is flat where markers are noisy, and SLSQP can wander off it); both tries are counted."""
+def solve_frame(system: System, settings: Settings, q0: np.ndarray, y: np.ndarray,
+                attempt: Iterate | None = None) -> FrameRecord:
+    """One frame with the chosen optimizer, timed, with its statistics (``attempt``: see
+    :func:`_optimize`). A frame the optimizer fails from q0 is retried once from that frame's
+    NRM-WLS solution (goal attainment's optimum is flat where markers are noisy, and SLSQP can
+    wander off it); both tries are counted."""
     started = clock.perf_counter()
     problem = FrameProblem(system, y)
-    out = _optimize(problem, settings, q0)
+    out = _optimize(problem, settings, q0, attempt)
     if not out.converged:
         weights = without_gaps(row_weights(system, 1e-3), system, problem.missing)
         start = gauss_newton(system, q0, problem.drive, weights, settings.tol, 50, "auto")
@@ -248,12 +277,19 @@ def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
 
 
 def compiled_sqp(system: System, settings: Settings, n_frames: int) -> bool:
-    """Whether the sequential structured CNO-SQP runs in the compiled kernels (nrm.use_kernels),
-    'auto' from ``SQP_COMPILED_FROM`` frames (its numpy path costs ~1 ms a frame, so numba's
-    ~0.25 s start pays from a few hundred)."""
+    """Whether the sequential structured optimizer runs in the compiled kernels
+    (nrm.use_kernels), 'auto' from ``SQP_COMPILED_FROM`` frames (its numpy path costs ~1 ms a
+    frame, so numba's ~0.25 s start pays from a few hundred). MO-ED needs each point's distance
+    curvature inside the factor's envelope (goal_kernels.ed_fits)."""
     from fccgrb_cli.system.sparse import supported
 
-    return settings.structured and use_kernels(settings.engine, supported(system), n_frames,
+    fits = supported(system)
+    if fits and settings.method == "mo-ed":
+        from fccgrb_cli.solvers.goal_kernels import ed_fits
+        from fccgrb_cli.solvers.nrm_compiled import sparse_of
+
+        fits = ed_fits(sparse_of(system), len(system.trk_weight))
+    return settings.structured and use_kernels(settings.engine, fits, n_frames,
                                                SQP_COMPILED_FROM)
 
 

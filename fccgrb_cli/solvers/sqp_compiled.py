@@ -1,8 +1,8 @@
-"""The sequential CNO-SQP and CNO-IP (TC objective) through the compiled kernels: frames the
-stabilized SQP (or its interior point) solves within the bounds stay in machine code; a frame
-without a history gets Python's initial guess, and a frame the kernel cannot solve goes through
-the numpy path's ``solve_frame`` (SLSQP or trust-constr, then the retry from NRM-WLS), exactly
-as the numpy path would."""
+"""The sequential structured optimizers through the compiled kernels (CNO-SQP and CNO-IP with
+the TC objective, goal attainment): frames the kernel solves within the bounds stay in machine
+code; a frame without a history gets Python's initial guess, and a frame the kernel cannot solve
+goes through the numpy path's ``solve_frame`` (SLSQP or trust-constr, then the retry from
+NRM-WLS), exactly as the numpy path would."""
 
 from __future__ import annotations
 
@@ -11,18 +11,13 @@ from collections.abc import Callable
 
 import numpy as np
 
-from fccgrb_cli.solvers import kernels
+from fccgrb_cli.solvers import goal_kernels, kernels
 from fccgrb_cli.solvers.frame_problem import FrameProblem
 from fccgrb_cli.solvers.initial import initial_guess
+from fccgrb_cli.solvers.newton import Iterate
 from fccgrb_cli.solvers.nrm import row_weights
 from fccgrb_cli.solvers.nrm_compiled import BLOCK, sparse_of
-from fccgrb_cli.solvers.optimize import (
-    CONVERGED,
-    CONVERGED_IP,
-    FrameRecord,
-    Settings,
-    solve_frame,
-)
+from fccgrb_cli.solvers.optimize import STRUCTURED, FrameRecord, Settings, solve_frame
 from fccgrb_cli.system import System
 
 SQP_HISTORY = 3
@@ -31,8 +26,8 @@ SQP_HISTORY = 3
 def run_frames_compiled(system: System, settings: Settings, targets: np.ndarray,
                         progress: Callable[[int, int], None] | None = None
                         ) -> list[FrameRecord]:
-    """optimize._run_frames over every frame, chained, with the stabilized SQP (or interior
-    point) compiled."""
+    """optimize._run_frames over every frame, chained, with the structured optimizer
+    compiled."""
     s = sparse_of(system)
     n, nq = len(targets), system.nq
     targets = np.ascontiguousarray(targets, dtype=float)
@@ -45,14 +40,17 @@ def run_frames_compiled(system: System, settings: Settings, targets: np.ndarray,
     converged, seconds = np.zeros(n, dtype=bool), np.zeros(n)
     history, state = np.zeros((SQP_HISTORY, nq)), np.zeros(1, dtype=np.int64)
     fallback: dict[int, FrameRecord] = {}
-    done = CONVERGED_IP if settings.method == "cno-ip" else CONVERGED
+    done = STRUCTURED[settings.method][1]
+    if settings.method.startswith("mo"):
+        frames, flag = goal_kernels.solve_frames_goal, settings.method == "mo-ed"
+    else:
+        frames, flag = kernels.solve_frames_sqp, settings.method == "cno-ip"
     guess, use_guess = initial_guess(system, targets[0]), True
     f = 0
     while f < n:
         started = clock.perf_counter()
-        g, reason = kernels.solve_frames_sqp(
-            s, targets, missing, weights, nrm_weights, lower, upper,
-            settings.method == "cno-ip", settings.tol,
+        g, reason = frames(
+            s, targets, missing, weights, nrm_weights, lower, upper, flag, settings.tol,
             settings.max_iter, settings.warm_start != "previous", f, min(n, f + BLOCK), guess,
             use_guess, history, state, q_all, iterations, phi_norm, phi_top, converged)
         if g > f:
@@ -61,7 +59,8 @@ def run_frames_compiled(system: System, settings: Settings, targets: np.ndarray,
         if reason == kernels.NEED_GUESS:
             guess, use_guess = initial_guess(system, targets[g]), True
         elif reason == kernels.NEED_FALLBACK:
-            record = solve_frame(system, settings, guess.copy(), targets[g])
+            record = solve_frame(system, settings, guess.copy(), targets[g],
+                                 Iterate(q_all[g].copy(), int(iterations[g]), bool(converged[g])))
             fallback[g] = record
             state[0] = kernels.pushed(history, int(state[0]), record.q) \
                 if record.converged else 0

@@ -1,0 +1,441 @@
+"""Goal attainment's active-set SQP (solvers/goal_sqp.py) in the compiled kernels: the same
+iteration on :class:`~fccgrb_cli.system.sparse.SparseSystem`, N = Φ_top,qᵀΦ_top,q + δρI (+ δH)
+factored inside its envelope, N⁻¹Gᵀ by substitution, and the working-set rounds on small dense
+systems, with a loop over frames that hands back to Python as the CNO-SQP's does
+(kernels.solve_frames_sqp)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from fccgrb_cli.solvers.frame_problem import ED_SMOOTHING
+from fccgrb_cli.solvers.goal_sqp import (
+    ACTIVE,
+    FAR,
+    MAX_ITER,
+    MAX_SWAPS,
+    PROX,
+    PROX_MIN_TC,
+    STALL,
+    STALL_RATE,
+    STATIONARY,
+    VALLEY,
+)
+from fccgrb_cli.solvers.kernels import (
+    DONE,
+    NEED_FALLBACK,
+    NEED_GUESS,
+    _statistics,
+    _warm_start,
+    add_hessian,
+    cholesky,
+    gauss_newton,
+    jacobian,
+    normal_equations,
+    pushed,
+    residual,
+    substitute,
+    workspace,
+)
+from fccgrb_cli.solvers.sqp import DELTA, FEASIBLE_TOP
+from fccgrb_cli.system.sparse import SparseSystem
+
+
+def ed_fits(s: SparseSystem, n_points: int) -> bool:
+    """Whether each tracked point's distance curvature Jd_pᵀ M Jd_p (its three rows' column
+    pairs) lies inside the factor's envelope, so that 'ed' can run compiled."""
+    for t in range(n_points):
+        cols = np.concatenate([s.j_col[s.j_ptr[r]:s.j_ptr[r + 1]]
+                               for r in range(s.trk_start + 3 * t, s.trk_start + 3 * t + 3)])
+        high, low = np.maximum.outer(cols, cols), np.minimum.outer(cols, cols)
+        if (low < s.first[high]).any():
+            return False
+    return True
+
+
+@njit(cache=True)
+def goal_workspace(s: SparseSystem, n_points: int):
+    """The arrays of one frame's iteration beside kernels.workspace's: constraint values c,
+    weights w, their Jacobian G (factor order), U = N⁻¹Gᵀ (by rows), M = GN⁻¹Gᵀ, the base
+    values, ζ, the working set, the curved matrix, N⁻¹rhs, the small system, its right-hand
+    side, constraint values at the current and the target point, its solution, a column."""
+    nq, m = s.nq, 6 * n_points
+    return (np.empty(m), np.empty(m), np.zeros((m, nq)), np.zeros((m, nq)), np.zeros((m, m)),
+            np.empty(m), np.zeros(m), np.zeros(m + 1, dtype=np.int64), np.zeros((nq, nq)),
+            np.empty(nq), np.zeros((m + 1, m + 1)), np.empty(m + 1), np.empty(m), np.empty(m),
+            np.zeros(m + 1), np.empty(nq))
+
+
+@njit(cache=True)
+def _goals(s: SparseSystem, phi: np.ndarray, values: np.ndarray, present: np.ndarray,
+           point_w: np.ndarray, ed: bool, c: np.ndarray, w: np.ndarray, G: np.ndarray,
+           normals: np.ndarray) -> int:
+    """goal_sqp.goals: c, w and G (factor order) of the points with markers; the number m.
+    'ed' keeps each point's unit direction n = d/s and s in ``normals`` (4 per point)."""
+    n_present = 0
+    for t in range(len(present)):
+        n_present += present[t]
+    half = 3 * n_present
+    m = 2 * half if not ed else n_present
+    G[:m] = 0.0
+    j = 0
+    for t in range(len(present)):
+        if not present[t]:
+            continue
+        r0 = s.trk_start + 3 * t
+        if not ed:
+            for d in range(3):
+                r = r0 + d
+                c[j], c[j + half] = phi[r], -phi[r]
+                w[j] = w[j + half] = point_w[t]
+                for k in range(s.j_ptr[r], s.j_ptr[r + 1]):
+                    G[j, s.j_col[k]] = values[k]
+                    G[j + half, s.j_col[k]] = -values[k]
+                j += 1
+        else:
+            total = ED_SMOOTHING * ED_SMOOTHING
+            for d in range(3):
+                total += phi[r0 + d] * phi[r0 + d]
+            smooth = np.sqrt(total)
+            c[j], w[j] = smooth - ED_SMOOTHING, point_w[t]
+            normals[4 * j + 3] = smooth
+            for d in range(3):
+                n = phi[r0 + d] / smooth
+                normals[4 * j + d] = n
+                for k in range(s.j_ptr[r0 + d], s.j_ptr[r0 + d + 1]):
+                    G[j, s.j_col[k]] += n * values[k]
+            j += 1
+    return m
+
+
+@njit(cache=True)
+def _add_distance_curvature(s: SparseSystem, present: np.ndarray, values: np.ndarray,
+                            normals: np.ndarray, zeta: np.ndarray, N: np.ndarray) -> None:
+    """N += Σ_p ζ_p Jd_pᵀ (I − nnᵀ)/s Jd_p (lower triangle, inside the envelope: ed_fits)."""
+    j = 0
+    for t in range(len(present)):
+        if not present[t]:
+            continue
+        if zeta[j] != 0.0:
+            r0 = s.trk_start + 3 * t
+            scale = zeta[j] / normals[4 * j + 3]
+            for k in range(3):
+                for m in range(3):
+                    coef = scale * ((1.0 if k == m else 0.0)
+                                    - normals[4 * j + k] * normals[4 * j + m])
+                    for a in range(s.j_ptr[r0 + k], s.j_ptr[r0 + k + 1]):
+                        for b in range(s.j_ptr[r0 + m], s.j_ptr[r0 + m + 1]):
+                            ca, cb = s.j_col[a], s.j_col[b]
+                            if ca >= cb:
+                                N[ca, cb] += coef * values[a] * values[b]
+        j += 1
+
+
+@njit(cache=True)
+def _small_solve(K: np.ndarray, rhs: np.ndarray, n: int, out: np.ndarray) -> bool:
+    """out[:n] = K[:n, :n]⁻¹ rhs[:n] by Gaussian elimination with partial pivoting (K and rhs
+    are overwritten); False if a pivot vanishes."""
+    for col in range(n):
+        pivot = col
+        for r in range(col + 1, n):
+            if abs(K[r, col]) > abs(K[pivot, col]):
+                pivot = r
+        if K[pivot, col] == 0.0:
+            return False
+        if pivot != col:
+            for k in range(n):
+                K[col, k], K[pivot, k] = K[pivot, k], K[col, k]
+            rhs[col], rhs[pivot] = rhs[pivot], rhs[col]
+        for r in range(col + 1, n):
+            f = K[r, col] / K[col, col]
+            if f != 0.0:
+                for k in range(col, n):
+                    K[r, k] -= f * K[col, k]
+                rhs[r] -= f * rhs[col]
+    for r in range(n - 1, -1, -1):
+        total = rhs[r]
+        for k in range(r + 1, n):
+            total -= K[r, k] * out[k]
+        out[r] = total / K[r, r]
+    return True
+
+
+@njit(cache=True)
+def _columns(s: SparseSystem, L: np.ndarray, G: np.ndarray, U: np.ndarray, M: np.ndarray,
+             have: np.ndarray, working: np.ndarray, n_w: int, m: int, col: np.ndarray) -> None:
+    """U_j = N⁻¹G_jᵀ and M's column j = GU_j for the working set's constraints that lack
+    them (computed once per iteration, as a constraint first enters the working set)."""
+    for a in range(n_w):
+        j = working[a]
+        if have[j]:
+            continue
+        substitute(s.first, L, G[j], col)
+        U[j] = col
+        for i in range(m):
+            total = 0.0
+            for k in range(s.nq):
+                total += G[i, k] * col[k]
+            M[i, j] = total
+        have[j] = True
+
+
+@njit(cache=True)
+def _minimizer(M: np.ndarray, base: np.ndarray, w: np.ndarray, working: np.ndarray, n_w: int,
+               m: int, K: np.ndarray, rhs: np.ndarray, x: np.ndarray,
+               values: np.ndarray) -> bool:
+    """goal_sqp's ``minimizer``: ζ_W and Δγ in x[:n_w], x[n_w]; constraint values there (M's
+    columns of the working set are in place: :func:`_columns`)."""
+    for a in range(n_w):
+        for b in range(n_w):
+            K[a, b] = M[working[a], working[b]]
+        K[a, n_w] = K[n_w, a] = w[working[a]]
+        rhs[a] = base[working[a]]
+    K[n_w, n_w] = 0.0
+    rhs[n_w] = DELTA
+    if not _small_solve(K, rhs, n_w + 1, x):
+        return False
+    for j in range(m):
+        total = base[j] - w[j] * x[n_w]
+        for a in range(n_w):
+            total -= M[j, working[a]] * x[a]
+        values[j] = total
+    return True
+
+
+@njit(cache=True)
+def _working_step(s: SparseSystem, N: np.ndarray, L: np.ndarray, rhs_q: np.ndarray,
+                  m: int, slack: np.ndarray, working: np.ndarray, n_w: int, gw,
+                  step: np.ndarray, zeta: np.ndarray) -> tuple[int, float]:
+    """goal_sqp._working_step: Δq (factor order) in ``step``, ζ (every constraint) in
+    ``zeta``, the working set in ``working``; returns (its size, Δγ), size −1 on failure."""
+    _, w, G, U, M, base, _, _, _, u0, K, small_rhs, values, target, x, col = gw
+    if not cholesky(s.first, N, L):
+        return -1, 0.0
+    substitute(s.first, L, rhs_q, u0)
+    have = np.zeros(m, dtype=np.bool_)
+    for a in range(m):
+        total = slack[a]
+        for k in range(s.nq):
+            total += G[a, k] * u0[k]
+        base[a] = total
+    current = np.empty(m + 1)
+    _columns(s, L, G, U, M, have, working, n_w, m, col)
+    if not _minimizer(M, base, w, working, n_w, m, K, small_rhs, x, values):
+        return -1, 0.0
+    feasible = True
+    for j in range(m):
+        feasible = feasible and values[j] <= ACTIVE
+    if feasible:
+        for a in range(n_w + 1):
+            current[a] = x[a]
+        d_gamma = x[n_w]
+    else:
+        best = 0
+        for j in range(m):
+            if base[j] / w[j] > base[best] / w[best]:
+                best = j
+        n_w = 1
+        working[0] = best
+        d_gamma = base[best] / w[best]
+        current[0] = DELTA / w[best]
+        for j in range(m):
+            values[j] = base[j] - w[j] * d_gamma
+    for _ in range(MAX_SWAPS):
+        _columns(s, L, G, U, M, have, working, n_w, m, col)
+        if not _minimizer(M, base, w, working, n_w, m, K, small_rhs, x, target):
+            return -1, 0.0
+        alpha, blocking = 2.0, -1
+        for j in range(m):
+            if target[j] > ACTIVE:
+                ratio = -values[j] / (target[j] - values[j])
+                if ratio < alpha:
+                    alpha, blocking = ratio, j
+        if blocking >= 0:
+            alpha = min(max(alpha, 0.0), 1.0)
+            for a in range(n_w):
+                current[a] += alpha * (x[a] - current[a])
+            d_gamma += alpha * (x[n_w] - d_gamma)
+            for j in range(m):
+                values[j] += alpha * (target[j] - values[j])
+            working[n_w] = blocking
+            current[n_w] = 0.0
+            n_w += 1
+            continue
+        d_gamma = x[n_w]
+        for j in range(m):
+            values[j] = target[j]
+        drop = 0
+        for a in range(n_w):
+            current[a] = x[a]
+            if x[a] < x[drop]:
+                drop = a
+        if x[drop] < -1e-12 * DELTA:
+            for a in range(drop, n_w - 1):
+                working[a] = working[a + 1]
+                current[a] = current[a + 1]
+            n_w -= 1
+            continue
+        for k in range(s.nq):
+            step[k] = u0[k]
+        zeta[:m] = 0.0
+        for a in range(n_w):
+            zeta[working[a]] = x[a]
+            for k in range(s.nq):
+                step[k] -= x[a] * U[working[a], k]
+        return n_w, d_gamma
+    return -1, 0.0
+
+
+@njit(cache=True)
+def goal_frame(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, present: np.ndarray,
+               point_w: np.ndarray, ed: bool, tol: float, max_iter: int, q: np.ndarray, ws,
+               gw, normals: np.ndarray) -> tuple[int, bool]:
+    """One frame of goal_sqp.active_set_sqp from q0; the iterate in ``q``."""
+    n_rows, nq = len(s.c_const) + len(s.dot_c), s.nq
+    F, phi, values, shifted, shift, N, L, g, step_p, step, _ = ws
+    c, w, G, _, _, _, zeta, working, curved, _, _, _, _, _, _, _ = gw
+    w_top = np.zeros(n_rows)
+    for r in s.top_rows:
+        w_top[r] = 1.0
+    slack = np.empty(len(c))
+    rhs_q = np.empty(nq)
+    trial_zeta = np.empty(len(c))
+    q[:] = q0
+    shift[:] = 0.0
+    residual(s, q, q[s.nb:], ref, F, phi)
+    jacobian(s, q, F, values)
+    m = _goals(s, phi, values, present, point_w, ed, c, w, G, normals)
+    best = 0
+    for j in range(m):
+        if c[j] / w[j] > c[best] / w[best]:
+            best = j
+    gamma = c[best] / w[best]
+    ceiling = gamma + ACTIVE
+    for r in s.top_rows:
+        ceiling = max(ceiling, gamma + ACTIVE + abs(phi[r]))
+    working[0] = best
+    n_w = 1
+    zeta[:] = 0.0
+    size, stalled, settled = np.inf, 0, False
+    for k in range(max_iter + 1):
+        residual(s, q, q[s.nb:], ref, F, phi)
+        jacobian(s, q, F, values)
+        m = _goals(s, phi, values, present, point_w, ed, c, w, G, normals)
+        violation, worst, least = 0.0, -np.inf, np.inf
+        for r in s.top_rows:
+            violation = max(violation, abs(phi[r]))
+        for j in range(m):
+            slack[j] = c[j] - w[j] * gamma
+            worst = max(worst, slack[j])
+            least = min(least, zeta[j])
+        if ((size < tol or settled) and violation <= FEASIBLE_TOP and worst <= ACTIVE
+                and least >= -1e-12 * DELTA):
+            return k, gamma <= ceiling
+        if k == max_iter:
+            break
+        for r in range(n_rows):
+            shifted[r] = phi[r] + shift[r]
+        normal_equations(s, values, shifted, w_top, N, g)
+        rho = PROX if ed else max(PROX_MIN_TC, PROX * 0.1**k)
+        for i in range(nq):
+            N[i, i] += DELTA * rho
+            rhs_q[i] = -g[i]
+        for i in range(nq):
+            for j in range(s.first[i], i + 1):
+                curved[i, j] = N[i, j]
+        add_hessian(s, q, shift, curved)
+        if ed:
+            _add_distance_curvature(s, present, values, normals, zeta, curved)
+        kept = working.copy()
+        n_kept = n_w
+        n_w, d_gamma = _working_step(s, curved, L, rhs_q, m, slack, working, n_w, gw, step_p,
+                                     trial_zeta)
+        if n_w < 0:  # the Lagrangian's curvature is not convex here: Gauss–Newton's
+            working[:] = kept
+            n_w, d_gamma = _working_step(s, N, L, rhs_q, m, slack, working, n_kept, gw,
+                                         step_p, trial_zeta)
+        if n_w < 0:
+            return k + 1, False
+        zeta[:m] = trial_zeta[:m]
+        before, largest = size, 0.0
+        for p in range(nq):
+            step[s.perm[p]] = step_p[p]
+            largest = max(largest, abs(step_p[p]))
+        size = max(largest, abs(d_gamma))
+        settled = abs(d_gamma) < tol and rho * largest < STATIONARY
+        stalled = stalled + 1 if size > STALL_RATE * before and abs(d_gamma) < VALLEY else 0
+        if not np.isfinite(size) or stalled == STALL:
+            return k + 1, False
+        for r in s.top_rows:
+            total = phi[r]
+            for t in range(s.j_ptr[r], s.j_ptr[r + 1]):
+                total += values[t] * step[s.perm[s.j_col[t]]]
+            shift[r] += total
+        for i in range(nq):
+            q[i] += step[i]
+        gamma += d_gamma
+    return max_iter, False
+
+
+@njit(cache=True)
+def solve_frames_goal(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
+                      point_weights: np.ndarray, nrm_w: np.ndarray, lower: np.ndarray,
+                      upper: np.ndarray, ed: bool, tol: float, max_iter: int,
+                      extrapolate: bool, start: int, stop: int, guess: np.ndarray,
+                      use_guess: bool, history: np.ndarray, state: np.ndarray,
+                      q_all: np.ndarray, iterations: np.ndarray, phi_norm: np.ndarray,
+                      phi_top: np.ndarray, converged: np.ndarray) -> tuple[int, int]:
+    """kernels.solve_frames_sqp's loop with goal attainment per frame."""
+    n_rows, nq = len(s.c_const) + len(s.dot_c), s.nq
+    n_points = targets.shape[1]
+    ws = workspace(s, n_rows)
+    gw = goal_workspace(s, n_points)
+    normals = np.zeros(4 * n_points)
+    w_nrm = np.empty(n_rows)
+    active = np.empty(n_rows)
+    present = np.zeros(n_points, dtype=np.bool_)
+    y = np.empty((n_points, 3))
+    q0 = np.empty(nq)
+    q = np.empty(nq)
+    start_q = np.empty(nq)
+    F = np.empty(len(s.f0))
+    phi = np.empty(n_rows)
+    for f in range(start, stop):
+        count = state[0]
+        if not _warm_start(use_guess and f == start, guess, history, count, count,
+                           extrapolate, q0):
+            return f, NEED_GUESS
+        for r in range(n_rows):
+            active[r] = 1.0
+        for t in range(n_points):
+            gone = missing[f, t]
+            present[t] = not gone and point_weights[t] > 0.0
+            for d in range(3):
+                y[t, d] = 0.0 if gone else targets[f, t, d]
+                active[s.trk_start + 3 * t + d] = 0.0 if gone else 1.0
+        residual(s, q0, q0[s.nb:], y, F, phi)
+        before = 0
+        violation = 0.0
+        for r in s.top_rows:
+            violation = max(violation, abs(phi[r]))
+        start_q[:] = q0
+        if violation > FAR:  # a guess far off the constraints: NRM-WLS first
+            for r in range(n_rows):
+                w_nrm[r] = nrm_w[r] * active[r]
+            before, _ = gauss_newton(s, q0, y, w_nrm, tol, min(max_iter, 50), 2, q, ws)
+            start_q[:] = q
+        k, ok = goal_frame(s, start_q, y, present, point_weights, ed, tol,
+                           min(max_iter, MAX_ITER), q, ws, gw, normals)
+        k += before
+        converged[f] = ok
+        for i in range(nq):
+            ok = ok and lower[i] <= q[i] <= upper[i]
+        q_all[f] = q
+        iterations[f] = k
+        if not ok:
+            guess[:] = q0
+            return f, NEED_FALLBACK
+        state[0] = pushed(history, count, q)
+        phi_norm[f], phi_top[f] = _statistics(s, q, y, active, F, phi)
+    return stop, DONE
