@@ -1,4 +1,6 @@
-"""One BLAS thread for the solvers: their matrices have tens of rows, and a multi-threaded BLAS
+"""BLAS and LAPACK for the solvers.
+
+One BLAS thread: their matrices have tens of rows, and a multi-threaded BLAS
 spends more time waking its threads than computing (measured 3× slower on 2 cores). The
 package sets OPENBLAS_NUM_THREADS at import, which only works before numpy loads; threadpoolctl
 limits the already loaded library, whatever the import order.
@@ -12,9 +14,40 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
+from pathlib import Path
+from types import ModuleType
 from typing import TypeVar
 
 F = TypeVar("F", bound=Callable)
+
+
+def _scipy_lapack() -> ModuleType:
+    """scipy's LAPACK wrappers (``scipy.linalg.lapack``'s functions: dposv, dpotrf, ...) from
+    their compiled module, loaded from its file without importing the ``scipy.linalg`` package:
+    that import costs ~0.1 s of every solve's start-up (its array-API layer touches every numpy
+    submodule, f2py and testing included), the module itself ~3 ms. Where scipy's layout is
+    not the expected one, the ordinary import."""
+    from importlib.machinery import EXTENSION_SUFFIXES, ExtensionFileLoader
+    from importlib.util import find_spec, module_from_spec, spec_from_file_location
+
+    name = "scipy.linalg._flapack"
+    scipy = find_spec("scipy")
+    folder = Path(scipy.origin).parent / "linalg" if scipy and scipy.origin else None
+    for suffix in EXTENSION_SUFFIXES if folder else ():
+        path = folder / f"_flapack{suffix}"
+        if path.is_file():
+            spec = spec_from_file_location(name, path, loader=ExtensionFileLoader(name,
+                                                                                  str(path)))
+            if spec is not None:
+                module = module_from_spec(spec)
+                spec.loader.exec_module(module)
+                return module
+    from scipy.linalg import lapack as ordinary
+
+    return ordinary
+
+
+lapack = _scipy_lapack()
 
 
 @functools.cache

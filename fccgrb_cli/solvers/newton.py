@@ -6,9 +6,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import linalg
-from scipy.linalg import lapack
 
+from fccgrb_cli.blas import lapack
 from fccgrb_cli.system import Drive, System
 
 
@@ -31,6 +30,8 @@ def linear_solve(J: np.ndarray, rhs: np.ndarray) -> np.ndarray:
             pass
     # gelsy (complete orthogonal factorization) gives the same minimum-norm solution as numpy's
     # SVD-based lstsq, about 4x faster at these sizes (78 x 84: 0.20 vs 0.84 ms)
+    from scipy import linalg  # ~0.1 s to import: only for a singular or redundant J
+
     return linalg.lstsq(J, rhs, cond=np.finfo(float).eps * max(J.shape),
                         lapack_driver="gelsy", check_finite=False)[0]
 
