@@ -35,7 +35,8 @@ def main() -> None:
     parser.add_argument("--ip-frames", type=int, default=30)
     parser.add_argument("--methods", default="cno-sqp:tc:compiled,cno-sqp:tc:numpy,"
                         "cno-sqp:tc:scipy,cno-sqp:ed:scipy,cno-ip:tc:compiled,cno-ip:tc:numpy,"
-                        "cno-ip:tc:scipy,mo-tc:tc:scipy,mo-ed:ed:scipy")
+                        "cno-ip:tc:scipy,mo-tc:tc:compiled,mo-tc:tc:numpy,mo-tc:tc:scipy,"
+                        "mo-ed:ed:compiled,mo-ed:ed:numpy,mo-ed:ed:scipy")
     args = parser.parse_args()
     model = load_model(ROOT / "configs" / "models" / "five_bar.yaml")
     truth = synthesize(model)

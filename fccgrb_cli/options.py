@@ -81,10 +81,10 @@ class SolveOptions:
              "step is below 1 mm / 1 mrad, then exact.")
     engine: str = _option(
         "auto", choices=("auto", "compiled", "numpy"),
-        help="Per-frame arithmetic of NRM and of the structured CNO-SQP / CNO-IP: compiled "
-             "kernels (numba), the same iteration in numpy (equal to 1e-12), or auto: compiled "
-             "for trials of 1000 frames or more (200 for CNO; loading numba costs ~0.25 s "
-             "once), where no body is reduced.")
+        help="Per-frame arithmetic of NRM and of the structured optimizers: compiled kernels "
+             "(numba), the same iteration in numpy (equal to 1e-12; goal attainment's to 1e-8), "
+             "or auto: compiled for trials of 1000 frames or more (200 for the optimizers; "
+             "loading numba costs ~0.25 s once), where no body is reduced.")
     skip_unsolvable: bool = _option(
         False, help="Report frames whose remaining markers cannot determine the model as "
                     "unsolved and go on, instead of stopping with an error.")
