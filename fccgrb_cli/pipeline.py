@@ -457,10 +457,14 @@ def plate_loads(model: Model, trial: Trial, warnings: list[str],
             return []
         raise InputError(f"{model.source}: loads.force_plates: expected a C3D trial with force "
                          f"platforms, got {trial.path}")
+    from fccgrb_cli.io.c3d_header import read_parameters
     from fccgrb_cli.io.forceplates import read_force_plates
 
-    plates = {p.number: p for p in read_force_plates(trial.path, trial.n_frames,
-                                                     model.plate_threshold)}
+    used = read_parameters(trial.path).get("FORCE_PLATFORM:USED")
+    none = used is not None and used.values.size and not used.values[0]
+    # FORCE_PLATFORM:USED 0: ezc3d would find no plate after loading every frame's points
+    plates = {} if none else {p.number: p for p in read_force_plates(
+        trial.path, trial.n_frames, model.plate_threshold)}
     loads = []
     for k, assignment in enumerate(model.force_plates):
         plate = plates.get(assignment.plate)

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from fccgrb_cli.errors import InputError
+from fccgrb_cli.io.c3d_header import read_layout, read_parameters
 
 SOURCES = ("c3d", "plates", "kinematic")
 KINDS = ("strike", "off")
@@ -80,24 +81,22 @@ def _parse(label: str, context: str) -> tuple[str, str] | None:
 
 
 def c3d_events(path: str | Path, n_frames: int, rate: float) -> Events | None:
-    """The foot events of a C3D's EVENT section within the trial (None when it has none)."""
-    import ezc3d
-
-    try:
-        c3d = ezc3d.c3d(str(path))
-    except Exception as error:  # ezc3d raises bare RuntimeErrors
-        raise InputError(f"{path}: not a readable C3D file ({error})") from None
-    group = c3d["parameters"].get("EVENT", {})
-    if "LABELS" not in group or "TIMES" not in group:
+    """The foot events of a C3D's EVENT section within the trial (None when it has none), read
+    from its parameter section alone (``c3d_header.read_parameters``: ezc3d would load every
+    frame's points again, ~10 kB a frame)."""
+    params = read_parameters(path)
+    if "EVENT:LABELS" not in params or "EVENT:TIMES" not in params:
         return None
-    labels = [str(v) for v in group["LABELS"]["value"]]
-    times = np.asarray(group["TIMES"]["value"], dtype=float)
+    labels = [str(v) for v in params["EVENT:LABELS"].values]
+    raw = params["EVENT:TIMES"]
+    times = raw.values.reshape(raw.dims[::-1]).T if raw.dims else raw.values
     if times.ndim != 2 or times.shape[1] != len(labels):
         raise InputError(f"{path}: EVENT:TIMES: expected 2 × {len(labels)} (minutes, seconds) "
                          f"for EVENT:LABELS, got shape {times.shape}")
-    contexts = [str(v) for v in group.get("CONTEXTS", {}).get("value", [])]
+    contexts = [str(v) for v in params["EVENT:CONTEXTS"].values] \
+        if "EVENT:CONTEXTS" in params else []
     contexts += [""] * (len(labels) - len(contexts))
-    start = c3d["header"]["points"]["first_frame"] / rate  # ezc3d's first frame is 0-based
+    start = (read_layout(path).first_frame - 1) / rate  # numbered from 1
     items = []
     for label, context, (minutes, seconds) in zip(labels, contexts, times.T, strict=True):
         parsed = _parse(label, context)

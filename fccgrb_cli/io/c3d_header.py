@@ -58,10 +58,13 @@ def decode_floats(raw: bytes, processor: str) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Parameter:
-    """One numeric parameter: its C3D type (1 byte, 2 integer, 4 float) and values."""
+    """One parameter: its C3D type (1 byte, 2 integer, 4 float; -1 text) and values (flat, the
+    first dimension varying fastest; text: one string per column of the character array,
+    without trailing blanks), with the dimensions as stored (text: the first is the length)."""
 
     kind: int
     values: np.ndarray
+    dims: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -211,9 +214,22 @@ def _frame_count(params: dict[str, Parameter], first: int,
     return count, first, first + count - 1, "POINT:FRAMES"
 
 
-def _parameters(section: bytes, processor: str) -> dict[str, Parameter]:
-    """The numeric parameters of a parameter section, keyed 'GROUP:NAME' (upper case). The walk
-    stops at the end marker, at a record that runs past the section, or at a loop."""
+def read_parameters(path: str | Path) -> dict[str, Parameter]:
+    """Every parameter of a C3D file, numbers and text, keyed 'GROUP:NAME', from its parameter
+    section alone (the data section is not read: ezc3d would build an object per point of every
+    frame, ~10 kB a frame for 55 markers); for a file ``read_layout`` accepted."""
+    with Path(path).open("rb") as f:
+        header = f.read(BLOCK)
+        f.seek((header[0] - 1) * BLOCK)
+        head = f.read(4)
+        section = head + f.read(max(head[2], 1) * BLOCK - 4)
+    return _parameters(section, PROCESSORS[head[3]], text=True)
+
+
+def _parameters(section: bytes, processor: str, text: bool = False) -> dict[str, Parameter]:
+    """The numeric parameters of a parameter section (and the text ones if ``text``), keyed
+    'GROUP:NAME' (upper case). The walk stops at the end marker, at a record that runs past the
+    section, or at a loop."""
     endian = ">" if processor == "MIPS" else "<"
     groups: dict[int, str] = {}
     found: dict[tuple[int, str], Parameter] = {}
@@ -240,7 +256,13 @@ def _parameters(section: bytes, processor: str) -> dict[str, Parameter]:
                     values = np.frombuffer(raw, endian + "i2").astype(float)
                 else:
                     values = decode_floats(raw, processor)
-                found[group, name] = Parameter(kind, values)
+                found[group, name] = Parameter(kind, values, tuple(dims))
+            elif text and kind == -1 and len(dims) == n_dims and len(raw) == count:
+                width = dims[0] if n_dims else 1
+                strings = [raw[k:k + width].decode("latin-1").rstrip(" \x00")
+                           for k in range(0, count, max(width, 1))] if count else []
+                found[group, name] = Parameter(kind, np.array(strings, dtype=object),
+                                               tuple(dims))
         following = pos + 2 + length + offset
         if offset == 0 or following <= pos:
             break

@@ -18,7 +18,14 @@ import numpy as np
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.atomic import atomic_path
 from fccgrb_cli.io.c3d import UNIT_SCALE, write_markers
-from fccgrb_cli.io.c3d_header import TRUNCATED, WORD_LIMIT, read_layout, read_points
+from fccgrb_cli.io.c3d_header import (
+    TRUNCATED,
+    WORD_LIMIT,
+    C3DLayout,
+    read_layout,
+    read_parameters,
+    read_points,
+)
 
 
 @dataclass(frozen=True)
@@ -82,6 +89,8 @@ def read_c3d(path: Path, accept_truncated: bool = False) -> Trial:
     if layout.truncated:
         frames = layout.frames_held
         warnings = _complete(path, layout.announced(), frames, accept_truncated)
+    if frames > WORD_LIMIT:  # ezc3d counts frames in a 16-bit word: read the file's bytes
+        return _read_long_c3d(path, layout, frames, warnings)
     try:
         c3d = ezc3d.c3d(str(path))
     except Exception as exc:  # ezc3d raises bare RuntimeError/IOError on bad files
@@ -91,18 +100,38 @@ def read_c3d(path: Path, accept_truncated: bool = False) -> Trial:
     labels = tuple(str(label).strip() for label in point["LABELS"]["value"])
     units = point.get("UNITS", {}).get("value") or ["mm"]
     scale = _unit_scale(str(units[0]), path, "POINT:UNITS")
-    rate = float(point["RATE"]["value"][0])
-    if not rate > 0:
-        raise InputError(f"{path}: POINT:RATE: expected a positive rate, got {rate}")
+    rate = _rate(float(point["RATE"]["value"][0]), path)
     xyz = np.transpose(c3d["data"]["points"][:3], (2, 1, 0)) * scale
     residuals = c3d["data"]["meta_points"].get("residuals")
     if residuals is not None and residuals.size:
         xyz[np.transpose(residuals[0], (1, 0)) < 0] = np.nan
-    if xyz.shape[0] == WORD_LIMIT < frames:  # ezc3d counts frames in a 16-bit word
-        xyz = read_points(path, layout, frames) * scale
     if xyz.shape[0] != frames:
         raise InputError(f"{path}: ezc3d read {xyz.shape[0]} frames where the file holds "
                          f"{frames} ({layout.announced()})")
+    return Trial(str(path), labels[: xyz.shape[1]], xyz, rate, warnings)
+
+
+def _rate(rate: float, path: Path) -> float:
+    if not rate > 0:
+        raise InputError(f"{path}: POINT:RATE: expected a positive rate, got {rate}")
+    return rate
+
+
+def _read_long_c3d(path: Path, layout: C3DLayout, frames: int,
+                   warnings: tuple[str, ...]) -> Trial:
+    """A C3D past 65,535 frames, whose points ezc3d stops short of: labels, units and rate from
+    its parameter section, the points from its data section in chunks (``c3d_header``), with
+    nothing else of the file in memory (ezc3d's objects would take ~10 kB a frame)."""
+    params = read_parameters(path)
+    if "POINT:LABELS" not in params or "POINT:RATE" not in params:
+        raise InputError(f"{path}: expected the parameters POINT:LABELS and POINT:RATE")
+    units = params.get("POINT:UNITS")
+    unit = str(units.values[0]) if units is not None and units.values.size else "mm"
+    scale = _unit_scale(unit, path, "POINT:UNITS")
+    rate = _rate(float(params["POINT:RATE"].values[0]), path)
+    xyz = read_points(path, layout, frames)
+    xyz *= scale
+    labels = tuple(str(label).strip() for label in params["POINT:LABELS"].values)
     return Trial(str(path), labels[: xyz.shape[1]], xyz, rate, warnings)
 
 
