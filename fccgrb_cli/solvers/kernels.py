@@ -682,7 +682,8 @@ def driven_frames(s: SparseSystem, guesses: np.ndarray, theta: np.ndarray,
     the next frame's Newton iteration as a chord (simplified Newton) matrix: frames 10 ms apart
     move Φ_q little, so the chord steps contract fast; where a step shrinks by less than
     ``CHORD_RATE`` of the one before, Φ_q is evaluated and factored afresh at the current
-    point. A chord step below tol ends the iteration only where its contraction is known (the
+    point, and so it is where the chord's rate would not meet tol within ``max_iter`` steps.
+    A chord step below tol ends the iteration only where its contraction is known (the
     error left is then ≤ rate · tol), so the solution agrees with full Newton's to far below
     tol. (A taller Φ_q keeps full Gauss–Newton: where its equations are not all met, a chord
     matrix's fixed point J_Lᵀ Φ = 0 is not the least-squares one Φ_qᵀ Φ = 0.) Frames that do
@@ -707,12 +708,12 @@ def driven_frames(s: SparseSystem, guesses: np.ndarray, theta: np.ndarray,
             q += offset
         if known > 1:
             q += offset - older
-        ok = False
+        ok = refresh = False
         previous = np.inf
         for k in range(1, max_iter + 1):
             residual(s, q, theta[f], ref[f], F, phi)
             size = np.inf
-            chord = factored and square
+            chord = factored and square and not refresh
             if chord:  # the factor of an earlier point: kept while its steps contract fast
                 _transposed_product(s, values, phi, g)
                 substitute(s.first, L, g, out)
@@ -735,6 +736,9 @@ def driven_frames(s: SparseSystem, guesses: np.ndarray, theta: np.ndarray,
             if size < tol and (not chord or previous < np.inf):
                 ok = True
                 break
+            # a chord's linear rate: factored afresh where it would not meet tol in the steps left
+            refresh = (chord and previous < np.inf and size > 0.0
+                       and k + np.log(size / tol) / np.log(previous / size) > max_iter - 1)
             previous = size
         if not ok:
             known = 0

@@ -1,0 +1,99 @@
+"""The dynamics stage in the compiled kernels (kernels.driven_frames with the inverse dynamics):
+one factorization a frame serving q̇, q̈, λ and, where Φ_q is square, the next frame's chord
+steps; guesses moved by the extrapolated corrections of the frames before.
+
+* guesses far from the solution (every body coordinate off by ~1 mm, so the chord steps must
+  give way to fresh factorizations) still give the frame-by-frame reference's motion,
+  multipliers, moments and load power to 1e-9, every frame inside the kernel (no frame left to
+  Python's path);
+* a frame with no guess in the middle (the extrapolation restarts after it) and an external
+  load whose point moves over the body;
+* the LAPACK the solvers use (fccgrb_cli.blas.lapack) is scipy's, without importing the
+  scipy.linalg package: a solve's start-up does not pay for it (checked in a fresh process).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_batched_dynamics import assert_same
+
+from fccgrb_cli.dynamics import ExternalLoad
+from fccgrb_cli.dynamics.convert import classical_dynamics
+from fccgrb_cli.io.trial import read_trial
+from fccgrb_cli.model import load_model
+from fccgrb_cli.options import SolveOptions
+from fccgrb_cli.pipeline import solve_trial
+from fccgrb_cli.solvers import ad
+from fccgrb_cli.solvers.nrm import numba_available
+
+ROOT = Path(__file__).resolve().parents[1]
+
+pytestmark = pytest.mark.skipif(not numba_available(), reason="numba is not installed")
+
+
+@pytest.fixture(scope="module")
+def sample():
+    model = load_model(ROOT / "configs" / "models" / "five_bar.yaml")
+    trial = read_trial(ROOT / "sample_data" / "five_bar.c3d")
+    run = solve_trial(model, trial, SolveOptions(method="nrm-wls", perturb_mm=30.0,
+                                                 dynamics=False))
+    return model, run.result
+
+
+def push(n: int) -> ExternalLoad:
+    """A force, a free moment and a point of application that wander (N, N·m, m)."""
+    rng = np.random.default_rng(11)
+    return ExternalLoad("push", "B4", rng.normal(0, 15, (n, 3)), rng.normal(0, 0.2, (n, 3)),
+                        rng.normal(0, 1.5, (n, 3)))
+
+
+@pytest.mark.parametrize("cutoff", [None, 6.0])
+def test_far_guesses_give_the_reference_inside_the_kernel(sample, cutoff) -> None:
+    model, result = sample
+    n = result.n_frames
+    rng = np.random.default_rng(3)
+    off = result.q.copy()
+    off[:, :60] += rng.normal(0, 1e-3, (n, 60))
+    load = push(n)
+    reference = classical_dynamics(model, result, cutoff=cutoff, loads=[load], batched=False)
+    compiled = classical_dynamics(model, replace(result, q=off), cutoff=cutoff, loads=[load],
+                                  engine="compiled")
+    assert_same(compiled, reference)
+    iterations = compiled.kinematics.iterations
+    assert iterations.max() <= ad.BATCH_ITER  # no frame went to Python's frame-by-frame path
+    assert iterations.mean() > 3.5  # the guesses were far: more steps than the sample's ~3.4
+    assert np.abs(compiled.inverse.external_power).max() > 1.0
+
+
+def test_a_frame_without_a_guess_restarts_the_extrapolation(sample) -> None:
+    model, result = sample
+    holed = result.q.copy()
+    holed[[40, 41, 150]] = np.nan
+    load = push(result.n_frames)
+    reference = classical_dynamics(model, result, loads=[load], batched=False)
+    compiled = classical_dynamics(model, replace(result, q=holed), loads=[load],
+                                  engine="compiled")
+    assert_same(compiled, reference)
+
+
+def test_solvers_lapack_is_scipys_without_scipy_linalg() -> None:
+    from scipy.linalg import lapack as scipy_lapack
+
+    from fccgrb_cli.blas import lapack
+
+    assert lapack.dposv is scipy_lapack.dposv
+    A = np.array([[4.0, 1.0], [1.0, 3.0]])
+    _, x, info = lapack.dposv(A, np.array([1.0, 2.0]))
+    assert info == 0 and np.allclose(A @ x, [1.0, 2.0], rtol=0, atol=1e-15)
+    assert lapack.dposv(np.array([[1.0, 2.0], [2.0, 1.0]]), np.ones(2))[2] > 0  # indefinite
+    code = ("import sys, fccgrb_cli.cli, fccgrb_cli.pipeline, fccgrb_cli.solvers.nrm; "
+            "from fccgrb_cli.blas import lapack; print('scipy.linalg' in sys.modules)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True)
+    assert done.stdout.strip() == "False"
