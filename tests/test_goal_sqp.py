@@ -21,12 +21,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import fccgrb_cli as fc
 from fccgrb_cli.solvers import goal_kernels, kernels
 from fccgrb_cli.solvers.frame_problem import ED_SMOOTHING, FrameProblem
 from fccgrb_cli.solvers.goal import kkt_satisfied
 from fccgrb_cli.solvers.goal_sqp import active_set_sqp
 from fccgrb_cli.solvers.nrm_compiled import sparse_of
 from fccgrb_cli.solvers.optimize import Settings, solve_frame, solve_optimization
+from tests import test_full_turns as full_turns
 from tests.test_sqp import case
 
 CONVERGED = "active-set SQP: converged successfully"
@@ -194,3 +196,18 @@ def test_which_optimizer_auto_takes() -> None:
     assert not Settings("cno-sqp", "ed", optimizer="structured").structured
     assert Settings("mo-ed", "ed", optimizer="structured").structured
     assert not Settings("cno-sqp", "tc", optimizer="scipy").structured
+
+
+@pytest.mark.parametrize("method", ["mo-tc", "mo-ed"])
+@pytest.mark.parametrize("name", ["rssr", "crank_rocker"])
+def test_three_full_turns_at_an_exact_fit(name: str, method: str) -> None:
+    """tests/test_full_turns.py's check with the structured optimizer: the crank angle to 1e-6°
+    on every frame through three turns, every frame trusted. Without the guard on a converged
+    frame's γ (goal_sqp.CEILING), the RSSR's frame 59 converged on the other assembly branch,
+    89° away, and the frames after it followed."""
+    run = fc.solve(full_turns.model(name), full_turns.exact_trial(name), method=method,
+                   dynamics=False, events="none", tol=1e-14, optimizer="structured")
+    error = np.degrees(np.abs(run.result.theta[:, 0]
+                              - full_turns.truth(name).result.theta[:, 0]))
+    assert error.max() <= 1e-6, error.max()
+    assert run.trusted.all()

@@ -12,6 +12,7 @@ from numba import njit
 from fccgrb_cli.solvers.frame_problem import ED_SMOOTHING
 from fccgrb_cli.solvers.goal_sqp import (
     ACTIVE,
+    CEILING,
     FAR,
     MAX_ITER,
     MAX_SWAPS,
@@ -313,7 +314,7 @@ def goal_frame(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, present: np.nda
     gamma = c[best] / w[best]
     ceiling = gamma + ACTIVE
     for r in s.top_rows:
-        ceiling = max(ceiling, gamma + ACTIVE + abs(phi[r]))
+        ceiling = max(ceiling, gamma + ACTIVE + CEILING * abs(phi[r]))
     working[0] = best
     n_w = 1
     zeta[:] = 0.0

@@ -33,7 +33,8 @@ converged, or whose optimum leaves the bounds, goes to SLSQP (goal.py) from the 
 (SLSQP's function-change test stops in such a valley; started where this method stopped, it
 found the crank-rocker's other assembly branch at an exact fit); a guess far off the
 constraints first goes through NRM-WLS (optimize.py). The iteration has no line search: a KKT
-point whose γ exceeds the guess's (plus the guess's distance from Φ_top = 0) is another local
+point whose γ exceeds the guess's by more than 10 times the guess's max |Φ_top| (the optimum
+near a guess exceeds the guess's γ by up to 1.3 times it on the five-bar) is another local
 optimum it wandered to (the RSSR's other assembly branch at an exact fit, 89° away), and is not
 converged either.
 """
@@ -53,6 +54,7 @@ MAX_ITER = 50
 MAX_SWAPS = 200  # working-set changes per iteration
 FAR = 1e-2  # max |Φ_top| of a guess that goes through NRM-WLS first (the proximal term damps
 # the first steps: the CNO-SQP's 1e-3 sent a third of the extrapolated guesses there at 30 mm)
+CEILING = 10.0  # a converged γ may exceed the guess's by this many times its max |Φ_top|
 STATIONARY = 1e-8  # ρ‖Δq‖∞: the unregularized problem's first-order error, relative to ∂γ = 1
 STALL, STALL_RATE, VALLEY = 5, 0.75, 1e-6  # steps in a row that shrink by less than a quarter
 # while γ moves by less than a micron: a flat valley, left to SLSQP (the smoothed distance's
@@ -133,7 +135,7 @@ def active_set_sqp(problem: FrameProblem, q0: np.ndarray, objective: str, tol: f
     for k in range(max_iter + 1):
         phi, J = system.evaluate(q, problem.drive)
         if k == 0:  # the guess's γ and distance from Φ_top = 0 bound a converged frame's γ
-            ceiling = gamma + np.abs(phi[top]).max(initial=0.0) + ACTIVE
+            ceiling = gamma + CEILING * np.abs(phi[top]).max(initial=0.0) + ACTIVE
         g = goals(problem, q, objective)
         slack = g.c - g.w * gamma
         if ((size < tol or settled) and np.abs(phi[top]).max(initial=0.0) <= FEASIBLE_TOP
