@@ -44,8 +44,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import lapack
 
+from fccgrb_cli.blas import lapack
 from fccgrb_cli.solvers.frame_problem import ED_SMOOTHING, FrameProblem
 from fccgrb_cli.solvers.newton import Iterate
 from fccgrb_cli.solvers.sqp import DELTA, FEASIBLE_TOP

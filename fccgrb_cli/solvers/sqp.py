@@ -36,8 +36,8 @@ an optimum whose bounds are inactive by about μ_end / (slack · curvature), bel
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import lapack
 
+from fccgrb_cli.blas import lapack
 from fccgrb_cli.solvers.newton import Iterate
 from fccgrb_cli.system import Drive, System
 
