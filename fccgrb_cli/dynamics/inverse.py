@@ -88,6 +88,8 @@ def inverse_dynamics(system: System, q: np.ndarray, qd: np.ndarray, qdd: np.ndar
         lam, residual, xs, xds, power = _frame_by_frame(system, M, g, q, qd, qdd, loads)
     driver_rows = system.n_linear_rows + system.angle_rows
     bases, force, moment = _base_wrenches(system, xs, lam)
+    potential = -(xs @ g)
+    del xs  # frames × nx: freed before the kinetic energy's frames × nx product (long trials)
     moments = -system.g_terms(theta)[1] * lam[:, driver_rows]
     if len(system.sine_rows):  # a signed angle's sine row: Φ_θ = −cos θ (docs/signed_angles.md)
         k = system.sine_of
@@ -95,7 +97,7 @@ def inverse_dynamics(system: System, q: np.ndarray, qd: np.ndarray, qdd: np.ndar
     return InverseDynamics(
         angle_names=tuple(a.name for a in model.angles), row_labels=system.labels, lam=lam,
         joint_moments=moments, kinetic=0.5 * np.einsum("fi,fi->f", xds @ M, xds),
-        potential=-(xs @ g), external_power=power, residual=residual, base_names=bases,
+        potential=potential, external_power=power, residual=residual, base_names=bases,
         residual_force=force, residual_moment=moment)
 
 
