@@ -211,9 +211,12 @@ def solve(model: str, trials: tuple[str, ...], output: str, accept_truncated: bo
         raise InputError(f"{output}: expected a results file other than the model, the trials "
                          "or their truth files (inputs are never modified)")
     loaded = load_checked(model, chosen.form)
+    from fccgrb_cli.io.results import check_output
+
+    check_output(output)
     runs = []
     for path in paths:
-        run = _solve_one(loaded, path, chosen, accept_truncated)
+        run = _solve_one(loaded, path, chosen, accept_truncated, output)
         if len(paths) > 1:
             run = dataclasses.replace(run, name=f"{Path(path).stem}-{run.name}")
         _write_and_show(run, output)
@@ -230,12 +233,15 @@ def solve(model: str, trials: tuple[str, ...], output: str, accept_truncated: bo
         click.echo(subject_report(names, cycles))
 
 
-def _solve_one(model: Model, path: str, options: SolveOptions, accept_truncated: bool) -> Run:
+def _solve_one(model: Model, path: str, options: SolveOptions, accept_truncated: bool,
+               output: str) -> Run:
+    """One trial solved, its largest arrays held on disk beside ``output`` until written."""
     from fccgrb_cli.io.trial import read_trial
     from fccgrb_cli.pipeline import solve_trial
 
     return solve_trial(model, read_trial(path, accept_truncated), options,
-                       progress=Progress(f"solve {options.method} {Path(path).name}"))
+                       progress=Progress(f"solve {options.method} {Path(path).name}"),
+                       spill=Path(output).resolve().parent)
 
 
 def _write_and_show(run: Run, output: str) -> None:

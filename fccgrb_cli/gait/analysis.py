@@ -41,13 +41,22 @@ class GaitResults:
     notes: tuple[str, ...] = ()
 
 
+def landmark_labels(model: Model, trial: Trial) -> dict[str, str]:
+    """The trial's label of each landmark the analysis reads (pelvis, heels, toes) that the model
+    names and the trial has: all of the trial ``analyse_gait`` needs besides its path, rate and
+    frame count."""
+    labels = dict(model.landmarks)
+    wanted = [*PELVIS, *(f"{side}_{name}" for side in SIDES for name in ("heel", *TOES))]
+    found = {landmark: trial.find(labels[landmark]) for landmark in wanted if landmark in labels}
+    return {landmark: label for landmark, label in found.items() if label is not None}
+
+
 def _landmark_markers(model: Model, trial: Trial) -> dict[str, np.ndarray]:
     """Pelvis centre, heels and toes (frames × 3, m) from the model's calibration landmarks."""
-    labels = dict(model.landmarks)
+    labels = landmark_labels(model, trial)
 
     def seen(landmark: str) -> np.ndarray | None:
-        label = labels.get(landmark)
-        found = trial.find(label) if label is not None else None
+        found = labels.get(landmark)
         return trial.select([found])[:, 0] if found is not None else None
 
     out: dict[str, np.ndarray] = {}

@@ -259,8 +259,8 @@ def _parameters(section: bytes, processor: str, text: bool = False) -> dict[str,
                 found[group, name] = Parameter(kind, values, tuple(dims))
             elif text and kind == -1 and len(dims) == n_dims and len(raw) == count:
                 width = dims[0] if n_dims else 1
-                strings = [raw[k:k + width].decode("latin-1").rstrip(" \x00")
-                           for k in range(0, count, max(width, 1))] if count else []
+                strings = [raw[k * width:(k + 1) * width].decode("latin-1").rstrip(" \x00")
+                           for k in range(math.prod(dims[1:]))]
                 found[group, name] = Parameter(kind, np.array(strings, dtype=object),
                                                tuple(dims))
         following = pos + 2 + length + offset

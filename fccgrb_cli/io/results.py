@@ -66,8 +66,9 @@ from fccgrb_cli.dynamics.inverse import InverseDynamics
 from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.atomic import atomic_path
-from fccgrb_cli.io.datasets import put
+from fccgrb_cli.io.datasets import put as put_array
 from fccgrb_cli.io.gait_results import read_gait, write_gait
+from fccgrb_cli.io.spill import StoredArray
 from fccgrb_cli.pipeline import Run
 from fccgrb_cli.solvers.quality import BITS
 from fccgrb_cli.solvers.result import KinematicResult
@@ -100,26 +101,37 @@ def _versions() -> dict[str, str]:
     return out
 
 
+def check_output(path: str | Path) -> None:
+    """An InputError unless ``path`` is absent or a results file of this format (``fccgrb solve``
+    asks before solving, so that a long solve is not lost to an output it cannot write)."""
+    import h5py
+
+    path = Path(path)
+    if not path.exists():
+        return
+    try:
+        with h5py.File(path, "r") as h5:
+            version = h5.attrs.get("format_version", FORMAT_VERSION)
+    except OSError:
+        raise InputError(f"{path}: exists and is not an HDF5 results file; "
+                         "choose another output") from None
+    if version != FORMAT_VERSION:
+        raise InputError(f"{path}: written in results format {version}, this fccgrb writes "
+                         f"format {FORMAT_VERSION}; choose another output")
+
+
 def write_run(path: str | Path, run: Run, command: str, cell: dict | None = None) -> None:
     """Add (or replace) one run in the results file, creating it when absent; ``cell`` (a sweep
-    cell's parameters) is kept as the root attribute ``cell`` (JSON)."""
+    cell's parameters) is kept as the root attribute ``cell`` (JSON). Arrays the run holds in a
+    Spill (``io.spill``) are copied from it as stored, and read from the results file after."""
     import h5py
 
     path = Path(path)
     with atomic_path(path) as tmp:
         if path.exists():
-            try:
-                with h5py.File(path, "r"):
-                    pass
-            except OSError:
-                raise InputError(f"{path}: exists and is not an HDF5 results file; "
-                                 "choose another output") from None
+            check_output(path)
             shutil.copyfile(path, tmp)
         with h5py.File(tmp, "a") as h5:
-            if h5.attrs.get("format_version", FORMAT_VERSION) != FORMAT_VERSION:
-                raise InputError(f"{path}: written in results format "
-                                 f"{h5.attrs['format_version']}, this fccgrb writes format "
-                                 f"{FORMAT_VERSION}; choose another output")
             h5.attrs["format_version"] = FORMAT_VERSION
             h5.attrs["model"] = run.model_text
             h5.attrs["command"] = command
@@ -183,6 +195,25 @@ def write_run(path: str | Path, run: Run, command: str, cell: dict | None = None
                 _write_clinical(g, run.clinical)
             if run.gait is not None:
                 write_gait(g, run.gait)
+    for spill in {stored.spill for stored in _stored(run)}:
+        spill.settled(path, f"/runs/{run.name}")
+
+
+def put(group, key: str, values) -> None:
+    """``io.datasets.put``, or for an array held in a Spill its stored dataset as it is."""
+    if isinstance(values, StoredArray):
+        values.copy_to(group, key)
+    else:
+        put_array(group, key, values)
+
+
+def _stored(run: Run) -> list[StoredArray]:
+    """The run's arrays held in a Spill."""
+    holders = [run, run.result]
+    if run.dynamics is not None:
+        holders += [run.dynamics.kinematics, run.dynamics.inverse]
+    return [value for holder in holders for value in vars(holder).values()
+            if isinstance(value, StoredArray)]
 
 
 def _write_clinical(g, c: ClinicalResults) -> None:
