@@ -85,23 +85,26 @@ class Stacked:
 
     # --- coordinates ------------------------------------------------------------------------
     def expand(self, q: np.ndarray) -> np.ndarray:
-        """x = S V q (Eq. 5) of every frame (frames × nx)."""
+        """x = S V q (Eq. 5) of every frame (frames × nx), a block at a time (the columns'
+        copies of a long trial's every frame would be as large as x)."""
         lay = self.system.layout
         x = np.empty((len(q), lay.nx))
-        x[:, lay.copy_x] = q[:, lay.copy_q]
-        if len(lay.reduced_w):
-            x[:, lay.reduced_w] = np.cross(q[:, lay.reduced_u], q[:, lay.reduced_v])
+        for b in blocks(len(q)):
+            x[b, lay.copy_x] = q[b, lay.copy_q]
+            if len(lay.reduced_w):
+                x[b, lay.reduced_w] = np.cross(q[b, lay.reduced_u], q[b, lay.reduced_v])
         return x
 
     def expand_rate(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """ẋ = X_q q̇ of every frame."""
+        """ẋ = X_q q̇ of every frame, a block at a time."""
         lay = self.system.layout
         xd = np.empty((len(q), lay.nx))
-        xd[:, lay.copy_x] = qd[:, lay.copy_q]
-        if len(lay.reduced_w):
-            u, v = q[:, lay.reduced_u], q[:, lay.reduced_v]
-            ud, vd = qd[:, lay.reduced_u], qd[:, lay.reduced_v]
-            xd[:, lay.reduced_w] = np.cross(ud, v) + np.cross(u, vd)
+        for b in blocks(len(q)):
+            xd[b, lay.copy_x] = qd[b, lay.copy_q]
+            if len(lay.reduced_w):
+                u, v = q[b, lay.reduced_u], q[b, lay.reduced_v]
+                ud, vd = qd[b, lay.reduced_u], qd[b, lay.reduced_v]
+                xd[b, lay.reduced_w] = np.cross(ud, v) + np.cross(u, vd)
         return xd
 
     def expand_jacobian(self, q: np.ndarray) -> np.ndarray | None:
