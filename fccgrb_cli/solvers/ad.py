@@ -185,12 +185,17 @@ def solve_ad_batched(system: System, time: np.ndarray, theta: np.ndarray, theta_
 def _result(system: System, time: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
             drives: Drives, phi: np.ndarray, iterations: np.ndarray, seconds: np.ndarray,
             converged: np.ndarray, tol: float) -> KinematicResult:
-    """The AD run's KinematicResult, with ‖Φ‖ and max |topological Φ| per frame."""
+    """The AD run's KinematicResult, with ‖Φ‖ and max |topological Φ| per frame (a block of
+    frames at a time: a long trial's frames × rows temporaries would each be as large as Φ)."""
     topology = system.masks()["topology"]
-    phi_top = np.abs(phi[:, topology]).max(axis=1) if topology.any() else np.zeros(len(q))
+    phi_norm, phi_top = np.empty(len(q)), np.zeros(len(q))
+    for b in blocks(len(q)):
+        phi_norm[b] = np.linalg.norm(phi[b], axis=1)
+        if topology.any():
+            phi_top[b] = np.abs(phi[b][:, topology]).max(axis=1)
     return KinematicResult(
         method="ad", tol=tol, time=np.asarray(time, dtype=float), q=q, qd=qd, qdd=qdd,
         theta=drives.theta, theta_d=drives.theta_d, theta_dd=drives.theta_dd,
         angle_names=tuple(a.name for a in system.model.angles), iterations=iterations,
-        time_s=seconds, phi_norm=np.linalg.norm(phi, axis=1), phi_top_max=phi_top,
+        time_s=seconds, phi_norm=phi_norm, phi_top_max=phi_top,
         converged=converged)
