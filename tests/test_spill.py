@@ -146,14 +146,17 @@ def test_points_and_distances_by_blocks_equal_all_frames_at_once() -> None:
     which = [(tp.body, tp.point) for tp in run.model.tracked_points]
     whole = points_along(system, run.result.q, which, block=len(trial.markers))
     assert np.array_equal(points_along(system, run.result.q, which, block=7), whole)
-    # each point from its body's own frame (Eq. 2): r + l1 u + l2 v + l3 w, frame 123
-    body, point = which[4]
-    coordinates = run.result.q[123, system.layout.q_slice(body)].reshape(-1, 3)
-    r, u, v = coordinates[:3]
-    w = coordinates[3] if len(coordinates) == 4 else np.cross(u, v)  # a reduced body: w = u × v
-    local = run.model.body(body).points[point].local
-    assert np.allclose(whole[123, 4], r + local[0] * u + local[1] * v + local[2] * w,
-                       atol=1e-15)
+    # each point from its body's own frame (Eq. 2): r + l1 u + l2 v + l3 w, at frame 123
+    locals_ = []
+    for k, (body, point) in enumerate(which):
+        coordinates = run.result.q[123, system.layout.q_slice(body)].reshape(-1, 3)
+        r, u, v = coordinates[:3]
+        w = coordinates[3] if len(coordinates) == 4 else np.cross(u, v)  # reduced: w = u × v
+        local = run.model.body(body).points[point].local
+        locals_.append(local)
+        assert np.allclose(whole[123, k], r + local[0] * u + local[1] * v + local[2] * w,
+                           rtol=0, atol=1e-15)
+    assert (np.abs(locals_) > 0).any(axis=0).all()  # every term of Eq. 2 is exercised
     reference = run.reference
     assert np.array_equal(distances(whole, reference, block=7),
                           np.linalg.norm(whole - reference, axis=2))
@@ -207,3 +210,33 @@ def test_a_tracked_vector_reads_its_markers_from_the_lighter_trial(tmp_path: Pat
     spilled = solve_trial(model, trial, options, spill=tmp_path)
     assert np.array_equal(np.asarray(spilled.result.q), plain.result.q)
     assert np.array_equal(spilled.result.theta, plain.result.theta)
+
+
+def test_the_dynamics_stage_by_blocks_of_frames(monkeypatch) -> None:
+    """x, ẋ (Stacked.expand, expand_rate) and ‖Φ‖, max |Φ_top| (ad._result) go a block of
+    frames at a time: with blocks of 7 over 50 frames they equal the per-frame x (Eq. 5), the
+    central difference of x along q̇, and the reductions of all frames at once, bit for bit
+    where nothing but the blocks changed (a block skipped or shifted leaves frames unset)."""
+    from fccgrb_cli.solvers import batched
+    from fccgrb_cli.solvers.ad import _result, stacked_drives
+
+    system = compile_system(fc.load_model(FIVE_BAR).with_form("reduced"), angles="driver")
+    assert len(system.layout.reduced_w)
+    rng = np.random.default_rng(3)
+    n = 50
+    q, qd = rng.normal(size=(2, n, system.nq))
+    phi = rng.normal(size=(n, system.n_rows))
+    monkeypatch.setattr(batched, "BLOCK", 7)
+    stacked = batched.Stacked(system)
+    assert np.array_equal(stacked.expand(q), [system.layout.expand(f) for f in q])
+    h = 1e-6
+    central = (stacked.expand(q + h * qd) - stacked.expand(q - h * qd)) / (2 * h)
+    assert np.allclose(stacked.expand_rate(q, qd), central, rtol=0, atol=1e-8)
+    theta = np.zeros((n, len(system.model.angles)))
+    result = _result(system, np.arange(n) / 100.0, q, qd, qd,
+                     stacked_drives(system, theta, theta, theta, None), phi,
+                     np.zeros(n, dtype=int), np.zeros(n), np.ones(n, dtype=bool), 1e-10)
+    topology = system.masks()["topology"]
+    assert topology.any()
+    assert np.array_equal(result.phi_norm, np.linalg.norm(phi, axis=1))
+    assert np.array_equal(result.phi_top_max, np.abs(phi[:, topology]).max(axis=1))
