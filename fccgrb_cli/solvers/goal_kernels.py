@@ -1,8 +1,7 @@
 """Goal attainment's active-set SQP (solvers/goal_sqp.py) in the compiled kernels: the same
 iteration on :class:`~fccgrb_cli.system.sparse.SparseSystem`, N = Φ_top,qᵀΦ_top,q + δρI (+ δH)
 factored inside its envelope, N⁻¹Gᵀ by substitution, and the working-set rounds on small dense
-systems, with a loop over frames that hands back to Python as the CNO-SQP's does
-(kernels.solve_frames_sqp)."""
+systems (the loop over frames: optimizer_kernels.solve_frames)."""
 
 from __future__ import annotations
 
@@ -13,8 +12,6 @@ from fccgrb_cli.solvers.frame_problem import ED_SMOOTHING
 from fccgrb_cli.solvers.goal_sqp import (
     ACTIVE,
     CEILING,
-    FAR,
-    MAX_ITER,
     MAX_SWAPS,
     PROX,
     PROX_MIN_TC,
@@ -24,20 +21,12 @@ from fccgrb_cli.solvers.goal_sqp import (
     VALLEY,
 )
 from fccgrb_cli.solvers.kernels import (
-    DONE,
-    NEED_FALLBACK,
-    NEED_GUESS,
-    _statistics,
-    _warm_start,
     add_hessian,
     cholesky,
-    gauss_newton,
     jacobian,
     normal_equations,
-    pushed,
     residual,
     substitute,
-    workspace,
 )
 from fccgrb_cli.solvers.sqp import DELTA, FEASIBLE_TOP
 from fccgrb_cli.system.sparse import SparseSystem
@@ -377,66 +366,3 @@ def goal_frame(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, present: np.nda
             q[i] += step[i]
         gamma += d_gamma
     return max_iter, False
-
-
-@njit(cache=True)
-def solve_frames_goal(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
-                      point_weights: np.ndarray, nrm_w: np.ndarray, lower: np.ndarray,
-                      upper: np.ndarray, ed: bool, tol: float, max_iter: int,
-                      extrapolate: bool, start: int, stop: int, guess: np.ndarray,
-                      use_guess: bool, history: np.ndarray, state: np.ndarray,
-                      q_all: np.ndarray, iterations: np.ndarray, phi_norm: np.ndarray,
-                      phi_top: np.ndarray, converged: np.ndarray) -> tuple[int, int]:
-    """kernels.solve_frames_sqp's loop with goal attainment per frame."""
-    n_rows, nq = len(s.c_const) + len(s.dot_c), s.nq
-    n_points = targets.shape[1]
-    ws = workspace(s, n_rows)
-    gw = goal_workspace(s, n_points)
-    normals = np.zeros(4 * n_points)
-    w_nrm = np.empty(n_rows)
-    active = np.empty(n_rows)
-    present = np.zeros(n_points, dtype=np.bool_)
-    y = np.empty((n_points, 3))
-    q0 = np.empty(nq)
-    q = np.empty(nq)
-    start_q = np.empty(nq)
-    F = np.empty(len(s.f0))
-    phi = np.empty(n_rows)
-    for f in range(start, stop):
-        count = state[0]
-        if not _warm_start(use_guess and f == start, guess, history, count, count,
-                           extrapolate, q0):
-            return f, NEED_GUESS
-        for r in range(n_rows):
-            active[r] = 1.0
-        for t in range(n_points):
-            gone = missing[f, t]
-            present[t] = not gone and point_weights[t] > 0.0
-            for d in range(3):
-                y[t, d] = 0.0 if gone else targets[f, t, d]
-                active[s.trk_start + 3 * t + d] = 0.0 if gone else 1.0
-        residual(s, q0, q0[s.nb:], y, F, phi)
-        before = 0
-        violation = 0.0
-        for r in s.top_rows:
-            violation = max(violation, abs(phi[r]))
-        start_q[:] = q0
-        if violation > FAR:  # a guess far off the constraints: NRM-WLS first
-            for r in range(n_rows):
-                w_nrm[r] = nrm_w[r] * active[r]
-            before, _ = gauss_newton(s, q0, y, w_nrm, tol, min(max_iter, 50), 2, q, ws)
-            start_q[:] = q
-        k, ok = goal_frame(s, start_q, y, present, point_weights, ed, tol,
-                           min(max_iter, MAX_ITER), q, ws, gw, normals)
-        k += before
-        converged[f] = ok
-        for i in range(nq):
-            ok = ok and lower[i] <= q[i] <= upper[i]
-        q_all[f] = q
-        iterations[f] = k
-        if not ok:
-            guess[:] = q0
-            return f, NEED_FALLBACK
-        state[0] = pushed(history, count, q)
-        phi_norm[f], phi_top[f] = _statistics(s, q, y, active, F, phi)
-    return stop, DONE

@@ -21,7 +21,6 @@ from numba import njit
 from fccgrb_cli.solvers.newton import LARGE, NEAR, ROUNDING, SLOW
 from fccgrb_cli.solvers.sqp import (
     DELTA,
-    FAR,
     FEASIBLE_TOP,
     KAPPA,
     MU_END,
@@ -29,7 +28,6 @@ from fccgrb_cli.solvers.sqp import (
     TAU,
     THETA,
 )
-from fccgrb_cli.solvers.sqp import MAX_ITER as MAX_SQP
 from fccgrb_cli.system.sparse import SparseSystem
 
 DONE, NEED_GUESS, NEED_RANK, NEED_FALLBACK = 0, 1, 2, 3
@@ -485,76 +483,6 @@ def _barrier_advance(q: np.ndarray, step: np.ndarray, lower: np.ndarray, upper: 
             d = step[i] if side == 0 else -step[i]
             z[side, i] += alpha_z * (mu - z[side, i] * slack - z[side, i] * d) / slack
     return alpha
-
-
-@njit(cache=True)
-def solve_frames_sqp(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
-                     point_weights: np.ndarray, nrm_w: np.ndarray, lower: np.ndarray,
-                     upper: np.ndarray, interior: bool, tol: float, max_iter: int,
-                     extrapolate: bool, start: int, stop: int,
-                     guess: np.ndarray, use_guess: bool, history: np.ndarray, state: np.ndarray,
-                     q_all: np.ndarray, iterations: np.ndarray, phi_norm: np.ndarray,
-                     phi_top: np.ndarray, converged: np.ndarray) -> tuple[int, int]:
-    """Frames ``start`` to ``stop`` of the sequential CNO-SQP (optimize._run_frames with the
-    stabilized SQP; with ``interior``, its interior point): each from the quadratic
-    extrapolation of up to 3 solutions (``history``, ``state[0]`` of them). Returns (frame,
-    DONE | NEED_GUESS | NEED_FALLBACK): a frame the kernel cannot solve within the bounds goes
-    back to Python (SLSQP or trust-constr) with its guess in ``guess``, the kernel's iterate in
-    ``q_all``, its iterations and whether it converged (outside the bounds) in ``converged``."""
-    n_rows, nq = len(s.c_const) + len(s.dot_c), s.nq
-    ws = workspace(s, n_rows)
-    w = np.empty(n_rows)
-    w_nrm = np.empty(n_rows)
-    start_q = np.empty(s.nq)
-    active = np.empty(n_rows)
-    y = np.empty((targets.shape[1], 3))
-    q0 = np.empty(nq)
-    q = np.empty(nq)
-    F = np.empty(len(s.f0))
-    phi = np.empty(n_rows)
-    z = np.zeros((2, nq))
-    for r in range(n_rows):
-        w[r] = 0.0
-        active[r] = 1.0
-    for r in s.top_rows:
-        w[r] = 1.0
-    for f in range(start, stop):
-        count = state[0]
-        if not _warm_start(use_guess and f == start, guess, history, count, count,
-                           extrapolate, q0):
-            return f, NEED_GUESS
-        for t in range(targets.shape[1]):
-            gone = missing[f, t]
-            for d in range(3):
-                row = s.trk_start + 3 * t + d
-                y[t, d] = 0.0 if gone else targets[f, t, d]
-                w[row] = 0.0 if gone else 2.0 * DELTA * point_weights[t]
-                active[row] = 0.0 if gone else 1.0
-        residual(s, q0, q0[s.nb:], y, F, phi)
-        before = 0
-        violation = 0.0
-        for r in s.top_rows:
-            violation = max(violation, abs(phi[r]))
-        start_q[:] = q0
-        if violation > FAR:  # a guess far off the constraints: NRM-WLS first (optimize.py)
-            for r in range(n_rows):
-                w_nrm[r] = nrm_w[r] * active[r]
-            before, _ = gauss_newton(s, q0, y, w_nrm, tol, min(max_iter, 50), 2, q, ws)
-            start_q[:] = q
-        k, ok = stabilized_sqp(s, start_q, y, w, tol, min(max_iter, MAX_SQP), q, ws, lower,
-                               upper, interior, z)
-        k += before
-        converged[f] = ok
-        for i in range(nq):
-            ok = ok and lower[i] <= q[i] <= upper[i]
-        q_all[f] = q
-        iterations[f] = k
-        if not ok:
-            guess[:] = q0
-            return f, NEED_FALLBACK
-        state[0] = pushed(history, count, q)
-        phi_norm[f], phi_top[f] = _statistics(s, q, y, active, F, phi)
-    return stop, DONE
 
 
 @njit(cache=True)

@@ -11,13 +11,14 @@ from collections.abc import Callable
 
 import numpy as np
 
-from fccgrb_cli.solvers import goal_kernels, kernels
+from fccgrb_cli.solvers import kernels, optimizer_kernels
 from fccgrb_cli.solvers.frame_problem import FrameProblem
 from fccgrb_cli.solvers.initial import initial_guess
 from fccgrb_cli.solvers.newton import Iterate
 from fccgrb_cli.solvers.nrm import row_weights
 from fccgrb_cli.solvers.nrm_compiled import BLOCK, sparse_of
 from fccgrb_cli.solvers.optimize import STRUCTURED, FrameRecord, Settings, solve_frame
+from fccgrb_cli.solvers.optimizer_kernels import KINDS
 from fccgrb_cli.system import System
 
 SQP_HISTORY = 3
@@ -41,18 +42,15 @@ def run_frames_compiled(system: System, settings: Settings, targets: np.ndarray,
     history, state = np.zeros((SQP_HISTORY, nq)), np.zeros(1, dtype=np.int64)
     fallback: dict[int, FrameRecord] = {}
     done = STRUCTURED[settings.method][1]
-    if settings.method.startswith("mo"):
-        frames, flag = goal_kernels.solve_frames_goal, settings.method == "mo-ed"
-    else:
-        frames, flag = kernels.solve_frames_sqp, settings.method == "cno-ip"
     guess, use_guess = initial_guess(system, targets[0]), True
     f = 0
     while f < n:
         started = clock.perf_counter()
-        g, reason = frames(
-            s, targets, missing, weights, nrm_weights, lower, upper, flag, settings.tol,
-            settings.max_iter, settings.warm_start != "previous", f, min(n, f + BLOCK), guess,
-            use_guess, history, state, q_all, iterations, phi_norm, phi_top, converged)
+        g, reason = optimizer_kernels.solve_frames(
+            s, KINDS[settings.method], targets, missing, weights, nrm_weights, lower, upper,
+            settings.tol, settings.max_iter, settings.warm_start != "previous", f,
+            min(n, f + BLOCK), guess, use_guess, history, state, q_all, iterations, phi_norm,
+            phi_top, converged)
         if g > f:
             seconds[f:g] = (clock.perf_counter() - started) / (g - f)
         use_guess = False
