@@ -380,8 +380,8 @@ def stabilized_sqp(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, w: np.ndarr
                    interior: bool, z: np.ndarray) -> tuple[int, bool]:
     """One frame of fccgrb_cli.solvers.sqp.stabilized_sqp (``w`` from sqp_weights); with
     ``interior``, its interior point on ``lower`` ≤ q ≤ ``upper`` (sqp.Barrier), the bound
-    multipliers z_l, z_u in ``z`` (2 × nq, 0 where unbounded). The iterate is left in ``q``;
-    returns (iterations, converged)."""
+    multipliers z_l, z_u in ``z`` (4 × nq: z_l, z_u, 0 where unbounded, and their steps).
+    The iterate is left in ``q``; returns (iterations, converged)."""
     n_rows, nq = len(w), s.nq
     F, phi, values, shifted, shift, N, L, g, step_p, step, _ = ws
     q[:] = q0
@@ -460,28 +460,26 @@ def _negated_with_barrier(s: SparseSystem, q: np.ndarray, lower: np.ndarray, upp
 @njit(cache=True)
 def _barrier_advance(q: np.ndarray, step: np.ndarray, lower: np.ndarray, upper: np.ndarray,
                      z: np.ndarray, mu: float) -> float:
-    """sqp.Barrier.advance: the bound multipliers' update and the primal step length."""
+    """sqp.Barrier.advance: the bound multipliers' update (their steps in z[2:]) and the
+    primal step length."""
     alpha, alpha_z = 1.0, 1.0
     for side in range(2):
         for i in range(len(q)):
             bound = lower[i] if side == 0 else upper[i]
+            z[2 + side, i] = 0.0
             if not np.isfinite(bound):
                 continue
             slack = q[i] - bound if side == 0 else bound - q[i]
             d = step[i] if side == 0 else -step[i]
             dz = (mu - z[side, i] * slack - z[side, i] * d) / slack
+            z[2 + side, i] = dz
             if d < 0.0:
                 alpha = min(alpha, -TAU * slack / d)
             if dz < 0.0:
                 alpha_z = min(alpha_z, -TAU * z[side, i] / dz)
     for side in range(2):
         for i in range(len(q)):
-            bound = lower[i] if side == 0 else upper[i]
-            if not np.isfinite(bound):
-                continue
-            slack = q[i] - bound if side == 0 else bound - q[i]
-            d = step[i] if side == 0 else -step[i]
-            z[side, i] += alpha_z * (mu - z[side, i] * slack - z[side, i] * d) / slack
+            z[side, i] += alpha_z * z[2 + side, i]
     return alpha
 
 
@@ -739,19 +737,27 @@ def _frame_multipliers(s: SparseSystem, values: np.ndarray, L: np.ndarray, f: in
     power[f] = work
     for p in range(nq):
         rhs[p] = total[s.perm[p]]
-    substitute(s.first, L, rhs, y)
-    n_rows = lam.shape[1]
-    for r in range(n_rows):
+    misfit[f] = _min_norm_multipliers(s, values, L, rhs, lam[f], y)
+    solved[f] = True
+
+
+@njit(cache=True)
+def _min_norm_multipliers(s: SparseSystem, values: np.ndarray, L: np.ndarray, rhs: np.ndarray,
+                          lam: np.ndarray, work: np.ndarray) -> float:
+    """λ = Φ_q (Φ_qᵀΦ_q)⁻¹ rhs into ``lam`` on the factor L of Φ_qᵀΦ_q (rhs in factor order):
+    the solution of Φ_qᵀλ = rhs for a square Φ_q, the minimum-norm one for a taller Φ_q of
+    full column rank; returns the misfit ‖Φ_qᵀλ − rhs‖ (``work``: nq of scratch)."""
+    substitute(s.first, L, rhs, work)
+    for r in range(len(lam)):
         acc = 0.0
         for m in range(s.j_ptr[r], s.j_ptr[r + 1]):
-            acc += values[m] * y[s.j_col[m]]
-        lam[f, r] = acc
-    _transposed_product(s, values, lam[f], y)
+            acc += values[m] * work[s.j_col[m]]
+        lam[r] = acc
+    _transposed_product(s, values, lam, work)
     acc = 0.0
-    for p in range(nq):
-        acc += (y[p] - rhs[p]) ** 2
-    misfit[f] = np.sqrt(acc)
-    solved[f] = True
+    for p in range(s.nq):
+        acc += (work[p] - rhs[p]) ** 2
+    return np.sqrt(acc)
 
 
 @njit(cache=True)
@@ -786,7 +792,7 @@ def multipliers_frames(s: SparseSystem, q_all: np.ndarray, rhs: np.ndarray, lam:
     values = np.empty(len(s.j_col))
     N, L = np.zeros((nq, nq)), np.zeros((nq, nq))
     w, zero = np.ones(n_rows), np.zeros(n_rows)
-    g, out, back = np.empty(nq), np.empty(nq), np.empty(nq)
+    g, out = np.empty(nq), np.empty(nq)
     for f in range(len(q_all)):
         features(s, q_all[f], F)
         jacobian(s, q_all[f], F, values)
@@ -796,17 +802,7 @@ def multipliers_frames(s: SparseSystem, q_all: np.ndarray, rhs: np.ndarray, lam:
             continue
         for p in range(nq):
             g[p] = rhs[f, s.perm[p]]
-        substitute(s.first, L, g, out)
-        for r in range(n_rows):
-            total = 0.0
-            for m in range(s.j_ptr[r], s.j_ptr[r + 1]):
-                total += values[m] * out[s.j_col[m]]
-            lam[f, r] = total
-        _transposed_product(s, values, lam[f], back)
-        total = 0.0
-        for p in range(nq):
-            total += (back[p] - g[p]) ** 2
-        misfit[f] = np.sqrt(total)
+        misfit[f] = _min_norm_multipliers(s, values, L, g, lam[f], out)
 
 
 @njit(cache=True)

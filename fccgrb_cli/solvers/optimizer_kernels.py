@@ -51,7 +51,7 @@ def solve_frames(s: SparseSystem, kind: int, targets: np.ndarray, missing: np.nd
     ws = workspace(s, n_rows)
     gw = goal_workspace(s, n_points)
     normals = np.zeros(4 * n_points)
-    z = np.zeros((2, nq))
+    z = np.zeros((4, nq))
     w = np.zeros(n_rows)
     w_nrm = np.empty(n_rows)
     active = np.ones(n_rows)
