@@ -22,8 +22,8 @@ Parts and their blocks:
   the walking trial).
 * ``benchmarks`` (minutes): ``bench-kinematics``, ``bench-optimization``, ``bench-gait``,
   ``bench-dynamics``, ``bench-peers`` (OpenSim's IK beside ours where ``opensim`` is
-  installed), ``bench-long`` (a 10-minute trial under /usr/bin/time -v): the performance
-  tables from benchmarks/*.py.
+  installed), ``bench-long`` (a 10-minute trial under /usr/bin/time -v), ``bench-startup``
+  (whole commands in fresh processes): the performance tables from benchmarks/*.py.
 * ``figures``: ``figures`` (the Figure 8 case: docs/point_P6.png, ed_P6.png, angle_J4_uv.png,
   velocity_P6_x.png via ``fccgrb plot``, and the commands that make them) and ``figure8-seeds``
   (the end point's distance to the truth over three seeds).
@@ -467,6 +467,12 @@ def bench_long(ws: Workspace) -> list[Artifact]:
     return [ReadmeBlock("bench-long", f"```console\n$ {command}\n{out}\n```")]
 
 
+def bench_startup(ws: Workspace) -> list[Artifact]:
+    command = "python benchmarks/startup.py"
+    out = ws.run(command, cwd=ROOT)
+    return [ReadmeBlock("bench-startup", f"```console\n$ {command}\n{out}\n```")]
+
+
 @dataclass(frozen=True)
 class Block:
     name: str
@@ -488,6 +494,7 @@ BLOCKS = {b.name: b for b in (
     Block("bench-dynamics", "benchmarks", bench_dynamics, "README dynamics stage speed"),
     Block("bench-peers", "benchmarks", bench_peers, "README: against OpenSim's IK"),
     Block("bench-long", "benchmarks", bench_long, "README: a 10-minute trial"),
+    Block("bench-startup", "benchmarks", bench_startup, "README: whole commands' wall time"),
     Block("figures", "figures", figures, "docs/*.png of the Figure 8 case and their commands"),
     Block("figure8-seeds", "figures", figure8_seeds, "README: P6's distance over seeds"),
 )}
