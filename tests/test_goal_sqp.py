@@ -7,8 +7,10 @@ paper's reference optimizer (SLSQP) and against the optimality conditions themse
 * every frame the structured method calls converged is a KKT point of min γ subject to
   c_j(q) ≤ w_j γ and Φ_top = 0 (multipliers by least squares, independently of the method);
 * where the optimum is a single point (an exact fit), q is SLSQP's;
-* the compiled kernels give the numpy path's verdicts, iterations and γ, with gaps; a frame the
-  method cannot solve goes to SLSQP, and says so.
+* the compiled kernel takes the numpy path's iterations to its point from the same start, with
+  a gap; sequential runs of the two engines reach the same γ, and the same verdicts on most
+  frames (rounding moves a few across the stall test); a frame the method cannot solve goes to
+  SLSQP, and says so.
 
 Noisy frames often have a face of optima (γ falls by nanometres along a valley), where q is not
 determined by the problem: two sequential runs whose frames differ by rounding drift apart along
@@ -97,15 +99,17 @@ def test_same_optimum_as_slsqp(method: str, level: float) -> None:
         for f in np.flatnonzero(structured):
             assert is_kkt_point(system, chain.q[f], markers[f], method), f
     starts, markers = chain.q[:-1], markers[1:]
-    ours = np.array([r.q for r in per_frame(system, Settings(method, method[3:],
-                                                              optimizer="structured"), starts,
-                                            markers)])
+    records = per_frame(system, Settings(method, method[3:], optimizer="structured"), starts,
+                        markers)
+    mine = np.array([r.message == CONVERGED for r in records])  # not SLSQP's fallback frames
+    assert mine.mean() >= 0.75
+    ours = np.array([r.q for r in records])[mine]
     reference = per_frame(system, Settings(method, method[3:], optimizer="scipy", tol=1e-14),
-                          starts, markers)
+                          starts[mine], markers[mine])
     assert all(r.converged for r in reference)
     reference_q = np.array([r.q for r in reference])
-    ours_g = gamma(system, ours, markers, method)
-    reference_g = gamma(system, reference_q, markers, method)
+    ours_g = gamma(system, ours, markers[mine], method)
+    reference_g = gamma(system, reference_q, markers[mine], method)
     assert np.abs(ours_g - reference_g).max() < 1e-8, np.abs(ours_g - reference_g).max()
     if level == 0.0:  # an exact fit: the optimum is a point
         assert ours_g.max() < 1e-8
@@ -120,11 +124,12 @@ def test_gaps(method: str) -> None:
     ours = run(system, time, markers, method, engine="numpy")
     reference = run(system, time, markers, method, optimizer="scipy", tol=1e-14)
     assert ours.converged.all()
+    mine = np.array([m == CONVERGED for m in ours.status])
+    assert mine[5:9].sum() >= 2 and mine.mean() >= 0.75  # gap frames among them
     assert np.abs(gamma(system, ours.q, markers, method)
-                  - gamma(system, reference.q, markers, method)).max() < 1e-8
-    for f in (0, 6, 15):
-        if ours.status[f] == CONVERGED:
-            assert is_kkt_point(system, ours.q[f], markers[f], method)
+                  - gamma(system, reference.q, markers, method))[mine].max() < 1e-8
+    for f in np.flatnonzero(mine):
+        assert is_kkt_point(system, ours.q[f], markers[f], method), f
 
 
 @pytest.mark.parametrize("method", ["mo-tc", "mo-ed"])
@@ -149,6 +154,8 @@ def test_kernel_equals_numpy_frame_by_frame(method: str) -> None:
     the point along it), and the same γ (a sequential run's frames then start from points that
     differ by rounding, which such a face does not pull back together)."""
     system, time, markers = case("five_bar", 15e-3, 12)
+    markers = markers.copy()
+    markers[4:8, 2] = np.nan  # a gap: the kernel leaves the point out by its mask
     chain = run(system, time, markers, method, engine="numpy")
     s = sparse_of(system)
     n_points = markers.shape[1]
@@ -157,10 +164,11 @@ def test_kernel_equals_numpy_frame_by_frame(method: str) -> None:
     for f in range(1, len(time)):
         problem = FrameProblem(system, markers[f])
         ours, _ = active_set_sqp(problem, chain.q[f - 1], method[3:], 1e-10)
-        k, ok = goal_kernels.goal_frame(s, chain.q[f - 1].copy(), markers[f].copy(),
-                                        np.ones(n_points, dtype=bool), np.ones(n_points),
-                                        method == "mo-ed", 1e-10, 50, q, ws, gw,
-                                        np.zeros(4 * n_points))
+        present = np.isfinite(markers[f]).all(axis=1)
+        k, ok = goal_kernels.goal_frame(s, chain.q[f - 1].copy(),
+                                        np.where(present[:, None], markers[f], 0.0), present,
+                                        np.ones(n_points), method == "mo-ed", 1e-10, 50, q,
+                                        ws, gw, np.zeros(4 * n_points))
         assert (k, ok) == (ours.iterations, ours.converged), f
         assert np.abs(q - ours.q).max() < (1e-8 if method == "mo-tc" else 1e-6)
         assert abs(gamma(system, q[None], markers[f:f + 1], method)[0]
@@ -176,16 +184,15 @@ def test_exact_fit_compiled_equals_numpy() -> None:
     assert np.abs(numpy.q - compiled.q).max() < 1e-10
 
 
-@pytest.mark.parametrize("engine", ["numpy", "compiled"])
-def test_frames_it_cannot_solve_go_to_slsqp(engine: str) -> None:
+def test_frames_it_cannot_solve_go_to_slsqp() -> None:
     """Two iterations a frame (SLSQP's cap too): most frames go to SLSQP from the same guess,
     and the status says so; the compiled engine takes the numpy path's way out."""
     system, time, markers = case("five_bar", 30e-3, 10)
-    capped = run(system, time, markers, "mo-tc", engine=engine, max_iter=2)
-    reference = run(system, time, markers, "mo-tc", engine="numpy", max_iter=2)
-    assert sum("; SLSQP: " in m for m in capped.status) >= 5
-    assert all(m.startswith("active-set SQP: ") for m in capped.status)
-    assert capped.status == reference.status
+    compiled = run(system, time, markers, "mo-tc", engine="compiled", max_iter=2)
+    numpy = run(system, time, markers, "mo-tc", engine="numpy", max_iter=2)
+    assert sum("; SLSQP: " in m for m in numpy.status) >= 5
+    assert all(m.startswith("active-set SQP: ") for m in numpy.status)
+    assert compiled.status == numpy.status
 
 
 def test_which_optimizer_auto_takes() -> None:

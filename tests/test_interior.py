@@ -100,7 +100,6 @@ def test_an_active_bound(cut) -> None:
         assert problem.tc(ours.q[f])[0] <= problem.tc(reference.q[f])[0] + 1e-12
         stationarity, z = bound_kkt(system, ours.q[f], markers[f], i)
         assert stationarity < 1e-8 and z > 1e-6, (f, stationarity, z)
-        assert z > 1e-6
 
 
 @pytest.mark.parametrize("name", ["five_bar", "crank_rocker"])

@@ -103,6 +103,7 @@ def _versions() -> dict[str, str]:
     out = {}
     for name, module in PACKAGES.items():
         loaded = sys.modules.get(module)
+        # click ≥ 8.2 deprecates click.__version__ (a warning on every solve): its dist-info
         version = getattr(loaded, "__version__", None) if module != "click" else None
         out[name] = version if isinstance(version, str) else _installed_version(name, module)
     return out

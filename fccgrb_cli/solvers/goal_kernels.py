@@ -209,61 +209,52 @@ def _working_step(s: SparseSystem, N: np.ndarray, L: np.ndarray, rhs_q: np.ndarr
         for k in range(s.nq):
             total += G[a, k] * u0[k]
         base[a] = total
-    current = np.empty(m + 1)
     _columns(s, L, G, U, M, have, working, n_w, m, col)
-    if not _minimizer(M, base, w, working, n_w, m, K, small_rhs, x, values):
-        return -1, 0.0
-    feasible = True
+    feasible = _minimizer(M, base, w, working, n_w, m, K, small_rhs, x, values)
     for j in range(m):
         feasible = feasible and values[j] <= ACTIVE
-    if feasible:
-        for a in range(n_w + 1):
-            current[a] = x[a]
-        d_gamma = x[n_w]
-    else:
+    if not feasible:  # not a feasible start: restart from the largest constraint
         best = 0
         for j in range(m):
             if base[j] / w[j] > base[best] / w[best]:
                 best = j
         n_w = 1
         working[0] = best
-        d_gamma = base[best] / w[best]
-        current[0] = DELTA / w[best]
         for j in range(m):
-            values[j] = base[j] - w[j] * d_gamma
+            values[j] = base[j] - w[j] * base[best] / w[best]
+    inside = np.zeros(m, dtype=np.bool_)
+    for a in range(n_w):
+        inside[working[a]] = True
     for _ in range(MAX_SWAPS):
         _columns(s, L, G, U, M, have, working, n_w, m, col)
         if not _minimizer(M, base, w, working, n_w, m, K, small_rhs, x, target):
             return -1, 0.0
-        alpha, blocking = 2.0, -1
+        alpha, blocking = np.inf, -1
         for j in range(m):
-            if target[j] > ACTIVE:
+            if target[j] > ACTIVE and not inside[j]:
                 ratio = -values[j] / (target[j] - values[j])
                 if ratio < alpha:
                     alpha, blocking = ratio, j
         if blocking >= 0:
+            if n_w == m:
+                return -1, 0.0
             alpha = min(max(alpha, 0.0), 1.0)
-            for a in range(n_w):
-                current[a] += alpha * (x[a] - current[a])
-            d_gamma += alpha * (x[n_w] - d_gamma)
             for j in range(m):
                 values[j] += alpha * (target[j] - values[j])
             working[n_w] = blocking
-            current[n_w] = 0.0
+            inside[blocking] = True
             n_w += 1
             continue
-        d_gamma = x[n_w]
         for j in range(m):
             values[j] = target[j]
         drop = 0
         for a in range(n_w):
-            current[a] = x[a]
             if x[a] < x[drop]:
                 drop = a
         if x[drop] < -1e-12 * DELTA:
+            inside[working[drop]] = False
             for a in range(drop, n_w - 1):
                 working[a] = working[a + 1]
-                current[a] = current[a + 1]
             n_w -= 1
             continue
         for k in range(s.nq):
@@ -273,7 +264,7 @@ def _working_step(s: SparseSystem, N: np.ndarray, L: np.ndarray, rhs_q: np.ndarr
             zeta[working[a]] = x[a]
             for k in range(s.nq):
                 step[k] -= x[a] * U[working[a], k]
-        return n_w, d_gamma
+        return n_w, x[n_w]
     return -1, 0.0
 
 
@@ -291,11 +282,14 @@ def goal_frame(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, present: np.nda
     slack = np.empty(len(c))
     rhs_q = np.empty(nq)
     trial_zeta = np.empty(len(c))
+    kept = np.empty_like(working)
     q[:] = q0
     shift[:] = 0.0
     residual(s, q, q[s.nb:], ref, F, phi)
     jacobian(s, q, F, values)
     m = _goals(s, phi, values, present, point_w, ed, c, w, G, normals)
+    if m == 0:  # no marker: nothing to attain
+        return 0, False
     best = 0
     for j in range(m):
         if c[j] / w[j] > c[best] / w[best]:
@@ -312,15 +306,13 @@ def goal_frame(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, present: np.nda
         residual(s, q, q[s.nb:], ref, F, phi)
         jacobian(s, q, F, values)
         m = _goals(s, phi, values, present, point_w, ed, c, w, G, normals)
-        violation, worst, least = 0.0, -np.inf, np.inf
+        violation, worst = 0.0, -np.inf
         for r in s.top_rows:
             violation = max(violation, abs(phi[r]))
         for j in range(m):
             slack[j] = c[j] - w[j] * gamma
             worst = max(worst, slack[j])
-            least = min(least, zeta[j])
-        if ((size < tol or settled) and violation <= FEASIBLE_TOP and worst <= ACTIVE
-                and least >= -1e-12 * DELTA):
+        if (size < tol or settled) and violation <= FEASIBLE_TOP and worst <= ACTIVE:
             return k, gamma <= ceiling
         if k == max_iter:
             break
@@ -337,11 +329,12 @@ def goal_frame(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, present: np.nda
         add_hessian(s, q, shift, curved)
         if ed:
             _add_distance_curvature(s, present, values, normals, zeta, curved)
-        kept = working.copy()
+        kept[:] = working
         n_kept = n_w
         n_w, d_gamma = _working_step(s, curved, L, rhs_q, m, slack, working, n_w, gw, step_p,
                                      trial_zeta)
-        if n_w < 0:  # the Lagrangian's curvature is not convex here: Gauss–Newton's
+        exact = n_w >= 0
+        if not exact:  # the Lagrangian's curvature not convex here, or the rounds failed
             working[:] = kept
             n_w, d_gamma = _working_step(s, N, L, rhs_q, m, slack, working, n_kept, gw,
                                          step_p, trial_zeta)
@@ -353,7 +346,7 @@ def goal_frame(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, present: np.nda
             step[s.perm[p]] = step_p[p]
             largest = max(largest, abs(step_p[p]))
         size = max(largest, abs(d_gamma))
-        settled = abs(d_gamma) < tol and rho * largest < STATIONARY
+        settled = exact and abs(d_gamma) < tol and rho * largest < STATIONARY
         stalled = stalled + 1 if size > STALL_RATE * before and abs(d_gamma) < VALLEY else 0
         if not np.isfinite(size) or stalled == STALL:
             return k + 1, False

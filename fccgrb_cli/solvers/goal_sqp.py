@@ -23,9 +23,11 @@ square system, whatever ρ. Where H is not convex (large multipliers, as at an e
 every constraint is active) the iteration uses N without it.
 
 A frame is converged when the step is below tol at a KKT point: Φ_top = 0 to FEASIBLE_TOP,
-every c_j ≤ w_j γ to 1e-12 m, z ≥ 0 (stationarity holds by the subproblem's first row once
-Δq = 0), or when γ moved by less than tol and the proximal term's share of the unregularized
-problem's first-order conditions, ρ‖Δq‖∞ (relative to ∂γ = 1), is below 1e-8. Some noisy
+every c_j ≤ w_j γ to 1e-12 m, z ≥ 0 (the subproblem's multipliers are kept ≥ 0; stationarity
+holds by its first row once Δq = 0), or, after a step with the exact Hessian, when γ moved by
+less than tol and the proximal term's share of the unregularized problem's first-order
+conditions, ρ‖Δq‖∞ (relative to ∂γ = 1), is below 1e-8 (after a step without H the share left
+is (ρI + H)Δq, which ρ‖Δq‖ does not bound). Some noisy
 frames have no such point within reach: the minimax falls along a valley by nanometres per
 millimetre, and the steps keep their length; after STALL steps in a row that shrink by less
 than a quarter while γ moves by less than a micron, the frame is given up. A frame that is not
@@ -127,6 +129,8 @@ def active_set_sqp(problem: FrameProblem, q0: np.ndarray, objective: str, tol: f
     top = problem.top
     q = q0.copy()
     g = goals(problem, q, objective)
+    if len(g.c) == 0:  # no marker: nothing to attain
+        return Iterate(q, 0, False), np.nan
     gamma = float((g.c / g.w).max())
     working = [int(np.argmax(g.c / g.w))]
     zeta = np.zeros(len(g.c))
@@ -139,7 +143,7 @@ def active_set_sqp(problem: FrameProblem, q0: np.ndarray, objective: str, tol: f
         g = goals(problem, q, objective)
         slack = g.c - g.w * gamma
         if ((size < tol or settled) and np.abs(phi[top]).max(initial=0.0) <= FEASIBLE_TOP
-                and slack.max() <= ACTIVE and zeta.min() >= -1e-12 * DELTA):
+                and slack.max() <= ACTIVE):
             return Iterate(q, k, gamma <= ceiling), gamma
         if k == max_iter:
             break
@@ -150,13 +154,14 @@ def active_set_sqp(problem: FrameProblem, q0: np.ndarray, objective: str, tol: f
         rhs_q = -(Jt.T @ (phi[top] + shift[top]))
         curved = N + _curvature(problem, q, shift, g, zeta, objective)
         found = _working_step(curved, rhs_q, g, slack, list(working))
-        if found is None:  # the Lagrangian's curvature is not convex here: Gauss–Newton's
+        exact = found is not None
+        if not exact:  # the Lagrangian's curvature not convex here, or the rounds failed
             found = _working_step(N, rhs_q, g, slack, list(working))
         if found is None:
             return Iterate(q, k + 1, False), gamma
         step, d_gamma, zeta, working = found
         size, before = max(np.abs(step).max(), abs(d_gamma)), size
-        settled = abs(d_gamma) < tol and rho * np.abs(step).max() < STATIONARY
+        settled = exact and abs(d_gamma) < tol and rho * np.abs(step).max() < STATIONARY
         stalled = stalled + 1 if size > STALL_RATE * before and abs(d_gamma) < VALLEY else 0
         if not np.isfinite(size) or stalled == STALL:
             return Iterate(q, k + 1, False), gamma
@@ -173,10 +178,11 @@ def _working_step(N: np.ndarray, rhs_q: np.ndarray, g: Goals, slack: np.ndarray,
     held active is Δq = N⁻¹rhs_q − U_W ζ_W with [[M_WW, w_W], [w_Wᵀ, 0]] [ζ_W; Δγ] =
     [slack_W + G_W N⁻¹rhs_q; δ]. From a feasible point (``working``'s own minimizer if it is
     feasible, else Δq = N⁻¹rhs_q with Δγ raising γ to the largest constraint), each round
-    moves towards W's minimizer until a constraint blocks (it joins W) or drops the constraint
-    with the most negative multiplier, until neither is needed. Returns Δq, Δγ, ζ and the
-    final W (``working`` is changed); None if N is not positive definite or the rounds do not
-    settle."""
+    moves towards W's minimizer until a constraint outside W blocks (it joins W) or drops the
+    constraint with the most negative multiplier, until neither is needed (only the constraint
+    values along the way matter: the multipliers and Δγ are the last minimizer's). Returns Δq,
+    Δγ, ζ and the final W (``working`` is changed); None if N is not positive definite, the
+    rounds do not settle or every constraint has joined W."""
     L, info = lapack.dpotrf(N, lower=1)
     if info != 0:
         return None
@@ -198,31 +204,28 @@ def _working_step(N: np.ndarray, rhs_q: np.ndarray, g: Goals, slack: np.ndarray,
         return zeta, d_gamma, base - M[:, A] @ zeta - g.w * d_gamma
 
     try:
-        zeta, d_gamma, values = minimizer(working)
-        if values.max() > ACTIVE:
-            working[:] = [int(np.argmax(base / g.w))]
-            d_gamma = float((base / g.w).max())
-            zeta = np.array([DELTA / g.w[working[0]]])
-            values = base - g.w * d_gamma
+        values = minimizer(working)[2] if working else None
+    except np.linalg.LinAlgError:
+        values = None
+    if values is None or not values.max() <= ACTIVE:  # not a feasible start: restart
+        working[:] = [int(np.argmax(base / g.w))]
+        values = base - g.w * float((base / g.w).max())
+    try:
         for _ in range(MAX_SWAPS):
-            target_zeta, target_gamma, target = minimizer(working)
+            zeta, d_gamma, target = minimizer(working)
             rising = target > ACTIVE
+            rising[working] = False
             if rising.any():
-                alpha = float((-values[rising] / (target[rising] - values[rising])).min())
-                alpha = min(max(alpha, 0.0), 1.0)
-                blocking = int(np.flatnonzero(rising)[np.argmin(
-                    -values[rising] / (target[rising] - values[rising]))])
-                zeta = zeta + alpha * (target_zeta - zeta)
-                d_gamma += alpha * (target_gamma - d_gamma)
+                if len(working) == len(slack):
+                    return None
+                ratios = -values[rising] / (target[rising] - values[rising])
+                alpha = min(max(float(ratios.min()), 0.0), 1.0)
                 values = values + alpha * (target - values)
-                working.append(blocking)
-                zeta = np.append(zeta, 0.0)
+                working.append(int(np.flatnonzero(rising)[np.argmin(ratios)]))
                 continue
-            zeta, d_gamma, values = target_zeta, target_gamma, target
+            values = target
             if zeta.min() < -1e-12 * DELTA:
-                drop = int(np.argmin(zeta))
-                working.pop(drop)
-                zeta = np.delete(zeta, drop)
+                working.pop(int(np.argmin(zeta)))
                 continue
             full = np.zeros(len(slack))
             full[working] = zeta

@@ -26,10 +26,13 @@ CNO-IP is the same iteration with a primal-dual logarithmic barrier on the bound
 (the interior point of FORMULATION §3, as MATLAB's fmincon 'interior-point', on this linear
 algebra): bound multipliers z_l, z_u with z·s = μ on the slacks s_l = q − l, s_u = u − q; the
 Newton step adds Σ = Z_l S_l⁻¹ + Z_u S_u⁻¹ to the Hessian's diagonal and μ S_l⁻¹ − μ S_u⁻¹ to
-the right-hand side (scaled by δ in the eliminated system), takes the largest step keeping
-99.5 % of each slack and bound multiplier (fraction to the boundary), and lowers μ after every
-iteration by IPOPT's superlinear rule μ ← max(μ_end, min(κμ, μ^θ)), κ = 0.2, θ = 1.5, from
-μ₀ = 1e-6 to μ_end = 1e-3·tol. The iterate stays strictly inside the bounds; the barrier moves
+the right-hand side (scaled by δ in the eliminated system), takes the largest step that goes
+at most 99.5 % of the way to a bound, for the slacks and the bound multipliers alike (fraction
+to the boundary, τ = 0.995), and lowers μ after every iteration by IPOPT's superlinear update
+μ ← max(μ_end, min(κμ, μ^θ)), κ = 0.2, θ = 1.5, from μ₀ = 1e-6 to μ_end = 1e-3·tol (IPOPT
+waits for each barrier problem to be solved first; here the iteration simply goes on at μ_end
+until the step is below tol, which is where the answer is judged). The iterate stays strictly
+inside the bounds; the barrier moves
 an optimum whose bounds are inactive by about μ_end / (slack · curvature), below tol.
 """
 
