@@ -441,36 +441,33 @@ def bench_optimization(ws: Workspace) -> list[Artifact]:
     return [ReadmeBlock("bench-optimization", "\n".join(lines))]
 
 
+def _bench_console(ws: Workspace, name: str, script: str) -> list[Artifact]:
+    """A README block holding what ``python benchmarks/SCRIPT`` prints, as a console session."""
+    command = f"python benchmarks/{script}"
+    out = ws.run(command, cwd=ROOT)
+    return [ReadmeBlock(name, f"```console\n$ {command}\n{out}\n```")]
+
+
 def bench_gait(ws: Workspace) -> list[Artifact]:
     _need_gait_trial()
-    command = "python benchmarks/gait.py"
-    out = ws.run(command, cwd=ROOT)
-    return [ReadmeBlock("bench-gait", f"```console\n$ {command}\n{out}\n```")]
+    return _bench_console(ws, "bench-gait", "gait.py")
 
 
 def bench_dynamics(ws: Workspace) -> list[Artifact]:
-    command = "python benchmarks/dynamics.py"
-    out = ws.run(command, cwd=ROOT)
-    return [ReadmeBlock("bench-dynamics", f"```console\n$ {command}\n{out}\n```")]
+    return _bench_console(ws, "bench-dynamics", "dynamics.py")
 
 
 def bench_peers(ws: Workspace) -> list[Artifact]:
-    command = "python benchmarks/peers.py"
-    out = ws.run(command, cwd=ROOT)
-    return [ReadmeBlock("bench-peers", f"```console\n$ {command}\n{out}\n```")]
+    return _bench_console(ws, "bench-peers", "peers.py")
 
 
 def bench_long(ws: Workspace) -> list[Artifact]:
     _need_gait_trial()
-    command = "python benchmarks/long_trial.py"
-    out = ws.run(command, cwd=ROOT)
-    return [ReadmeBlock("bench-long", f"```console\n$ {command}\n{out}\n```")]
+    return _bench_console(ws, "bench-long", "long_trial.py")
 
 
 def bench_startup(ws: Workspace) -> list[Artifact]:
-    command = "python benchmarks/startup.py"
-    out = ws.run(command, cwd=ROOT)
-    return [ReadmeBlock("bench-startup", f"```console\n$ {command}\n{out}\n```")]
+    return _bench_console(ws, "bench-startup", "startup.py")
 
 
 @dataclass(frozen=True)
