@@ -52,7 +52,7 @@ if TYPE_CHECKING:
 METHODS = ("cno-sqp", "cno-ip", "mo-tc", "mo-ed")
 PARALLEL_INITS = ("same", "chunks", "nrm")
 REJOINED = 1e-6
-SQP_COMPILED_FROM = 200
+COMPILED_FROM = 200
 STRUCTURED = {method: (name, f"{name}: converged successfully") for method, name in
               (("cno-sqp", "stabilized SQP"), ("cno-ip", "interior point"),
                ("mo-tc", "active-set SQP"), ("mo-ed", "active-set SQP"))}
@@ -244,7 +244,7 @@ def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
     label = settings.method + ("-ed" if settings.method.startswith("cno")
                                and settings.objective == "ed" else "")
     init = settings.init
-    compiled = not settings.parallel and compiled_sqp(system, settings, n)
+    compiled = not settings.parallel and compiled_structured(system, settings, n)
     if compiled:
         from fccgrb_cli.solvers.sqp_compiled import run_frames_compiled
 
@@ -276,9 +276,9 @@ def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
                         tol=settings.tol, messages=messages, wall_s=wall, compiled=compiled)
 
 
-def compiled_sqp(system: System, settings: Settings, n_frames: int) -> bool:
+def compiled_structured(system: System, settings: Settings, n_frames: int) -> bool:
     """Whether the sequential structured optimizer runs in the compiled kernels
-    (nrm.use_kernels), 'auto' from ``SQP_COMPILED_FROM`` frames (its numpy path costs ~1 ms a
+    (nrm.use_kernels), 'auto' from ``COMPILED_FROM`` frames (its numpy path costs ~1 ms a
     frame, so numba's ~0.25 s start pays from a few hundred). MO-ED needs each point's distance
     curvature inside the factor's envelope (goal_kernels.ed_fits)."""
     from fccgrb_cli.system.sparse import supported
@@ -290,7 +290,7 @@ def compiled_sqp(system: System, settings: Settings, n_frames: int) -> bool:
 
         fits = ed_fits(sparse_of(system), len(system.trk_weight))
     return settings.structured and use_kernels(settings.engine, fits, n_frames,
-                                               SQP_COMPILED_FROM)
+                                               COMPILED_FROM)
 
 
 def _parallel(system: System, time: np.ndarray, targets: np.ndarray, settings: Settings,
