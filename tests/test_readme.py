@@ -70,6 +70,14 @@ def test_console_timing_columns_are_ignored_and_the_rest_kept():
     assert not _same(SUMMARY, SUMMARY.replace("(300 frames)", "(299 frames)"))
 
 
+def test_rounding_residues_are_compared_as_such_and_larger_numbers_digit_by_digit():
+    exact = SUMMARY.replace("7.61e-05", "4.44e-16")
+    assert _same(exact, exact.replace("4.44e-16", "6.66e-16"))
+    assert _same(exact, exact.replace("4.44e-16", "2.5e-13"))
+    assert not _same(exact, exact.replace("4.44e-16", "2.5e-12"))  # not rounding any more
+    assert not _same(SUMMARY, SUMMARY.replace("7.61e-05", "7.61e-15"))
+
+
 def test_free_text_and_markdown_timing_are_ignored_and_the_rest_kept():
     text = "AD analysis: 2.98 iterations/frame, 0.225 ms/frame; (39 cells, 41 s)"
     assert _same(text, text.replace("0.225", "0.31").replace("41 s", "177 s"))
