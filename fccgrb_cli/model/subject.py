@@ -1,0 +1,155 @@
+"""A subject's measurements: what a clinical gait model (Plug-in Gait, the Conventional Gait Model
+CGM 1.0) needs besides the markers, per side where the body has two.
+
+SI inside (kg, m, rad). The same quantities come from three places, each read elsewhere into this
+one type: a C3D's ``PROCESSING`` group as Vicon Nexus writes it (``io/processing.py``), a Vicon
+``.vsk`` subject file (``io/vsk.py``), and a model file's ``subject:`` section (the loader).
+Vicon's own spelling (``PIG_KEYS``) names each quantity in both of Vicon's files: lengths in mm,
+angles in rad, the mass in kg; one key per side, ``L``/``R`` + name in a C3D, ``Left``/``Right`` +
+name in a ``.vsk``.
+
+``present`` lists the source's keys that were found and used (its own spelling), so that a
+personalized model can say what it was built from; a quantity the source lacks is None.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+SIDE_NAMES = {"l": "left", "r": "right"}
+
+
+@dataclass(frozen=True)
+class Sided:
+    """One quantity for each side (None where not measured)."""
+
+    left: float | None = None
+    right: float | None = None
+
+    def side(self, s: str) -> float | None:
+        """The value of side ``s`` ('l' or 'r')."""
+        return self.left if s == "l" else self.right
+
+
+@dataclass(frozen=True)
+class Quantity:
+    """How one measurement reads: its Vicon name (without the side prefix), its kind ('length',
+    'angle' or 'mass'), whether it has a value per side, the plausible range in Vicon's units (a
+    value outside it is refused: a typo, or a value in another unit), and whether Vicon writes 0
+    for 'not measured' (then 0 reads as absent and the model computes it)."""
+
+    vicon: str
+    kind: str
+    sided: bool
+    low: float
+    high: float
+    zero_is_absent: bool = False
+
+
+# Field name → how Vicon spells and scales it. Ranges cover children to tall adults (mm, rad, kg).
+PIG_KEYS: dict[str, Quantity] = {
+    "body_mass": Quantity("Bodymass", "mass", False, 1.0, 400.0, True),
+    "height": Quantity("Height", "length", False, 300.0, 2600.0, True),
+    "marker_diameter": Quantity("MarkerDiameter", "length", False, 0.0, 50.0),
+    "inter_asis_distance": Quantity("InterAsisDistance", "length", False, 50.0, 500.0, True),
+    "leg_length": Quantity("LegLength", "length", True, 200.0, 1500.0, True),
+    "knee_width": Quantity("KneeWidth", "length", True, 20.0, 250.0, True),
+    "ankle_width": Quantity("AnkleWidth", "length", True, 15.0, 200.0, True),
+    "asis_trochanter_distance": Quantity("AsisTrocanterDistance", "length", True, 5.0, 250.0,
+                                         True),
+    "sole_delta": Quantity("SoleDelta", "length", True, -100.0, 100.0),
+    "thigh_rotation": Quantity("ThighRotation", "angle", True, -math.pi / 2, math.pi / 2),
+    "shank_rotation": Quantity("ShankRotation", "angle", True, -math.pi / 2, math.pi / 2),
+    "tibial_torsion": Quantity("TibialTorsion", "angle", True, -math.pi / 2, math.pi / 2),
+    "static_plantar_flexion": Quantity("StaticPlantFlex", "angle", True, -math.pi / 2,
+                                       math.pi / 2),
+    "static_rotation_offset": Quantity("StaticRotOff", "angle", True, -math.pi / 2, math.pi / 2),
+}
+VICON_SCALE = {"length": 1e-3, "angle": 1.0, "mass": 1.0}  # Vicon's unit → SI
+
+
+@dataclass(frozen=True)
+class SubjectMeasurements:
+    """A subject's measurements, SI: body mass (kg), height, leg length (ASIS to medial
+    malleolus), knee width (across the femoral epicondyles), ankle width (across the malleoli),
+    the markers' diameter, the inter-ASIS distance, the ASIS–greater trochanter distance, the sole
+    delta (heel minus toe sole thickness of the static trial's shoes), all m; thigh and shank
+    rotation offsets (the thigh and shank wands' angles off the knee and ankle flexion axes) and
+    tibial torsion, rad. ``static_plantar_flexion`` and ``static_rotation_offset`` are the foot
+    offsets a static trial gave Vicon's Plug-in Gait (its results, stored for comparison:
+    calibration computes its own). ``source`` names where the values came from, ``present`` the
+    keys found there."""
+
+    body_mass: float | None = None
+    height: float | None = None
+    marker_diameter: float | None = None
+    inter_asis_distance: float | None = None
+    leg_length: Sided = field(default_factory=Sided)
+    knee_width: Sided = field(default_factory=Sided)
+    ankle_width: Sided = field(default_factory=Sided)
+    asis_trochanter_distance: Sided = field(default_factory=Sided)
+    sole_delta: Sided = field(default_factory=Sided)
+    thigh_rotation: Sided = field(default_factory=Sided)
+    shank_rotation: Sided = field(default_factory=Sided)
+    tibial_torsion: Sided = field(default_factory=Sided)
+    static_plantar_flexion: Sided = field(default_factory=Sided)
+    static_rotation_offset: Sided = field(default_factory=Sided)
+    source: str = ""
+    present: tuple[str, ...] = ()
+
+    def missing(self, names: tuple[str, ...]) -> list[str]:
+        """The Vicon keys of the named quantities not given (per side for sided ones)."""
+        out = []
+        for name in names:
+            value, q = getattr(self, name), PIG_KEYS[name]
+            if isinstance(value, Sided):
+                out += [f"{p}{q.vicon}" for p, s in (("L", "l"), ("R", "r"))
+                        if value.side(s) is None]
+            elif value is None:
+                out.append(q.vicon)
+        return out
+
+
+def vicon_key_names(prefixes: tuple[str, str] = ("L", "R")) -> dict[str, tuple[str, str]]:
+    """Every Vicon key (with ``prefixes`` for the left and right sides) → (field, side), side
+    '' for a quantity of the whole body."""
+    out: dict[str, tuple[str, str]] = {}
+    for name, q in PIG_KEYS.items():
+        if q.sided:
+            out[f"{prefixes[0]}{q.vicon}"] = (name, "l")
+            out[f"{prefixes[1]}{q.vicon}"] = (name, "r")
+        else:
+            out[q.vicon] = (name, "")
+    return out
+
+
+def from_vicon(values: dict[str, float], source: str, fail: Callable[[str, str, float], None],
+               prefixes: tuple[str, str] = ("L", "R")) -> SubjectMeasurements:
+    """Measurements from Vicon's keys and units (``values``: key → number, keys matched without
+    regard to case; others ignored). A value that is not finite or lies outside its plausible
+    range calls ``fail(key, expected, got)``, which raises; 0 where Vicon writes it for 'not
+    measured' reads as absent. ``present`` holds the keys in Vicon's spelling."""
+    by_upper = {k.upper(): v for k, v in values.items()}
+    collected: dict[str, Any] = {}
+    present = []
+    for key, (name, side) in vicon_key_names(prefixes).items():
+        if key.upper() not in by_upper:
+            continue
+        value = by_upper[key.upper()]
+        q = PIG_KEYS[name]
+        unit = {"length": "mm", "angle": "rad", "mass": "kg"}[q.kind]
+        if value == 0 and q.zero_is_absent:
+            continue
+        if not (math.isfinite(value) and q.low <= value <= q.high):
+            fail(key, f"{q.low:g}–{q.high:g} {unit}", value)
+        present.append(key)
+        si = value * VICON_SCALE[q.kind]
+        if side:
+            old = collected.get(name, Sided())
+            collected[name] = replace(old, **{SIDE_NAMES[side]: si})
+        else:
+            collected[name] = si
+    return SubjectMeasurements(**collected, source=source, present=tuple(present))
