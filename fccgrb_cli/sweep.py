@@ -15,7 +15,7 @@ import json
 import shutil
 import time as clock
 from collections.abc import Callable, Iterator
-from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from concurrent.futures import Executor
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -23,6 +23,7 @@ from typing import Any
 
 import yaml
 
+from fccgrb_cli.cells import Job, pending, run_jobs
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.atomic import atomic_path
 from fccgrb_cli.options import SWEEP_KEYS, SolveOptions
@@ -214,47 +215,29 @@ def run_sweep(sweep: Sweep, output: Path, *, workers: int = 1, executor: Executo
     merge every cell into ``output``. Returns (cells run now, cells already done)."""
     store = cells_folder(output)
     store.mkdir(parents=True, exist_ok=True)
-    for cell in sweep.cells:
-        path = store / f"{cell.key}.h5"
-        if path.exists() and not _readable(path):
-            if progress is not None:
-                progress(f"{path.name} is unreadable; running that cell again")
-            path.unlink()
-    todo = [c for c in sweep.cells if not (store / f"{c.key}.h5").exists()]
-    done_before = len(sweep.cells) - len(todo)
-    alone = [c for c in todo if c.get("parallel")]
-    pooled = [c for c in todo if not c.get("parallel")]
+    jobs = [Job(cell.key, store / f"{cell.key}.h5", run_cell, (sweep, cell, store),
+                alone=bool(cell.get("parallel"))) for cell in sweep.cells]
+
+    def forget(path: Path) -> None:
+        if progress is not None:
+            progress(f"{path.name} is unreadable; running that cell again")
+
+    todo = pending(jobs, _readable, forget)
     finished = 0
     started = clock.perf_counter()
 
-    def report(cell: Cell) -> None:
+    def done(job: Job, error: BaseException | None) -> None:
         nonlocal finished
+        if error is not None:
+            raise error
         finished += 1
         if progress is not None:
             progress(f"{finished}/{len(todo)} cells ({clock.perf_counter() - started:.0f} s): "
-                     f"{cell.key}")
+                     f"{job.name}")
 
-    if pooled:
-        own = executor is None and workers > 1
-        pool = ProcessPoolExecutor(max_workers=workers) if own else executor
-        if pool is None:
-            for cell in pooled:
-                run_cell(sweep, cell, store)
-                report(cell)
-        else:
-            try:
-                futures = {pool.submit(run_cell, sweep, cell, store): cell for cell in pooled}
-                for future in as_completed(futures):
-                    future.result()
-                    report(futures[future])
-            finally:
-                if own:
-                    pool.shutdown(cancel_futures=True)
-    for cell in alone:
-        run_cell(sweep, cell, store)
-        report(cell)
+    run_jobs(todo, done, workers=workers, executor=executor)
     merge(sweep, store, output)
-    return len(todo), done_before
+    return len(todo), len(jobs) - len(todo)
 
 
 def _readable(path: Path) -> bool:
