@@ -8,6 +8,7 @@ on which (the same function runs on the same inputs).
 
 from __future__ import annotations
 
+import shutil
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
@@ -28,6 +29,16 @@ class Job:
     function: Callable[..., Any]
     args: tuple = ()
     alone: bool = False
+
+
+def cells_folder(output: Path) -> Path:
+    """Where the finished cells of a command writing ``output`` are kept."""
+    return output.with_name(output.name + ".cells")
+
+
+def remove_cells(output: Path) -> None:
+    """Forget the finished cells of ``output`` (for a clean rerun)."""
+    shutil.rmtree(cells_folder(output), ignore_errors=True)
 
 
 def pending(jobs: Iterable[Job], readable: Callable[[Path], bool],

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from concurrent.futures import Executor
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -414,9 +416,10 @@ def sweep(config: str, output: str | None, workers: int, scheduler: str | None, 
     print tables laid out like the paper's Tables 1 and 2 with the paper's figures beside ours."""
     import time
 
+    from fccgrb_cli.cells import remove_cells
     from fccgrb_cli.io.trial import read_trial
     from fccgrb_cli.report import collect, render
-    from fccgrb_cli.sweep import load_sweep, remove_cells, run_sweep
+    from fccgrb_cli.sweep import load_sweep, run_sweep
 
     spec = load_sweep(config)
     if "file" in spec.trial:  # read once here: a bad trial stops before any cell runs
@@ -431,23 +434,83 @@ def sweep(config: str, output: str | None, workers: int, scheduler: str | None, 
     def progress(text: str) -> None:
         click.echo(f"sweep: {text}", err=True)
 
-    if scheduler is not None:
-        try:
-            from dask.distributed import Client
-        except ImportError:
-            raise InputError("--scheduler: expected dask.distributed; install the 'cluster' "
-                             "extra (pip install 'fccgrb-cli[cluster]')") from None
-        try:
-            client = Client(scheduler, timeout=10)
-        except OSError as exc:
-            raise InputError(f"--scheduler: cannot reach {scheduler} ({exc})") from None
-        with client:
-            ran, kept = run_sweep(spec, out, executor=client.get_executor(), progress=progress)
-    else:
-        ran, kept = run_sweep(spec, out, workers=workers, progress=progress)
+    with cluster_executor(scheduler) as executor:
+        ran, kept = run_sweep(spec, out, workers=workers, executor=executor, progress=progress)
     click.echo(render(*collect(out), fmt=fmt))
     click.echo(f"wrote {out}: {ran} cells run, {kept} already done "
                f"({time.perf_counter() - started:.0f} s)")
+
+
+@contextlib.contextmanager
+def cluster_executor(scheduler: str | None) -> Iterator[Executor | None]:
+    """The executor of the Dask cluster at ``scheduler`` (None: no cluster), closed after."""
+    if scheduler is None:
+        yield None
+        return
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise InputError("--scheduler: expected dask.distributed; install the 'cluster' "
+                         "extra (pip install 'fccgrb-cli[cluster]')") from None
+    try:
+        client = Client(scheduler, timeout=10)
+    except OSError as exc:
+        raise InputError(f"--scheduler: cannot reach {scheduler} ({exc})") from None
+    with client:
+        yield client.get_executor()
+
+
+@main.command()
+@click.argument("study")
+@click.option("-o", "--output", default=None, type=click.Path(dir_okay=False),
+              help="Study results (HDF5) [default: the study's name + .h5 in the current "
+                   "folder]. Finished calibrations and trials are kept in OUTPUT.cells/ so a "
+                   "rerun does only the missing ones.")
+@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Local processes solving trials at once.")
+@click.option("--scheduler", default=None, metavar="ADDRESS",
+              help="Run the calibrations and trials on an existing Dask cluster (e.g. "
+                   "tcp://host:8786) whose workers see the same files; needs the 'cluster' "
+                   "extra.")
+@click.option("--fresh", is_flag=True,
+              help="Forget finished calibrations and trials and do every one again.")
+@ACCEPT_TRUNCATED
+@reports_input_errors
+def batch(study: str, output: str | None, workers: int, scheduler: str | None, fresh: bool,
+          accept_truncated: bool) -> None:
+    """Run a study: calibrate each subject of STUDY (YAML; see the README) once from its static
+    trial, solve every trial, pool the strides per subject and per group, and write one results
+    file; print each subject's and group's spatiotemporal table and the failures.
+
+    A trial or calibration that fails is listed at the end and does not stop the others. Exit
+    status: 0 every trial solved; 1 some failed (the file holds the rest and the failures); 2
+    bad input (the study file, a path or option in it, the output): nothing written."""
+    import time
+
+    from fccgrb_cli.cells import remove_cells
+    from fccgrb_cli.study.batch import Executors, run_study
+    from fccgrb_cli.study.spec import load_study
+    from fccgrb_cli.study.store import check_study_output, read_study
+    from fccgrb_cli.study.tables import study_tables
+
+    spec = load_study(study)
+    out = Path(output or f"{spec.name}.h5")
+    if out.resolve() in {p.resolve() for p in spec.inputs}:
+        raise InputError(f"{out}: expected an output other than the study file, a template or "
+                         "a trial (inputs are never modified)")
+    check_study_output(out)
+    if fresh:
+        remove_cells(out)
+    started = time.perf_counter()
+    progress = Progress("batch", delay=0.0, log_every=0.0, unit="trial", bar=20)
+    with cluster_executor(scheduler) as executor:
+        outcome = run_study(spec, out, Executors(workers, executor),
+                            accept_truncated=accept_truncated, progress=progress)
+    click.echo(study_tables(read_study(out)))
+    click.echo(f"wrote {out}: {outcome.solved} trials solved now, {outcome.kept} already done, "
+               f"{len(outcome.failures)} failed ({time.perf_counter() - started:.0f} s)")
+    if outcome.failures:
+        sys.exit(1)
 
 
 @main.command()

@@ -20,11 +20,15 @@ class Progress:
     the frame, the share done, the time so far and the time left at the pace so far. On a
     terminal one line is rewritten every ``every`` s; into a file or a pipe (a log) a line is
     added every ``log_every`` s, so that a long trial's log stays short (a 10-minute solve:
-    about 60 lines), and a last line when the run ends."""
+    about 60 lines), and a last line when the run ends. ``unit`` names what is counted
+    (frames; a batch's trials); ``bar`` draws a bar of that many characters before it; a third
+    argument ``(done, total, what)`` names the last item done."""
 
     def __init__(self, label: str, delay: float = 1.0, every: float = 0.5,
-                 log_every: float = 10.0):
+                 log_every: float = 10.0, unit: str = "frame", bar: int = 0):
         self.label = label
+        self.unit = unit
+        self.bar = bar
         self.delay = delay
         self.every = every
         self.log_every = log_every
@@ -32,7 +36,7 @@ class Progress:
         self.last = self.start
         self.shown = False
 
-    def __call__(self, done: int, total: int) -> None:
+    def __call__(self, done: int, total: int, what: str = "") -> None:
         now = time.perf_counter()
         finished = done >= total
         terminal = sys.stderr.isatty()
@@ -44,11 +48,13 @@ class Progress:
         self.last = now
         self.shown = True
         elapsed = now - self.start
-        line = f"{self.label}: frame {done}/{total} ({100 * done / max(total, 1):.0f} %, " \
-               f"{_duration(elapsed)}"
+        filled = self.bar * done // max(total, 1)
+        bar = f"[{'#' * filled}{'.' * (self.bar - filled)}] " if self.bar else ""
+        line = f"{self.label}: {bar}{self.unit} {done}/{total} " \
+               f"({100 * done / max(total, 1):.0f} %, {_duration(elapsed)}"
         if not finished and done > 0:
             line += f", ~{_duration(elapsed * (total - done) / done)} left"
-        line += ")"
+        line += ")" + (f" {what}" if what else "")
         if terminal:
             sys.stderr.write(f"\r{line}\033[K" + ("\n" if finished else ""))
         else:

@@ -12,7 +12,6 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
-import shutil
 import time as clock
 from collections.abc import Callable, Iterator
 from concurrent.futures import Executor
@@ -23,7 +22,7 @@ from typing import Any
 
 import yaml
 
-from fccgrb_cli.cells import Job, pending, run_jobs
+from fccgrb_cli.cells import Job, cells_folder, pending, run_jobs
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.atomic import atomic_path
 from fccgrb_cli.options import SWEEP_KEYS, SolveOptions
@@ -252,11 +251,6 @@ def _readable(path: Path) -> bool:
         return False
 
 
-def cells_folder(output: Path) -> Path:
-    """Where the finished cells of a sweep writing ``output`` are kept."""
-    return output.with_name(output.name + ".cells")
-
-
 def merge(sweep: Sweep, store: Path, output: Path) -> None:
     """Copy every cell's file into one HDF5 (``/cells/<key>/``), atomically."""
     import h5py
@@ -276,8 +270,3 @@ def merge(sweep: Sweep, store: Path, output: Path) -> None:
                     target.attrs[key] = value
                 for name in src:
                     src.copy(src[name], target, name=name)
-
-
-def remove_cells(output: Path) -> None:
-    """Forget the finished cells of ``output`` (for a clean rerun)."""
-    shutil.rmtree(cells_folder(output), ignore_errors=True)

@@ -1,4 +1,4 @@
-"""The package versions a results file records (io/results._versions, read without importing
+"""The package versions a results file records (io/results.versions, read without importing
 importlib.metadata on a solve) against importlib.metadata itself and pyproject.toml, whether
 or not the package's module is loaded."""
 
@@ -12,13 +12,13 @@ from pathlib import Path
 
 import pytest
 
-from fccgrb_cli.io.results import PACKAGES, _installed_version, _versions
+from fccgrb_cli.io.results import PACKAGES, _installed_version, versions
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_versions_are_the_installed_ones() -> None:
-    recorded = _versions()
+    recorded = versions()
     assert set(recorded) == set(PACKAGES)
     project = re.search(r'^version = "(.+)"$', (ROOT / "pyproject.toml").read_text(),
                         re.MULTILINE).group(1)
@@ -34,7 +34,7 @@ def test_an_unloaded_package_is_read_from_its_dist_info(name: str) -> None:
 
 
 def test_a_solve_process_does_not_import_importlib_metadata() -> None:
-    code = ("import sys; from fccgrb_cli.io.results import _versions; _versions(); "
+    code = ("import sys; from fccgrb_cli.io.results import versions; versions(); "
             "print('importlib.metadata' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)

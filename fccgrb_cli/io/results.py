@@ -93,7 +93,7 @@ PACKAGES = {"fccgrb-cli": "fccgrb_cli", "numpy": "numpy", "scipy": "scipy", "h5p
             "ezc3d": "ezc3d", "click": "click", "pyyaml": "yaml"}
 
 
-def _versions() -> dict[str, str]:
+def versions() -> dict[str, str]:
     """The versions of the packages a results file was made with: a loaded module's own
     ``__version__``; for one this run did not import (scipy, whose LAPACK is loaded by file:
     fccgrb_cli.blas), the version in its installed dist-info folder's name. importlib.metadata
@@ -162,7 +162,7 @@ def write_run(path: str | Path, run: Run, command: str, cell: dict | None = None
             h5.attrs["format_version"] = FORMAT_VERSION
             h5.attrs["model"] = run.model_text
             h5.attrs["command"] = command
-            h5.attrs["versions"] = json.dumps(_versions())
+            h5.attrs["versions"] = json.dumps(versions())
             h5.attrs["trial"] = run.trial_path
             if cell is not None:
                 h5.attrs["cell"] = json.dumps(cell, sort_keys=True, default=str)

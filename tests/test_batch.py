@@ -1,0 +1,370 @@
+"""``fccgrb batch``: a study of subjects (each calibrated once, every trial solved, strides pooled
+per subject and per group), resumable, with failures collected, on local processes or a Dask
+cluster with the same numbers.
+
+The study here is made without the shared data (``tests/walking.py``: a synthesized walker and
+perturbed copies, two subjects in two groups). Checked against independent computations:
+* resume: a batch killed with SIGKILL after its first trial, run again, solves only the trials
+  that had no file, and its study file equals an uninterrupted run's in every dataset,
+  attribute and link outside ``/timings`` (bit for bit);
+* a Dask ``LocalCluster`` (2 worker processes) through ``--scheduler`` gives that same file;
+* pooling: each subject's mean ± SD cycle and parameters, and each group's mean ± between-subject
+  SD, recomputed here with numpy from the runs' own per-trial cycles in the file;
+* the timings live only under ``/timings`` (the runs' ``time_s`` are links there);
+* failures: a trial that cannot be solved and a subject whose calibration fails are listed,
+  the rest is solved, exit status 1; bad study files are one line, exit 2, nothing written.
+The shared walking trials (Qualisys with the lower-limb template, the Plug-in Gait child with
+the Helen Hayes template) run as one study where ``../shared/data`` is present.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+import yaml
+from cli_helpers import one_error_line, run_cli
+from walking import walking_trials
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED = ROOT.parent / "shared" / "data" / "c3d"
+FCCGRB = str(Path(sys.executable).with_name("fccgrb"))
+TIMINGS = "timings"
+
+
+def study_doc(trials: list[Path]) -> dict:
+    """Two subjects in two groups: A with three trials (one a glob), B with two."""
+    return {
+        "name": "walkers",
+        "template": str(ROOT / "configs" / "models" / "lower_limb.yaml"),
+        "options": {"filter_cutoff": 6},
+        "subjects": [
+            {"name": "A", "group": "control", "static": trials[0].name,
+             "trials": ["walk[12].c3d", trials[2].name], "mass": 70},
+            {"name": "B", "group": "patients", "static": trials[3].name,
+             "trials": [trials[3].name, trials[1].name], "mass": 55.5},
+        ]}
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("study")
+    trials = walking_trials(folder, 4)
+    path = folder / "study.yaml"
+    path.write_text(yaml.safe_dump(study_doc(trials), sort_keys=False), encoding="utf-8")
+    return path
+
+
+@pytest.fixture(scope="module")
+def reference(study: Path) -> Path:
+    """The study run uninterrupted, in this process."""
+    out = study.parent / "reference.h5"
+    started = time.perf_counter()
+    result = run_cli("batch", study, "-o", out)
+    print(f"reference batch: {time.perf_counter() - started:.1f} s")
+    assert result.exit_code == 0, (result.output, result.stderr, result.exception)
+    assert "5 trials solved now, 0 already done, 0 failed" in result.output
+    return out
+
+
+# --- comparing two study files -------------------------------------------------------------
+
+def _attrs(obj) -> dict[str, bytes]:
+    out = {}
+    for key, value in obj.attrs.items():
+        value = np.asarray(value)
+        out[key] = value.tobytes() if value.dtype.kind != "O" else repr(value.tolist()).encode()
+    return out
+
+
+def tree(path: Path) -> dict[str, tuple]:
+    """Every link of a file outside /timings: soft links by their target; groups by their
+    attributes; datasets by dtype, shape, storage layout, filters, bytes and attributes."""
+    out: dict[str, tuple] = {}
+    with h5py.File(path, "r") as h5:
+        out["/"] = ("group", _attrs(h5))
+
+        def visit(name: str) -> None:
+            if name.split("/")[0] == TIMINGS:
+                return
+            link = h5.get(name, getlink=True)
+            if isinstance(link, h5py.SoftLink):
+                out[name] = ("soft", link.path)
+                return
+            obj = h5[name]
+            if isinstance(obj, h5py.Group):
+                out[name] = ("group", _attrs(obj))
+                return
+            data = obj[()]
+            raw = data.tobytes() if np.asarray(data).dtype.kind != "O" else \
+                repr(np.asarray(data).tolist()).encode()
+            out[name] = ("dataset", str(obj.dtype), obj.shape, obj.chunks, obj.compression,
+                         obj.shuffle, raw, _attrs(obj))
+
+        h5.visit_links(visit)
+    return out
+
+
+def assert_same_study(a: Path, b: Path) -> None:
+    ta, tb = tree(a), tree(b)
+    assert sorted(ta) == sorted(tb)
+    different = [name for name in ta if ta[name] != tb[name]]
+    assert not different, different[:10]
+
+
+# --- 1. the study's results ----------------------------------------------------------------
+
+def test_every_trial_is_solved_once_and_the_timings_are_apart(reference: Path) -> None:
+    with h5py.File(reference, "r") as h5:
+        assert h5.attrs["kind"] == "study"
+        assert list(h5["runs"]) == ["A-walk1", "A-walk2", "A-walk3", "B-walk4", "B-walk2"]
+        assert list(h5["subjects"]) == ["A", "B"]
+        assert [h5["subjects"][s].attrs["group"] for s in ("A", "B")] == ["control", "patients"]
+        for name, run in h5["runs"].items():
+            subject = run.attrs["subject"]
+            # the personalized model the run was solved with is its subject's calibration
+            assert run.attrs["model"] == h5["subjects"][subject].attrs["model"]
+            link = run.get("time_s", getlink=True)
+            assert isinstance(link, h5py.SoftLink) and link.path == f"/timings/{name}/time_s"
+            assert np.isnan(run.attrs["wall_s"])
+            assert len(run["time_s"]) == len(run["theta"])  # readers follow the link
+            assert h5[TIMINGS][name].attrs["solve_s"] > 0
+            assert len(h5["errors/where"]) == 0
+        # the two subjects' masses reach their models' inertia
+        for subject, mass in (("A", 70.0), ("B", 55.5)):
+            personal = yaml.safe_load(h5["subjects"][subject].attrs["model"])
+            assert personal["subject"]["mass"] == mass
+            total = sum(b.get("mass", 0.0) for b in personal["bodies"].values())
+            assert 0.3 * mass < total < 0.7 * mass  # pelvis and legs: de Leva's shares
+
+
+def _run_cycles(h5: h5py.File, run: str, side: str) -> tuple[np.ndarray, np.ndarray, list]:
+    c = h5["runs"][run]["gait/cycles"][side]
+    names = [n.decode() if isinstance(n, bytes) else n for n in c["curves"].attrs["names"]]
+    return c["curves"][()], c["trusted"][()], names, c["parameters"][()]
+
+
+def test_pooling_per_subject_and_group_matches_numpy(reference: Path) -> None:
+    """Subject: mean ± SD (n − 1) over every trusted stride of all its trials; group: mean and
+    between-subject SD of the subjects' means; recomputed from each run's own cycles."""
+    with h5py.File(reference, "r") as h5:
+        subject_means: dict[str, dict[str, np.ndarray]] = {}
+        subject_params: dict[str, dict[str, np.ndarray]] = {}
+        for subject in ("A", "B"):
+            runs = [r for r in h5["runs"] if h5["runs"][r].attrs["subject"] == subject]
+            for side in ("left", "right"):
+                parts = [_run_cycles(h5, r, side) for r in runs]
+                curves = np.concatenate([p[0][p[1]] for p in parts])
+                params = np.concatenate([p[3][p[1]] for p in parts])
+                assert len(curves) >= 2
+                stored = h5["subjects"][subject]["cycles"][side]
+                np.testing.assert_allclose(stored["mean"][()], curves.mean(axis=0), rtol=1e-12,
+                                           atol=1e-12)
+                np.testing.assert_allclose(stored["sd"][()], curves.std(axis=0, ddof=1),
+                                           rtol=1e-10, atol=1e-12)
+                table = h5["subjects"][subject]["spatiotemporal"][side]
+                np.testing.assert_allclose(table["mean"][()], params.mean(axis=0), rtol=1e-12)
+                np.testing.assert_allclose(table["sd"][()], params.std(axis=0, ddof=1),
+                                           rtol=1e-10)
+                assert (table["n"][()] == len(params)).all()
+                subject_means.setdefault(subject, {})[side] = curves.mean(axis=0)
+                subject_params.setdefault(subject, {})[side] = params.mean(axis=0)
+        for group, members in (("control", ["A"]), ("patients", ["B"])):
+            g = h5["groups"][group]
+            for side in ("left", "right"):
+                means = np.array([subject_means[m][side] for m in members])
+                np.testing.assert_allclose(g["cycles"][side]["mean"][()], means.mean(axis=0),
+                                           rtol=1e-12, atol=1e-12)
+                assert np.isnan(g["cycles"][side]["sd"][()]).all()  # one subject: no SD
+                np.testing.assert_allclose(g["spatiotemporal"][side]["mean"][()],
+                                           np.mean([subject_params[m][side] for m in members],
+                                                   axis=0), rtol=1e-12)
+
+
+def test_group_of_two_subjects_has_the_between_subject_sd(study: Path, tmp_path: Path) -> None:
+    """Both subjects in one group (the cells of the reference reused: nothing is solved): the
+    group's SD is the SD of the two subjects' means, not of the strides."""
+    doc = yaml.safe_load(study.read_text(encoding="utf-8"))
+    for s in doc["subjects"]:
+        s["group"] = "everyone"
+    one = study.with_name("one_group.yaml")
+    one.write_text(yaml.safe_dump(doc), encoding="utf-8")
+    out = study.parent / "one_group.h5"
+    shutil.copytree(study.parent / "reference.h5.cells", study.parent / "one_group.h5.cells")
+    result = run_cli("batch", one, "-o", out)
+    assert result.exit_code == 0, result.output
+    assert "0 trials solved now, 5 already done" in result.output
+    with h5py.File(out, "r") as h5:
+        g = h5["groups"]["everyone"]
+        assert list(h5["groups"]) == ["everyone"]
+        for side in ("left", "right"):
+            a = h5["subjects/A/cycles"][side]["mean"][()]
+            b = h5["subjects/B/cycles"][side]["mean"][()]
+            np.testing.assert_allclose(g["cycles"][side]["mean"][()], (a + b) / 2, atol=1e-12)
+            np.testing.assert_allclose(g["cycles"][side]["sd"][()], np.abs(a - b) / np.sqrt(2),
+                                       atol=1e-12)
+            pa = h5["subjects/A/spatiotemporal"][side]["mean"][()]
+            pb = h5["subjects/B/spatiotemporal"][side]["mean"][()]
+            np.testing.assert_allclose(g["spatiotemporal"][side]["sd"][()],
+                                       np.abs(pa - pb) / np.sqrt(2), rtol=1e-10, atol=1e-15)
+            assert (g["spatiotemporal"][side]["n"][()] == 2).all()
+
+
+# --- 2. resume after kill -9 ---------------------------------------------------------------
+
+def _trial_cells(out: Path) -> dict[Path, tuple[int, int]]:
+    folder = out.with_name(out.name + ".cells")
+    return {p: (p.stat().st_ino, p.stat().st_mtime_ns) for p in folder.glob("*/*.h5")}
+
+
+def test_killed_batch_resumes_and_equals_an_uninterrupted_run(study: Path, reference: Path
+                                                              ) -> None:
+    out = study.parent / "killed.h5"
+    proc = subprocess.Popen([FCCGRB, "batch", str(study), "-o", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 300
+    while not _trial_cells(out) and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.communicate()
+    assert proc.returncode == -signal.SIGKILL
+    assert not out.exists()
+    before = _trial_cells(out)
+    assert 1 <= len(before) < 5, "kill the batch between its first and its last trial"
+    result = run_cli("batch", study, "-o", out)
+    assert result.exit_code == 0, (result.output, result.stderr)
+    assert f"{5 - len(before)} trials solved now, {len(before)} already done" in result.output
+    after = _trial_cells(out)
+    for path, stamp in before.items():
+        assert after[path] == stamp, f"{path.name} was solved again"
+    assert_same_study(out, reference)
+
+
+def test_rerun_solves_nothing_and_fresh_solves_everything(study: Path, reference: Path) -> None:
+    before = _trial_cells(reference)
+    result = run_cli("batch", study, "-o", reference)
+    assert "0 trials solved now, 5 already done" in result.output
+    assert _trial_cells(reference) == before
+
+
+# --- 3. a Dask cluster ----------------------------------------------------------------------
+
+def test_dask_cluster_gives_the_same_file(study: Path, reference: Path) -> None:
+    distributed = pytest.importorskip("dask.distributed")
+    out = study.parent / "dask.h5"
+    with distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
+                                  dashboard_address=None) as cluster:
+        result = run_cli("batch", study, "-o", out, "--scheduler", cluster.scheduler_address)
+    assert result.exit_code == 0, (result.output, result.stderr)
+    assert "5 trials solved now" in result.output
+    assert_same_study(out, reference)
+
+
+# --- 4. failures and bad input --------------------------------------------------------------
+
+def test_failures_are_collected_and_the_rest_is_solved(study: Path, tmp_path: Path) -> None:
+    folder = study.parent
+    broken = folder / "broken.c3d"
+    broken.write_bytes(b"not a c3d file at all" * 10)
+    doc = yaml.safe_load(study.read_text(encoding="utf-8"))
+    doc["subjects"][0]["trials"].append("broken.c3d")
+    doc["subjects"].append({"name": "C", "static": "broken.c3d", "trials": ["walk1.c3d"]})
+    path = folder / "failing.yaml"
+    path.write_text(yaml.safe_dump(doc), encoding="utf-8")
+    out = folder / "failing.h5"
+    shutil.copytree(folder / "reference.h5.cells", folder / "failing.h5.cells")
+    result = run_cli("batch", path, "-o", out)
+    assert result.exit_code == 1, (result.output, result.stderr)
+    assert "0 trials solved now, 5 already done, 2 failed" in result.output
+    tail = result.output.split("2 failed:")[1]
+    assert "A-broken: " in tail and "C-walk1: not solved: the calibration of C failed" in tail
+    with h5py.File(out, "r") as h5:
+        where = [w.decode() for w in h5["errors/where"][()]]
+        assert where == ["C", "A-broken", "C-walk1"]
+        assert len(h5["runs"]) == 5
+        assert list(h5["subjects/C"].attrs["runs"]) == []
+
+
+BAD = {
+    "no subjects": ({"template": "T"}, "subjects: expected this key"),
+    "unknown key": ({"subjects": [], "bogus": 1}, "bogus: expected one of the keys"),
+    "unknown subject key": ({"subjects": [{"name": "S", "static": "walk1.c3d",
+                                           "trials": "walk1.c3d", "height": 2}]},
+                            "subjects[0].height: expected one of the keys"),
+    "glob matches nothing": ({"subjects": [{"name": "S", "static": "walk1.c3d",
+                                            "trials": ["walk1.c3d", "run*.c3d"]}]},
+                             "subjects[0].trials[1]: expected trial files matching"),
+    "missing static": ({"subjects": [{"name": "S", "static": "nope.c3d",
+                                      "trials": "walk1.c3d"}]},
+                       "subjects[0].static: expected an existing static trial file"),
+    "bad mass": ({"subjects": [{"name": "S", "static": "walk1.c3d", "trials": "walk1.c3d",
+                                "mass": -3}]}, "subjects[0].mass: expected a body mass"),
+    "bad name": ({"subjects": [{"name": "../x", "static": "walk1.c3d",
+                                "trials": "walk1.c3d"}]}, "subjects[0].name: expected a name"),
+    "twice the same name": ({"subjects": [
+        {"name": "S", "static": "walk1.c3d", "trials": "walk1.c3d"},
+        {"name": "S", "static": "walk1.c3d", "trials": "walk2.c3d"}]},
+        "subjects[1].name: expected a name no other subject has"),
+    "bad option": ({"options": {"tol": -1}, "subjects": [
+        {"name": "S", "static": "walk1.c3d", "trials": "walk1.c3d"}]}, "options.tol"),
+    "run name in options": ({"options": {"name": "x"}, "subjects": [
+        {"name": "S", "static": "walk1.c3d", "trials": "walk1.c3d"}]}, "options.name"),
+    "bad measurements": ({"subjects": [{"name": "S", "static": "walk1.c3d",
+                                        "trials": "walk1.c3d", "measurements": "from-vsk"}]},
+                         "subjects[0].measurements: expected from-c3d or a mapping"),
+    "bad frames": ({"subjects": [{"name": "S", "static": "walk1.c3d", "trials": "walk1.c3d",
+                                  "frames": "5:2"}]}, "subjects[0].frames: expected A:B"),
+    "missing map": ({"map": "lab.yaml", "subjects": [
+        {"name": "S", "static": "walk1.c3d", "trials": "walk1.c3d"}]},
+        "map: expected an existing label map file"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_study_is_one_line_and_writes_nothing(study: Path, case: str) -> None:
+    doc, fragment = BAD[case]
+    doc = {"template": str(ROOT / "configs" / "models" / "lower_limb.yaml"), **doc}
+    path = study.parent / "bad.yaml"
+    path.write_text(yaml.safe_dump(doc), encoding="utf-8")
+    out = study.parent / "bad.h5"
+    line = one_error_line(run_cli("batch", path, "-o", out), fragment)
+    assert line.startswith(f"fccgrb: error: {path}: "), line
+    assert not out.exists() and not out.with_name("bad.h5.cells").exists()
+
+
+def test_output_may_not_be_an_input_or_another_file(study: Path) -> None:
+    one_error_line(run_cli("batch", study, "-o", study.parent / "walk1.c3d"),
+                   "expected an output other than")
+    other = study.parent / "not_a_study.h5"
+    with h5py.File(other, "w") as h5:
+        h5.attrs["format_version"] = 2
+    one_error_line(run_cli("batch", study, "-o", other), "is not a study file")
+
+
+# --- 5. the shared walking trials ----------------------------------------------------------
+
+@pytest.mark.skipif(not (SHARED / "Qualisys.c3d").exists() or
+                    not (SHARED / "plugin_gait" / "HC030A05.c3d").exists(),
+                    reason="../shared/data is absent (a user's clone)")
+def test_the_shared_walking_trials_as_one_study(tmp_path: Path) -> None:
+    """The README's study: Qualisys (calibrated from the walking trial itself, 67 kg) with the
+    lower-limb template and the Plug-in Gait child with the Helen Hayes template, its mass and
+    Davis' widths from its static's PROCESSING group."""
+    study = ROOT / "configs" / "studies" / "shared.yaml"
+    out = tmp_path / "shared.h5"
+    result = run_cli("batch", study, "-o", out)
+    assert result.exit_code == 0, (result.output, result.stderr)
+    with h5py.File(out, "r") as h5:
+        assert list(h5["runs"]) == ["Q01-Qualisys", "HC030-HC030A05"]
+        q = h5["subjects/Q01/spatiotemporal/left"]
+        assert q["n"][0] == 1 and 0.9 < q["mean"][0] < 1.0  # stride time (s), README: 0.945
+        child = yaml.safe_load(h5["subjects/HC030"].attrs["model"])
+        assert abs(child["subject"]["mass"] - 45.8) < 1e-4  # PROCESSING:Bodymass
