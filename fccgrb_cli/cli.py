@@ -507,8 +507,11 @@ def batch(study: str, output: str | None, workers: int, scheduler: str | None, f
         outcome = run_study(spec, out, Executors(workers, executor),
                             accept_truncated=accept_truncated, progress=progress)
     click.echo(study_tables(read_study(out)))
+    failed = outcome.failed_trials
+    calibrations = len(outcome.failures) - failed
     click.echo(f"wrote {out}: {outcome.solved} trials solved now, {outcome.kept} already done, "
-               f"{len(outcome.failures)} failed ({time.perf_counter() - started:.0f} s)")
+               f"{failed} failed" + (f" ({calibrations} calibrations failed)" if calibrations
+                                     else "") + f" ({time.perf_counter() - started:.0f} s)")
     if outcome.failures:
         sys.exit(1)
 
@@ -521,16 +524,50 @@ def batch(study: str, output: str | None, workers: int, scheduler: str | None, f
 @click.option("--table", default=None,
               help="Compare with this table of the paper (table1, table2) [default: the "
                    "sweep's own, none for a solve's results].")
+@click.option("--html", "html_folder", default=None, type=click.Path(file_okay=False),
+              metavar="FOLDER",
+              help="For a study file (fccgrb batch): write the clinical report into FOLDER, "
+                   "index.html for the study and subject-<name>.html per subject, "
+                   "self-contained HTML pages (inline SVG plots; print or save as PDF from a "
+                   "browser).")
+@click.option("--normative", default=None, type=click.Path(dir_okay=False),
+              help="With --html: a CSV of norms (columns variable, percent, mean, sd: curves by "
+                   "clinical name without _l/_r, e.g. knee_flexion, knee_flexion_moment; rows "
+                   "with an empty percent for spatiotemporal parameters, e.g. walking_speed), "
+                   "drawn as grey mean ± sd bands and printed beside the parameters.")
 @reports_input_errors
-def report(results: str, fmt: str, table: str | None) -> None:
+def report(results: str, fmt: str, table: str | None, html_folder: str | None,
+           normative: str | None) -> None:
     """Print the tables of a results or sweep file: per method / variant / tracked points /
     tolerance, the ms/frame, iterations, mean ‖Φ‖, max topological Φ, ED (mm), jump (mm) and
-    failed frames at P0, P7.5 and P30, the paper's figures in brackets where they match."""
+    failed frames at P0, P7.5 and P30, the paper's figures in brackets where they match. For a
+    study file, each subject's and group's spatiotemporal table and the failures; with --html,
+    the clinical report."""
     from fccgrb_cli.report import collect, render
+    from fccgrb_cli.study.store import is_study
 
+    study = is_study(results)
+    if normative is not None and html_folder is None:
+        raise InputError("--normative: expected with --html (the cycle plots of "
+                         "'fccgrb plot --kind cycles' take it too)")
+    if html_folder is not None:
+        if not study:
+            raise InputError(f"{results}: --html: expected a study file (written by "
+                             "'fccgrb batch')")
+        from fccgrb_cli.clinical_report import write_report
+
+        pages = write_report(results, html_folder, normative)
+        click.echo(f"wrote {html_folder}: {len(pages)} pages ({pages[0].name} for the study, "
+                   f"one per subject)")
+        return
     own, rows = collect(results)
     click.echo(render(table if table is not None else own, rows, fmt=fmt), nl=False)
-    if fmt == "text":
+    if fmt == "text" and study:
+        from fccgrb_cli.study.store import read_study
+        from fccgrb_cli.study.tables import study_tables
+
+        click.echo("\n" + study_tables(read_study(results)))
+    elif fmt == "text":
         from fccgrb_cli.gait.report import gait_report
         from fccgrb_cli.io.gait_results import read_all_gait
 
@@ -579,14 +616,15 @@ def plot(results: str, kind: str, marker: str | None, angle: str | None,
     from fccgrb_cli.plot import draw, load_series, save
 
     if kind == "cycles":
-        from fccgrb_cli.gait.plot import draw_cycles, read_normative
+        from fccgrb_cli.gait.normative import read_norms
+        from fccgrb_cli.gait.plot import draw_cycles
         from fccgrb_cli.io.gait_results import read_all_gait
 
         wanted = _split(runs)
         gaits = {k: g for k, g in read_all_gait(results).items()
                  if not wanted or k in wanted}
         save(draw_cycles(gaits, tuple(a for a in (angle or "").split(",") if a),
-                         read_normative(normative) if normative else None), output)
+                         read_norms(normative).curves if normative else None), output)
         click.echo(f"wrote {output}: cycles for {len(gaits)} runs")
         return
     series = load_series(Path(results), _split(runs))

@@ -32,7 +32,6 @@ import numpy as np
 import pytest
 import yaml
 from cli_helpers import one_error_line, run_cli
-from walking import walking_trials
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "data" / "c3d"
@@ -40,39 +39,9 @@ FCCGRB = str(Path(sys.executable).with_name("fccgrb"))
 TIMINGS = "timings"
 
 
-def study_doc(trials: list[Path]) -> dict:
-    """Two subjects in two groups: A with three trials (one a glob), B with two."""
-    return {
-        "name": "walkers",
-        "template": str(ROOT / "configs" / "models" / "lower_limb.yaml"),
-        "options": {"filter_cutoff": 6},
-        "subjects": [
-            {"name": "A", "group": "control", "static": trials[0].name,
-             "trials": ["walk[12].c3d", trials[2].name], "mass": 70},
-            {"name": "B", "group": "patients", "static": trials[3].name,
-             "trials": [trials[3].name, trials[1].name], "mass": 55.5},
-        ]}
-
-
-@pytest.fixture(scope="module")
-def study(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    folder = tmp_path_factory.mktemp("study")
-    trials = walking_trials(folder, 4)
-    path = folder / "study.yaml"
-    path.write_text(yaml.safe_dump(study_doc(trials), sort_keys=False), encoding="utf-8")
-    return path
-
-
-@pytest.fixture(scope="module")
-def reference(study: Path) -> Path:
-    """The study run uninterrupted, in this process."""
-    out = study.parent / "reference.h5"
-    started = time.perf_counter()
-    result = run_cli("batch", study, "-o", out)
-    print(f"reference batch: {time.perf_counter() - started:.1f} s")
-    assert result.exit_code == 0, (result.output, result.stderr, result.exception)
-    assert "5 trials solved now, 0 already done, 0 failed" in result.output
-    return out
+def cells(out: Path) -> Path:
+    """The batch's cells folder for an output."""
+    return out.with_name(out.name + ".cells")
 
 
 # --- comparing two study files -------------------------------------------------------------
@@ -122,8 +91,8 @@ def assert_same_study(a: Path, b: Path) -> None:
 
 # --- 1. the study's results ----------------------------------------------------------------
 
-def test_every_trial_is_solved_once_and_the_timings_are_apart(reference: Path) -> None:
-    with h5py.File(reference, "r") as h5:
+def test_every_trial_is_solved_once_and_the_timings_are_apart(walking_reference: Path) -> None:
+    with h5py.File(walking_reference, "r") as h5:
         assert h5.attrs["kind"] == "study"
         assert list(h5["runs"]) == ["A-walk1", "A-walk2", "A-walk3", "B-walk4", "B-walk2"]
         assert list(h5["subjects"]) == ["A", "B"]
@@ -152,10 +121,10 @@ def _run_cycles(h5: h5py.File, run: str, side: str) -> tuple[np.ndarray, np.ndar
     return c["curves"][()], c["trusted"][()], names, c["parameters"][()]
 
 
-def test_pooling_per_subject_and_group_matches_numpy(reference: Path) -> None:
+def test_pooling_per_subject_and_group_matches_numpy(walking_reference: Path) -> None:
     """Subject: mean ± SD (n − 1) over every trusted stride of all its trials; group: mean and
     between-subject SD of the subjects' means; recomputed from each run's own cycles."""
-    with h5py.File(reference, "r") as h5:
+    with h5py.File(walking_reference, "r") as h5:
         subject_means: dict[str, dict[str, np.ndarray]] = {}
         subject_params: dict[str, dict[str, np.ndarray]] = {}
         for subject in ("A", "B"):
@@ -189,16 +158,17 @@ def test_pooling_per_subject_and_group_matches_numpy(reference: Path) -> None:
                                                    axis=0), rtol=1e-12)
 
 
-def test_group_of_two_subjects_has_the_between_subject_sd(study: Path, tmp_path: Path) -> None:
-    """Both subjects in one group (the cells of the reference reused: nothing is solved): the
-    group's SD is the SD of the two subjects' means, not of the strides."""
-    doc = yaml.safe_load(study.read_text(encoding="utf-8"))
+def test_group_of_two_subjects_has_the_between_subject_sd(walking_study: Path,
+                                                          walking_reference: Path) -> None:
+    """Both subjects in one group (the reference's cells reused: nothing is solved): the group's
+    SD is the SD of the two subjects' means, not of the strides."""
+    doc = yaml.safe_load(walking_study.read_text(encoding="utf-8"))
     for s in doc["subjects"]:
         s["group"] = "everyone"
-    one = study.with_name("one_group.yaml")
+    one = walking_study.with_name("one_group.yaml")
     one.write_text(yaml.safe_dump(doc), encoding="utf-8")
-    out = study.parent / "one_group.h5"
-    shutil.copytree(study.parent / "reference.h5.cells", study.parent / "one_group.h5.cells")
+    out = walking_study.parent / "one_group.h5"
+    shutil.copytree(cells(walking_reference), cells(out))
     result = run_cli("batch", one, "-o", out)
     assert result.exit_code == 0, result.output
     assert "0 trials solved now, 5 already done" in result.output
@@ -221,14 +191,15 @@ def test_group_of_two_subjects_has_the_between_subject_sd(study: Path, tmp_path:
 # --- 2. resume after kill -9 ---------------------------------------------------------------
 
 def _trial_cells(out: Path) -> dict[Path, tuple[int, int]]:
-    folder = out.with_name(out.name + ".cells")
-    return {p: (p.stat().st_ino, p.stat().st_mtime_ns) for p in folder.glob("*/*.h5")}
+    folder = cells(out)
+    return {p: (p.stat().st_ino, p.stat().st_mtime_ns) for p in folder.glob("*/*.h5")
+            if not p.name.startswith(".")}  # a solve's scratch file is not a cell
 
 
-def test_killed_batch_resumes_and_equals_an_uninterrupted_run(study: Path, reference: Path
-                                                              ) -> None:
-    out = study.parent / "killed.h5"
-    proc = subprocess.Popen([FCCGRB, "batch", str(study), "-o", str(out)],
+def test_killed_batch_resumes_and_equals_an_uninterrupted_run(walking_study: Path,
+                                                              walking_reference: Path) -> None:
+    out = walking_study.parent / "killed.h5"
+    proc = subprocess.Popen([FCCGRB, "batch", str(walking_study), "-o", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 300
     while not _trial_cells(out) and proc.poll() is None and time.monotonic() < deadline:
@@ -239,56 +210,59 @@ def test_killed_batch_resumes_and_equals_an_uninterrupted_run(study: Path, refer
     assert not out.exists()
     before = _trial_cells(out)
     assert 1 <= len(before) < 5, "kill the batch between its first and its last trial"
-    result = run_cli("batch", study, "-o", out)
+    result = run_cli("batch", walking_study, "-o", out)
     assert result.exit_code == 0, (result.output, result.stderr)
     assert f"{5 - len(before)} trials solved now, {len(before)} already done" in result.output
     after = _trial_cells(out)
     for path, stamp in before.items():
         assert after[path] == stamp, f"{path.name} was solved again"
-    assert_same_study(out, reference)
+    assert_same_study(out, walking_reference)
 
 
-def test_rerun_solves_nothing_and_fresh_solves_everything(study: Path, reference: Path) -> None:
-    before = _trial_cells(reference)
-    result = run_cli("batch", study, "-o", reference)
+def test_rerun_solves_nothing(walking_study: Path, walking_reference: Path) -> None:
+    before = _trial_cells(walking_reference)
+    result = run_cli("batch", walking_study, "-o", walking_reference)
     assert "0 trials solved now, 5 already done" in result.output
-    assert _trial_cells(reference) == before
+    assert _trial_cells(walking_reference) == before
 
 
 # --- 3. a Dask cluster ----------------------------------------------------------------------
 
-def test_dask_cluster_gives_the_same_file(study: Path, reference: Path) -> None:
+def test_dask_cluster_gives_the_same_file(walking_study: Path, walking_reference: Path) -> None:
     distributed = pytest.importorskip("dask.distributed")
-    out = study.parent / "dask.h5"
+    out = walking_study.parent / "dask.h5"
     with distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
                                   dashboard_address=None) as cluster:
-        result = run_cli("batch", study, "-o", out, "--scheduler", cluster.scheduler_address)
+        result = run_cli("batch", walking_study, "-o", out, "--scheduler",
+                         cluster.scheduler_address)
     assert result.exit_code == 0, (result.output, result.stderr)
     assert "5 trials solved now" in result.output
-    assert_same_study(out, reference)
+    assert_same_study(out, walking_reference)
 
 
 # --- 4. failures and bad input --------------------------------------------------------------
 
-def test_failures_are_collected_and_the_rest_is_solved(study: Path, tmp_path: Path) -> None:
-    folder = study.parent
+def test_failures_are_collected_and_the_rest_is_solved(walking_study: Path,
+                                                       walking_reference: Path) -> None:
+    folder = walking_study.parent
     broken = folder / "broken.c3d"
     broken.write_bytes(b"not a c3d file at all" * 10)
-    doc = yaml.safe_load(study.read_text(encoding="utf-8"))
+    doc = yaml.safe_load(walking_study.read_text(encoding="utf-8"))
     doc["subjects"][0]["trials"].append("broken.c3d")
     doc["subjects"].append({"name": "C", "static": "broken.c3d", "trials": ["walk1.c3d"]})
     path = folder / "failing.yaml"
     path.write_text(yaml.safe_dump(doc), encoding="utf-8")
     out = folder / "failing.h5"
-    shutil.copytree(folder / "reference.h5.cells", folder / "failing.h5.cells")
+    shutil.copytree(cells(walking_reference), cells(out))
     result = run_cli("batch", path, "-o", out)
     assert result.exit_code == 1, (result.output, result.stderr)
-    assert "0 trials solved now, 5 already done, 2 failed" in result.output
-    tail = result.output.split("2 failed:")[1]
-    assert "A-broken: " in tail and "C-walk1: not solved: the calibration of C failed" in tail
+    assert "0 trials solved now, 5 already done, 2 failed (1 calibrations failed)" in result.output
+    tail = result.output.split("failed (3):")[1]
+    assert "C (calibration): " in tail and "A-broken: " in tail
+    assert "C-walk1: not solved: the calibration of C failed" in tail
     with h5py.File(out, "r") as h5:
         where = [w.decode() for w in h5["errors/where"][()]]
-        assert where == ["C", "A-broken", "C-walk1"]
+        assert where == ["C (calibration)", "A-broken", "C-walk1"]
         assert len(h5["runs"]) == 5
         assert list(h5["subjects/C"].attrs["runs"]) == []
 
@@ -313,6 +287,10 @@ BAD = {
         {"name": "S", "static": "walk1.c3d", "trials": "walk1.c3d"},
         {"name": "S", "static": "walk1.c3d", "trials": "walk2.c3d"}]},
         "subjects[1].name: expected a name no other subject has"),
+    "two runs of one name": ({"subjects": [
+        {"name": "S", "static": "walk1.c3d", "trials": "a-walk1.c3d"},
+        {"name": "S-a", "static": "walk1.c3d", "trials": "walk1.c3d"}]},
+        "subjects[1].trials: expected run names (subject-trial) no other"),
     "bad option": ({"options": {"tol": -1}, "subjects": [
         {"name": "S", "static": "walk1.c3d", "trials": "walk1.c3d"}]}, "options.tol"),
     "run name in options": ({"options": {"name": "x"}, "subjects": [
@@ -329,24 +307,25 @@ BAD = {
 
 
 @pytest.mark.parametrize("case", sorted(BAD))
-def test_bad_study_is_one_line_and_writes_nothing(study: Path, case: str) -> None:
+def test_bad_study_is_one_line_and_writes_nothing(walking_study: Path, case: str) -> None:
     doc, fragment = BAD[case]
     doc = {"template": str(ROOT / "configs" / "models" / "lower_limb.yaml"), **doc}
-    path = study.parent / "bad.yaml"
+    path = walking_study.parent / "bad.yaml"
     path.write_text(yaml.safe_dump(doc), encoding="utf-8")
-    out = study.parent / "bad.h5"
+    shutil.copyfile(walking_study.parent / "walk1.c3d", walking_study.parent / "a-walk1.c3d")
+    out = walking_study.parent / "bad.h5"
     line = one_error_line(run_cli("batch", path, "-o", out), fragment)
     assert line.startswith(f"fccgrb: error: {path}: "), line
     assert not out.exists() and not out.with_name("bad.h5.cells").exists()
 
 
-def test_output_may_not_be_an_input_or_another_file(study: Path) -> None:
-    one_error_line(run_cli("batch", study, "-o", study.parent / "walk1.c3d"),
+def test_output_may_not_be_an_input_or_another_file(walking_study: Path) -> None:
+    one_error_line(run_cli("batch", walking_study, "-o", walking_study.parent / "walk1.c3d"),
                    "expected an output other than")
-    other = study.parent / "not_a_study.h5"
+    other = walking_study.parent / "not_a_study.h5"
     with h5py.File(other, "w") as h5:
         h5.attrs["format_version"] = 2
-    one_error_line(run_cli("batch", study, "-o", other), "is not a study file")
+    one_error_line(run_cli("batch", walking_study, "-o", other), "is not a study file")
 
 
 # --- 5. the shared walking trials ----------------------------------------------------------
@@ -358,9 +337,8 @@ def test_the_shared_walking_trials_as_one_study(tmp_path: Path) -> None:
     """The README's study: Qualisys (calibrated from the walking trial itself, 67 kg) with the
     lower-limb template and the Plug-in Gait child with the Helen Hayes template, its mass and
     Davis' widths from its static's PROCESSING group."""
-    study = ROOT / "configs" / "studies" / "shared.yaml"
     out = tmp_path / "shared.h5"
-    result = run_cli("batch", study, "-o", out)
+    result = run_cli("batch", ROOT / "configs" / "studies" / "shared.yaml", "-o", out)
     assert result.exit_code == 0, (result.output, result.stderr)
     with h5py.File(out, "r") as h5:
         assert list(h5["runs"]) == ["Q01-Qualisys", "HC030-HC030A05"]

@@ -52,3 +52,17 @@ def walking_trials(folder: Path, count: int, duration: float = 2.6) -> list[Path
         assert result.exit_code == 0, result.output
         out.append(path)
     return out
+
+
+def study_doc(trials: list[Path]) -> dict:
+    """Two subjects in two groups: A with three trials (one a glob), B with two."""
+    return {
+        "name": "walkers",
+        "template": str(TEMPLATE),
+        "options": {"filter_cutoff": 6},
+        "subjects": [
+            {"name": "A", "group": "control", "static": trials[0].name,
+             "trials": ["walk[12].c3d", trials[2].name], "mass": 70},
+            {"name": "B", "group": "patients", "static": trials[3].name,
+             "trials": [trials[3].name, trials[1].name], "mass": 55.5},
+        ]}

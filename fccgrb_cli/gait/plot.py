@@ -1,11 +1,8 @@
 """The gait report's figure: each side's mean ± SD cycle of the clinical angles (and moments),
 0–100 % of the stride, the mean toe-off as a vertical line, and an optional normative band from
-a user's CSV (columns ``variable,percent,mean,sd``; the band is mean ± sd)."""
+a user's CSV (``gait.normative``: columns ``variable,percent,mean,sd``; the band is mean ± sd)."""
 
 from __future__ import annotations
-
-import csv
-from pathlib import Path
 
 import numpy as np
 
@@ -13,24 +10,6 @@ from fccgrb_cli.errors import InputError
 from fccgrb_cli.gait.analysis import GaitResults
 
 COLOURS = {"left": "tab:blue", "right": "tab:red"}
-
-
-def read_normative(path: str | Path) -> dict[str, np.ndarray]:
-    """variable → rows of (percent, mean, sd), sorted by percent."""
-    out: dict[str, list[tuple[float, float, float]]] = {}
-    try:
-        with open(path, newline="", encoding="utf-8") as handle:
-            rows = list(csv.DictReader(handle))
-    except OSError as error:
-        raise InputError(f"{path}: cannot read the normative data ({error.strerror})") from None
-    for line, row in enumerate(rows, start=2):
-        try:
-            out.setdefault(row["variable"].strip(), []).append(
-                (float(row["percent"]), float(row["mean"]), float(row["sd"])))
-        except (KeyError, TypeError, ValueError, AttributeError):
-            raise InputError(f"{path}: line {line}: expected the columns variable, percent, "
-                             "mean, sd with numbers") from None
-    return {k: np.array(sorted(v)) for k, v in out.items()}
 
 
 def _stem(name: str) -> str:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from concurrent.futures import Executor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from fccgrb_cli.cells import Job, cells_folder, pending, run_jobs
@@ -33,11 +33,13 @@ Progress = Callable[[int, int, str], None]
 
 @dataclass(frozen=True)
 class Outcome:
-    """Trials solved by this run, trials found done, and every failure (where, message)."""
+    """Trials solved by this run, trials found done, every failure (where: a subject's name for
+    its calibration, else a trial's run name; message) and how many of them are trials."""
 
     solved: int
     kept: int
     failures: tuple[tuple[str, str], ...]
+    failed_trials: int
 
 
 @dataclass(frozen=True)
@@ -85,12 +87,16 @@ def run_study(study: Study, output: Path, where: Executors = Executors(), *,
                 raise error
             failures[job.name] = message(error)
 
+    def calibrated(job: Job, error: BaseException | None) -> None:
+        if error is not None:
+            collect(replace(job, name=f"{job.name} (calibration)"), error)
+
     calibrations = {s.name: Job(s.name, calibration_file(s, store, accept_truncated),
                                 calibrate_subject,
                                 (Calibration(s, calibration_file(s, store, accept_truncated),
                                              accept_truncated),))
                     for s in study.subjects}
-    run_jobs(pending(calibrations.values(), _readable_text), collect, workers=where.workers,
+    run_jobs(pending(calibrations.values(), _readable_text), calibrated, workers=where.workers,
              executor=where.executor)
     command = f"fccgrb batch {study.source.name}"
     trials: list[Job] = []
@@ -119,11 +125,12 @@ def run_study(study: Study, output: Path, where: Executors = Executors(), *,
     if progress is not None and todo:
         progress(finished, study.n_trials, "")
     run_jobs(todo, solved, workers=where.workers, executor=where.executor)
-    order = [*(s.name for s in study.subjects),
-             *(s.trial_name(t) for s in study.subjects for t in s.trials)]
+    runs = [s.trial_name(t) for s in study.subjects for t in s.trials]
+    order = [*(f"{s.name} (calibration)" for s in study.subjects), *runs]
+    listed = tuple((name, failures[name]) for name in order if name in failures)
     write_study(study, output, Solved(
         runs={job.name: job.target for job in trials if job.target.exists()},
         models={name: job.target for name, job in calibrations.items() if job.target.exists()},
-        failures=tuple((name, failures[name]) for name in order if name in failures)), command)
-    return Outcome(len(todo) - sum(job.name in failures for job in todo), kept,
-                   tuple((name, failures[name]) for name in order if name in failures))
+        failures=listed), command)
+    return Outcome(len(todo) - sum(job.name in failures for job in todo), kept, listed,
+                   sum(name in runs for name, _ in listed))

@@ -13,6 +13,7 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from fccgrb_cli.blas import single_threaded
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.atomic import atomic_path
 from fccgrb_cli.options import SolveOptions
@@ -72,6 +73,7 @@ def trial_file(subject: SubjectSpec, model: Path, trial: Path, options: SolveOpt
     return model.parent / f"{trial.stem}-{key}.h5"
 
 
+@single_threaded
 def calibrate_subject(job: Calibration) -> None:
     """Personalize the subject's template from its static trial (``fccgrb calibrate``'s steps)
     with its mass and measurements, and write the model."""
@@ -121,10 +123,14 @@ def _measurements(s: SubjectSpec, method: str):
     return mass, Measurements.from_mm(**widths)
 
 
+@single_threaded
 def solve_trial_cell(job: TrialSolve) -> None:
     """Solve one trial with the subject's model and write its run (``fccgrb solve``'s steps);
     the solve's wall time goes into the cell's attributes, kept apart from the results when the
-    study file is made."""
+    study file is made. BLAS runs on one thread throughout, as in ``fccgrb solve``: a worker
+    whose numpy was loaded before this package (a Dask worker, a test process) would otherwise
+    run the dynamics stage's products on several, and their last bits differ with the thread
+    count."""
     from fccgrb_cli.io.results import write_run
     from fccgrb_cli.io.trial import read_trial
     from fccgrb_cli.model import load_model

@@ -231,9 +231,15 @@ def load_study(path: str | Path) -> Study:
     for k, item in enumerate(subjects):
         out.append(_subject(r, f"subjects[{k}]", item, defaults))
     names = [s.name for s in out]
-    for k, name in enumerate(names):
-        if name in names[:k]:
-            r.fail(f"subjects[{k}].name", "a name no other subject has", name)
+    runs: list[str] = []
+    for k, s in enumerate(out):
+        if s.name in names[:k]:
+            r.fail(f"subjects[{k}].name", "a name no other subject has", s.name)
+        for trial in s.trials:
+            if s.trial_name(trial) in runs:
+                r.fail(f"subjects[{k}].trials", "run names (subject-trial) no other subject's "
+                                                "trial has", s.trial_name(trial))
+            runs.append(s.trial_name(trial))
     return Study(r.name(doc.get("name", path.stem), "name"), path.resolve(), text, solve,
                  tuple(out))
 

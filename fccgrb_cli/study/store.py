@@ -248,6 +248,12 @@ def _strings(values) -> tuple[str, ...]:
     return tuple(v.decode() if isinstance(v, bytes) else str(v) for v in values)
 
 
+def is_study(path: str | Path) -> bool:
+    """Whether a results file is a study's (``fccgrb batch``)."""
+    with open_results(path) as h5:
+        return h5.attrs.get("kind") == KIND
+
+
 def check_study_output(path: Path) -> None:
     """An InputError unless ``path`` is absent or a study file (which the batch replaces)."""
     import h5py

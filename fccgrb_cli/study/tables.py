@@ -48,6 +48,6 @@ def study_tables(study: StudyResults) -> str:
             "no strides in this group"
         parts.append(f"{head}\n{body}")
     if study.errors:
-        parts.append(f"{len(study.errors)} failed:\n" + "\n".join(
+        parts.append(f"failed ({len(study.errors)}):\n" + "\n".join(
             f"  {where}: {text}" for where, text in study.errors))
     return "\n\n".join(parts)
