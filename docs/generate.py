@@ -1,6 +1,6 @@
 """Regenerate every figure of README.md and docs/ by running the commands, as a user would.
 
-    python docs/generate.py --part cheap|tables|benchmarks|figures|all [--check]
+    python docs/generate.py --part cheap|tables|benchmarks|figures|study|all [--check]
     python docs/generate.py --block example-session [--block gait-trial ...] [--check]
 
 Every command runs through the installed ``fccgrb`` (or ``python benchmarks/...``) in a
@@ -23,7 +23,12 @@ Parts and their blocks:
 * ``benchmarks`` (minutes): ``bench-kinematics``, ``bench-optimization``, ``bench-gait``,
   ``bench-dynamics``, ``bench-peers`` (OpenSim's IK beside ours where ``opensim`` is
   installed), ``bench-long`` (a 10-minute trial under /usr/bin/time -v), ``bench-startup``
-  (whole commands in fresh processes): the performance tables from benchmarks/*.py.
+  (whole commands in fresh processes), ``bench-batch`` (a 50-trial study on this machine): the
+  performance tables from benchmarks/*.py.
+* ``study`` (a minute; the shared data and a chromium binary): ``study`` (``fccgrb batch
+  configs/studies/shared.yaml`` and its clinical report, with norms from a stand-in control
+  group of perturbed copies of the adult's walk; docs/report_subject.png, the adult's page in
+  headless Chromium).
 * ``figures``: ``figures`` (the Figure 8 case: docs/point_P6.png, ed_P6.png, angle_J4_uv.png,
   velocity_P6_x.png via ``fccgrb plot``, and the commands that make them) and ``figure8-seeds``
   (the end point's distance to the truth over three seeds).
@@ -44,6 +49,7 @@ from __future__ import annotations
 import argparse
 import csv
 import difflib
+import importlib.util
 import os
 import re
 import shlex
@@ -120,7 +126,10 @@ def _executable(name: str) -> str:
     return str(beside) if beside.exists() else (shutil.which(name) or name)
 
 
-PROGRESS = re.compile(r"^([\w .-]+: frame \d+/\d+ \([\d.]+ s\)|sweep: \d+/\d+ cells \(.*)$")
+# progress lines (fccgrb_cli.progress: "LABEL: [###...] frame|trial N/M (P %, T...) …"; the
+# sweep's "sweep: N/M cells (…"): on stderr only when a run is slow, so never in a block
+PROGRESS = re.compile(r"^([\w .-]+: (\[[#.]*\] )?(frame|trial) \d+/\d+ \(\d+ %, .*"
+                      r"|sweep: \d+/\d+ cells \(.*)$")
 
 
 class Workspace:
@@ -255,6 +264,83 @@ def gait_methods(ws: Workspace) -> list[Artifact]:
             f"{angles[:, sagittal].max():.2g}°) of NRM-WLS and the moments within "
             f"{moments.max():.2g} N·m/kg.")
     return [ReadmeBlock("gait-methods", text)]
+
+
+STUDY = [
+    "fccgrb batch configs/studies/shared.yaml -o study.h5",
+    "fccgrb report study.h5 --html report --normative controls.csv",
+]
+CONTROLS = 5  # perturbed copies of the adult's walk standing in for a lab's control group
+
+
+def _controls_norms(ws: Workspace) -> None:
+    """controls.csv for the report's picture: the mean ± between-subject SD of a "control
+    group" of five copies of the adult's walk, each with its own soft-tissue artefact (4–12 mm,
+    benchmarks/batch.py's copies: plates and events kept), both sides averaged. It shows the
+    report's layout; a lab gives its own norms."""
+    import h5py
+    import numpy as np
+    import yaml
+
+    spec = importlib.util.spec_from_file_location("bench_batch", ROOT / "benchmarks" / "batch.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    subjects = []
+    for k in range(CONTROLS):
+        name = f"control{k + 1}"
+        bench.perturbed_copy(QUALISYS, ws.dir / f"{name}.c3d", 4.0 + 2.0 * k, 10 + k)
+        subjects.append({"name": name, "static": f"{name}.c3d", "trials": [f"{name}.c3d"],
+                         "mass": 67})
+    (ws.dir / "controls.yaml").write_text(yaml.safe_dump(
+        {"name": "controls", "template": "configs/models/lower_limb.yaml",
+         "options": {"filter_cutoff": 6}, "subjects": subjects}), encoding="utf-8")
+    ws.run("fccgrb batch controls.yaml -o controls.h5")
+    lines = ["variable,percent,mean,sd"]
+    with h5py.File(ws.dir / "controls.h5", "r") as h5:
+        group = h5["groups/all"]
+        sides = [group["cycles"][side] for side in ("left", "right")]
+        names = [str(n)[:-2] for n in sides[0].attrs["names"]]
+        mean = np.mean([s["mean"][()] for s in sides], axis=0)
+        sd = np.mean([s["sd"][()] for s in sides], axis=0)
+        for j, name in enumerate(names):
+            lines += [f"{name},{p},{mean[p, j]:.4g},{sd[p, j]:.3g}" for p in range(0, 101, 2)]
+        table = group["spatiotemporal"]
+        means = np.mean([table[s]["mean"][()] for s in ("left", "right")], axis=0)
+        sds = np.mean([table[s]["sd"][()] for s in ("left", "right")], axis=0)
+        parameters = [str(n) for n in h5["subjects/control1/spatiotemporal/left"].attrs["names"]]
+        lines += [f"{p},,{m:.4g},{d:.3g}" for p, m, d in zip(parameters, means, sds, strict=True)]
+    (ws.dir / "controls.csv").write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def _screenshot(page: Path, target: Path, size: tuple[int, int]) -> None:
+    """A page as headless Chromium draws it (the window's size, CSS pixels)."""
+    binary = next((shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome")
+                   if shutil.which(n)), None)
+    if binary is None:
+        raise Skip("no chromium binary for the report's screenshot")
+    with tempfile.TemporaryDirectory() as profile:
+        subprocess.run([binary, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                        "--no-first-run", "--disable-background-networking",
+                        "--disable-component-update", "--disable-sync", "--hide-scrollbars",
+                        f"--user-data-dir={profile}", f"--window-size={size[0]},{size[1]}",
+                        f"--screenshot={target}", page.as_uri()], check=True,
+                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+def study(ws: Workspace) -> list[Artifact]:
+    """The shared walking trials as one study, its report, and a screenshot of the adult's
+    page (docs/report_subject.png)."""
+    _need_gait_trial()
+    _controls_norms(ws)
+    text = ws.console(STUDY)
+    _screenshot(ws.dir / "report" / "subject-Q01.html", ws.dir / "docs" / "report_subject.png",
+                (1100, 1720))
+    return [ReadmeBlock("study", text), Image.made("docs/report_subject.png", ws)]
+
+
+def bench_batch(ws: Workspace) -> list[Artifact]:
+    _need_gait_trial()
+    return _bench_console(ws, "bench-batch", "batch.py")
 
 
 def _sweep_subset(config: Path, target: Path) -> None:
@@ -492,10 +578,12 @@ BLOCKS = {b.name: b for b in (
     Block("bench-peers", "benchmarks", bench_peers, "README: against OpenSim's IK"),
     Block("bench-long", "benchmarks", bench_long, "README: a 10-minute trial"),
     Block("bench-startup", "benchmarks", bench_startup, "README: whole commands' wall time"),
+    Block("bench-batch", "benchmarks", bench_batch, "README: a 50-trial study"),
+    Block("study", "study", study, "README and docs/report_subject.png: a study, its report"),
     Block("figures", "figures", figures, "docs/*.png of the Figure 8 case and their commands"),
     Block("figure8-seeds", "figures", figure8_seeds, "README: P6's distance over seeds"),
 )}
-PARTS = ("cheap", "tables", "benchmarks", "figures")
+PARTS = ("cheap", "tables", "benchmarks", "figures", "study")
 
 # ---------------------------------------------------------------------------------------------
 # Comparing without the timing figures

@@ -25,7 +25,16 @@ import pytest
 from browser import Browser, chromium_binary
 from cli_helpers import one_error_line, run_cli
 
-from fccgrb_cli.clinical_report.svg import HEIGHT, LEFT, TOP, WIDTH, Curve, cycle_plot, nice_ticks
+from fccgrb_cli.clinical_report.svg import (
+    BOTTOM,
+    HEIGHT,
+    LEFT,
+    TOP,
+    WIDTH,
+    Curve,
+    cycle_plot,
+    nice_ticks,
+)
 from fccgrb_cli.gait.cycles import PARAMETERS
 
 needs_chromium = pytest.mark.skipif(chromium_binary() is None,
@@ -76,7 +85,7 @@ def test_svg_coordinates_map_back_to_the_data() -> None:
     np.testing.assert_allclose(values, mean, atol=0.01)
     width = WIDTH - LEFT - 8
     np.testing.assert_allclose((xy[:, 0] - LEFT) / width * 100, percent, atol=0.01)
-    assert xy[:, 1].min() >= TOP and xy[:, 1].max() <= HEIGHT - 30
+    assert xy[:, 1].min() >= TOP and xy[:, 1].max() <= HEIGHT - BOTTOM
     assert 'class="toe-off"' in svg and "right (n=4)" in svg
 
 

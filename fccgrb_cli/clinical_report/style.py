@@ -10,7 +10,7 @@ header { border-bottom: 2px solid var(--ink); margin-bottom: 12px; }
 header h1 { font-size: 22px; margin: 0 0 4px; }
 header p { margin: 0 0 8px; color: var(--muted); }
 nav { font-size: 13px; margin: 6px 0 10px; }
-nav a { margin-right: 12px; }
+nav a, nav strong { margin-right: 12px; }
 h2 { font-size: 17px; border-bottom: 1px solid var(--rule); padding-bottom: 2px;
      margin: 22px 0 8px; }
 h3 { font-size: 14px; margin: 12px 0 6px; }

@@ -13,7 +13,7 @@ from html import escape
 import numpy as np
 
 WIDTH, HEIGHT = 300, 190
-LEFT, RIGHT, TOP, BOTTOM = 44, 8, 22, 30  # margins inside the view box
+LEFT, RIGHT, TOP, BOTTOM = 44, 8, 30, 30  # margins inside the view box
 COLOURS = {"left": "#1f5fbf", "right": "#c8302c", "norm": "#8c8c8c"}
 
 
@@ -42,10 +42,10 @@ def nice_ticks(low: float, high: float, count: int = 5) -> list[float]:
     ticks = []
     value = first
     while value < high + step * 0.5:
-        ticks.append(round(value, 10))
+        ticks.append(round(value, 10) + 0.0)  # + 0.0: no "-0" label
         value += step
     if ticks[-1] < high:
-        ticks.append(round(ticks[-1] + step, 10))
+        ticks.append(round(ticks[-1] + step, 10) + 0.0)
     return ticks
 
 
@@ -93,7 +93,7 @@ def cycle_plot(title: str, unit: str, curves: list[Curve],
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {WIDTH} {HEIGHT}" '
              f'class="plot" role="img" aria-label="{escape(title)} ({escape(unit)})">',
              f'<title>{escape(title)} ({escape(unit)})</title>',
-             f'<text x="{WIDTH / 2:.1f}" y="14" class="title">{escape(title)}</text>']
+             f'<text x="{WIDTH / 2:.1f}" y="11" class="title">{escape(title)}</text>']
     for t in ticks:
         y = f.y(t)
         parts.append(f'<line x1="{LEFT}" x2="{WIDTH - RIGHT}" y1="{y:.2f}" y2="{y:.2f}" '
@@ -131,10 +131,10 @@ def cycle_plot(title: str, unit: str, curves: list[Curve],
               if np.isfinite(c.mean).all()]
     if norm is not None and len(norm):
         legend.append((COLOURS["norm"], "norm ± SD"))
-    for k, (colour, label) in enumerate(legend):
-        x = LEFT + 6 + 82 * k
-        parts.append(f'<rect x="{x}" y="{TOP + 4}" width="9" height="4" fill="{colour}"/>'
-                     f'<text x="{x + 12}" y="{TOP + 9}" class="legend">{escape(label)}</text>')
+    for k, (colour, label) in enumerate(legend):  # above the plot area, below the title
+        x = LEFT + 82 * k
+        parts.append(f'<rect x="{x}" y="{TOP - 9}" width="9" height="4" fill="{colour}"/>'
+                     f'<text x="{x + 12}" y="{TOP - 4}" class="legend">{escape(label)}</text>')
     if not drawn:
         parts.append(f'<text x="{LEFT + f.width / 2:.1f}" y="{TOP + f.height / 2:.1f}" '
                      'class="empty" text-anchor="middle">no trusted strides</text>')

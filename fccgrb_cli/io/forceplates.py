@@ -3,6 +3,7 @@ centre of pressure and free moment, in the global frame, SI, resampled to the po
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,7 +40,9 @@ def _blocks(signal: np.ndarray, n_frames: int) -> np.ndarray:
     per = samples // n_frames if n_frames else 0
     if per < 1:
         raise InputError(f"force platform data has {samples} samples for {n_frames} frames")
-    return np.nanmean(signal[:, : per * n_frames].reshape(3, n_frames, per), axis=2).T
+    with warnings.catch_warnings():  # a frame whose samples are all NaN averages to NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmean(signal[:, : per * n_frames].reshape(3, n_frames, per), axis=2).T
 
 
 def plausibility(corners: np.ndarray, force: np.ndarray) -> str | None:

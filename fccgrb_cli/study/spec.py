@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import glob
 import math
+import os
 import re
 from dataclasses import dataclass
 from functools import lru_cache
@@ -87,6 +88,10 @@ class Study:
         for s in self.subjects:
             out += [s.template, s.static, *s.trials]
         return tuple(out)
+
+    def relative(self, path: Path) -> str:
+        """A path as seen from the study file's folder (as the study names it)."""
+        return os.path.relpath(path, self.source.parent)
 
     @property
     def n_trials(self) -> int:

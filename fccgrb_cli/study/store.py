@@ -8,7 +8,8 @@ Layout (results format 2, root attribute ``kind`` = ``study``):
 * ``/runs/<subject>-<trial>/``: each solved trial's run, as ``fccgrb solve`` writes it
   (``fccgrb_cli.io.results``: ``fccgrb export``, ``plot`` and ``report`` read it), with the
   attributes ``subject``, ``trial_name`` and ``versions`` (the worker's);
-* ``/subjects/<subject>/``: attributes ``group``, ``template``, ``static``, ``model`` (the
+* ``/subjects/<subject>/``: attributes ``group``, ``template``, ``static`` (paths relative to
+  the study file's folder), ``model`` (the
   personalized model's YAML), ``mass`` (kg, NaN when none), ``runs`` (solved), ``trials`` (all);
   ``cycles/<side>/`` every trial's strides pooled (``io.gait_results``, mean ± SD over the
   trusted ones), ``spatiotemporal/<side>/`` ``mean``, ``sd``, ``n`` of each parameter over them;
@@ -85,8 +86,8 @@ def write_study(study: Study, output: Path, solved: Solved, command: str) -> Non
             g = h5["subjects"].create_group(subject.name)
             model = solved.models.get(subject.name)
             g.attrs.update({
-                "group": subject.group, "template": str(subject.template),
-                "static": str(subject.static),
+                "group": subject.group, "template": study.relative(subject.template),
+                "static": study.relative(subject.static),
                 "model": model.read_text(encoding="utf-8") if model is not None else "",
                 "mass": np.nan if subject.mass is None else subject.mass})
             g.attrs.create("runs", done, dtype=_text(h5py))

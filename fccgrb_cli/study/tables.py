@@ -29,6 +29,11 @@ def _parameters(tables: dict[str, Table]) -> str:
     return "\n".join(rows)
 
 
+def _any(tables: dict[str, Table]) -> bool:
+    """Whether any side has a parameter over at least one stride (or subject)."""
+    return any(int(t.n.max(initial=0)) > 0 for t in tables.values())
+
+
 def study_tables(study: StudyResults) -> str:
     """Every subject's table, then every group's, then the failures."""
     parts = []
@@ -37,15 +42,15 @@ def study_tables(study: StudyResults) -> str:
                             for side, c in s.cycles.items()) or "none"
         head = (f"subject {s.name} (group {s.group}): {len(s.runs)} of {len(s.trials)} trials "
                 f"solved; strides {strides}; mean ± SD over the trusted strides (how many)")
-        body = _parameters(s.spatiotemporal) if s.spatiotemporal else \
-            "no strides: no spatiotemporal parameters"
+        body = _parameters(s.spatiotemporal) if _any(s.spatiotemporal) else \
+            "no trusted stride: no spatiotemporal parameters"
         parts.append(f"{head}\n{body}")
     for g in study.groups:
         head = (f"group {g.name}: {len(g.subjects)} subjects ({', '.join(g.subjects)}); mean ± "
                 "between-subject SD of the means of the subjects with trusted strides (how "
                 "many)")
-        body = _parameters(g.spatiotemporal) if g.spatiotemporal else \
-            "no strides in this group"
+        body = _parameters(g.spatiotemporal) if _any(g.spatiotemporal) else \
+            "no subject with a trusted stride: no spatiotemporal parameters"
         parts.append(f"{head}\n{body}")
     if study.errors:
         parts.append(f"failed ({len(study.errors)}):\n" + "\n".join(

@@ -1,0 +1,141 @@
+"""A 50-trial study on this machine: ``fccgrb batch`` over perturbed copies of the shared walking
+trials, whole command wall time (start-up, calibrations, solves with the inverse dynamics, the
+study file) and per trial.
+
+    python benchmarks/batch.py [--trials 50] [--workers 2] [--keep]
+
+The study: ten subjects of five trials each, alternately an adult (Qualisys.c3d, 200 Hz, 340
+frames; lower-limb template, calibrated from its first trial, 67 kg) and a child
+(plugin_gait/HC030A05.c3d, 100 Hz, 197 frames; Helen Hayes template, calibrated from
+HC030A01.c3d with the measurements of its PROCESSING group); every trial a copy of its subject's
+walking trial with every marker perturbed by the soft-tissue artefact of ``fccgrb perturb``
+(``fccgrb_cli.perturb.artefact``, 2–10 mm, its own seed), so that no two trials are the same,
+written into a copy of the original C3D so that its force plates and events stay (``fccgrb
+perturb`` writes the markers alone). Options as the README's gait example (NRM-WLS, 6 Hz).
+'per trial' is the whole batch's wall time over the trials; 'solve s' each trial's own solve in
+its worker (the study file's /timings), mean and range. Run it on a quiet machine: the figures
+are wall clock. Speed goals live here, never in tests.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT.parent / "shared" / "data" / "c3d"
+ADULT, CHILD = DATA / "Qualisys.c3d", DATA / "plugin_gait" / "HC030A05.c3d"
+CHILD_STATIC = DATA / "plugin_gait" / "HC030A01.c3d"
+PER_SUBJECT = 5
+
+
+def fccgrb() -> list[str]:
+    script = Path(sys.executable).with_name("fccgrb")
+    return [str(script)] if script.exists() else [shutil.which("fccgrb") or "fccgrb"]
+
+
+def perturbed_copy(source: Path, target: Path, level_mm: float, seed: int) -> None:
+    """``source`` with every point's soft-tissue artefact added (its units), all else kept."""
+    import ezc3d
+
+    from fccgrb_cli.io.c3d import UNIT_SCALE
+    from fccgrb_cli.perturb import artefact
+
+    c3d = ezc3d.c3d(str(source))
+    point = c3d["parameters"]["POINT"]
+    labels = [str(v).strip() for key in sorted(k for k in point if k.startswith("LABELS"))
+              for v in point[key]["value"]]
+    scale = UNIT_SCALE[str(point["UNITS"]["value"][0]).strip()]
+    points = c3d["data"]["points"]
+    rate = float(point["RATE"]["value"][0])
+    for k, label in enumerate(labels[: points.shape[1]]):
+        points[:3, k, :] += artefact(label, points.shape[2], rate, level_mm * 1e-3, seed).T / scale
+    c3d["data"]["points"] = points
+    c3d.write(str(target))
+
+
+def make_study(folder: Path, trials: int) -> Path:
+    """The study file: subjects alternately adults and children, five trials each."""
+    subjects = []
+    for k in range(-(-trials // PER_SUBJECT)):
+        adult = k % 2 == 0
+        source = ADULT if adult else CHILD
+        name = f"{'A' if adult else 'C'}{k + 1:02d}"
+        paths = []
+        for j in range(min(PER_SUBJECT, trials - k * PER_SUBJECT)):
+            path = folder / f"{name}_walk{j + 1}.c3d"
+            perturbed_copy(source, path, 2.0 + 2.0 * j, 100 * k + j)
+            paths.append(path.name)
+        subject = {"name": name, "trials": paths}
+        if adult:
+            subject |= {"template": str(ROOT / "configs" / "models" / "lower_limb.yaml"),
+                        "static": paths[0], "mass": 67}
+        else:
+            subject |= {"template": str(ROOT / "configs" / "models" / "helen_hayes.yaml"),
+                        "static": str(CHILD_STATIC), "measurements": "from-c3d",
+                        "map": str(ROOT / "configs" / "studies" / "plugin_gait_labels.yaml")}
+        subjects.append(subject)
+    path = folder / "study.yaml"
+    path.write_text(yaml.safe_dump({"name": "bench", "options": {"filter_cutoff": 6},
+                                    "subjects": subjects}, sort_keys=False), encoding="utf-8")
+    return path
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--trials", type=int, default=50)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--keep", action="store_true", help="Keep the temporary folder.")
+    args = parser.parse_args()
+    for path in (ADULT, CHILD, CHILD_STATIC):
+        if not path.exists():
+            raise SystemExit(f"{path}: not found (the shared data folder is not here)")
+    folder = Path(tempfile.mkdtemp(prefix="fccgrb-batch-bench-"))
+    try:
+        study = make_study(folder, args.trials)
+        out = folder / "study.h5"
+        command = [*fccgrb(), "batch", str(study), "-o", str(out), "--workers",
+                   str(args.workers)]
+        started = time.perf_counter()
+        done = subprocess.run(command, capture_output=True, text=True, check=False)
+        wall = time.perf_counter() - started
+        if done.returncode != 0:
+            raise SystemExit(f"fccgrb batch exited with {done.returncode}:\n{done.stderr}")
+        with h5py.File(out, "r") as h5:
+            solve = np.array([t.attrs["solve_s"] for t in h5["timings"].values()])
+            frames = np.array([len(r["theta"]) for r in h5["runs"].values()])
+            rates = np.array([float(r.attrs["rate"]) for r in h5["runs"].values()])
+            subjects = len(h5["subjects"])
+        n = len(solve)
+        print(f"{n} trials of {subjects} subjects ({int(frames.sum())} frames; "
+              f"{int((rates == 200).sum())} at 200 Hz with 340 frames, "
+              f"{int((rates == 100).sum())} at 100 Hz with 197), --workers {args.workers} "
+              f"on {_cpus()} CPUs")
+        print(f"{'batch wall s':>13} {'per trial s':>12} {'solve s mean':>13} "
+              f"{'solve s min':>12} {'solve s max':>12} {'trials/min':>11}")
+        print(f"{wall:13.1f} {wall / n:12.2f} {solve.mean():13.2f} {solve.min():12.2f} "
+              f"{solve.max():12.2f} {60 * n / wall:11.1f}")
+        if args.keep:
+            print(f"kept {folder}")
+    finally:
+        if not args.keep:
+            shutil.rmtree(folder, ignore_errors=True)
+
+
+def _cpus() -> int:
+    import os
+
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+
+
+if __name__ == "__main__":
+    main()
