@@ -308,7 +308,8 @@ def _controls_norms(ws: Workspace) -> None:
         means = np.mean([table[s]["mean"][()] for s in ("left", "right")], axis=0)
         sds = np.mean([table[s]["sd"][()] for s in ("left", "right")], axis=0)
         parameters = [str(n) for n in h5["subjects/control1/spatiotemporal/left"].attrs["names"]]
-        lines += [f"{p},,{m:.4g},{d:.3g}" for p, m, d in zip(parameters, means, sds, strict=True)]
+        lines += [f"{p},,{m:.4g},{d if d > 1e-9 * abs(m) else 0.0:.3g}"  # rounding: 0
+                  for p, m, d in zip(parameters, means, sds, strict=True)]
     (ws.dir / "controls.csv").write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 

@@ -198,13 +198,16 @@ def _trial_cells(out: Path) -> dict[Path, tuple[int, int]]:
 
 def test_killed_batch_resumes_and_equals_an_uninterrupted_run(walking_study: Path,
                                                               walking_reference: Path) -> None:
+    """Two local worker processes; the batch and its workers killed at once (SIGKILL to the
+    process group, as a machine that goes down) when its first trial is written."""
     out = walking_study.parent / "killed.h5"
-    proc = subprocess.Popen([FCCGRB, "batch", str(walking_study), "-o", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen([FCCGRB, "batch", str(walking_study), "-o", str(out), "--workers",
+                             "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
     deadline = time.monotonic() + 300
     while not _trial_cells(out) and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.05)
-    os.kill(proc.pid, signal.SIGKILL)
+    os.killpg(proc.pid, signal.SIGKILL)
     proc.communicate()
     assert proc.returncode == -signal.SIGKILL
     assert not out.exists()
@@ -298,6 +301,13 @@ BAD = {
     "bad measurements": ({"subjects": [{"name": "S", "static": "walk1.c3d",
                                         "trials": "walk1.c3d", "measurements": "from-vsk"}]},
                          "subjects[0].measurements: expected from-c3d or a mapping"),
+    "widths for an anatomical template": (
+        {"subjects": [{"name": "S", "static": "walk1.c3d", "trials": "walk1.c3d",
+                       "measurements": {"knee_width": 100}}]},
+        "subjects[0].measurements: expected from-c3d or nothing"),
+    "not a template": ({"template": str(ROOT / "configs" / "models" / "five_bar.yaml"),
+                        "subjects": [{"name": "S", "static": "walk1.c3d",
+                                      "trials": "walk1.c3d"}]}, "calibration.landmarks"),
     "bad frames": ({"subjects": [{"name": "S", "static": "walk1.c3d", "trials": "walk1.c3d",
                                   "frames": "5:2"}]}, "subjects[0].frames: expected A:B"),
     "missing map": ({"map": "lab.yaml", "subjects": [

@@ -17,6 +17,7 @@ import base64
 import io
 import math
 import re
+import shutil
 from pathlib import Path
 
 import h5py
@@ -57,16 +58,35 @@ def _norms(path: Path) -> Path:
     return path
 
 
+def _flagged_copy(results: Path, target: Path) -> Path:
+    """The study file with flags set on some frames of two runs, and a flag no version of
+    fccgrb declares (bit 64, with a description attribute), as a later version could add."""
+    shutil.copyfile(results, target)
+    with h5py.File(target, "r+") as h5:
+        for k, run in enumerate(("A-walk2", "B-walk4")):
+            flags = h5["runs"][run]["flags"]
+            values = flags[()]
+            values[10 + k:40] |= 4
+            values[35:37 + 5 * k] |= 2
+            values[100:100 + 17 * (k + 1)] |= 64
+            flags[...] = values
+            flags.attrs["marker_dropout"] = np.uint8(64)
+            flags.attrs["marker_dropout_means"] = "a marker of the model missing for 50 ms"
+    return target
+
+
 @pytest.fixture(scope="module")
 def report(walking_reference: Path) -> tuple[Path, Path, Path]:
-    """(folder, results, norms): the report of the synthetic study with norms."""
+    """(folder, results, norms): the report of the synthetic study (some frames flagged, one
+    flag unknown to this version) with norms."""
     folder = walking_reference.parent / "report"
     norms = _norms(walking_reference.parent / "norms.csv")
-    result = run_cli("report", walking_reference, "--html", folder, "--normative", norms)
+    flagged = _flagged_copy(walking_reference, walking_reference.parent / "flagged.h5")
+    result = run_cli("report", flagged, "--html", folder, "--normative", norms)
     assert result.exit_code == 0, (result.output, result.stderr)
     assert sorted(p.name for p in folder.iterdir()) == ["index.html", "subject-A.html",
                                                         "subject-B.html"]
-    return folder, walking_reference, norms
+    return folder, flagged, norms
 
 
 # --- without a browser ---------------------------------------------------------------------
@@ -108,6 +128,8 @@ def test_pages_are_self_contained(report: tuple[Path, Path, Path]) -> None:
         assert not re.search(r"(src|href)=\"(https?:)?//", text), page.name
         assert "@media print" in text and text.count("<svg") >= (12 if "subject-" in page.name
                                                                 else 24)
+        if "subject-" in page.name:  # the unknown flag's description, as the file states it
+            assert "a marker of the model missing for 50 ms" in text
 
 
 def test_bad_report_options_are_one_line(report: tuple[Path, Path, Path], tmp_path: Path
@@ -244,13 +266,17 @@ def test_report_in_a_browser(report: tuple[Path, Path, Path]) -> None:
             _check_table(rows, g["spatiotemporal"], sides, norms)
             runs = [r.decode() if isinstance(r, bytes) else r for r in g.attrs["runs"]]
             assert layout["qualityTrials"] == runs
+            declared = {k: int(v) for run in runs for k, v in h5["runs"][run]["flags"].attrs.items()
+                        if isinstance(v, np.integer)}  # every flag any of its trials declares
+            assert layout["flags"] == sorted(declared, key=declared.get)
+            assert {"unconverged", "topology", "jump", "marker_dropout"} <= set(declared)
             for row, run in zip(layout["quality"], runs, strict=True):
                 flags = h5["runs"][run]["flags"]
                 bits = {k: int(v) for k, v in flags.attrs.items() if isinstance(v, np.integer)}
-                assert layout["flags"] == sorted(bits, key=bits.get)
                 values = flags[()]
                 counted = {c["flag"]: int(c["value"]) for c in row if "flag" in c}
-                assert counted == {k: int(((values & b) > 0).sum()) for k, b in bits.items()}
+                assert counted == {k: int(((values & b) > 0).sum()) if k in bits else 0
+                                   for k, b in declared.items()}
                 assert int(row[2]["value"]) == len(values)
                 assert int(row[3]["value"]) == int(h5["runs"][run]["converged"][()].sum())
             events = [(row[0]["text"], float(row[4]["value"])) for row in layout["events"]]

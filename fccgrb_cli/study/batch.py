@@ -91,24 +91,33 @@ def run_study(study: Study, output: Path, where: Executors = Executors(), *,
         if error is not None:
             collect(replace(job, name=f"{job.name} (calibration)"), error)
 
-    calibrations = {s.name: Job(s.name, calibration_file(s, store, accept_truncated),
-                                calibrate_subject,
-                                (Calibration(s, calibration_file(s, store, accept_truncated),
-                                             accept_truncated),))
-                    for s in study.subjects}
+    calibrations = {}
+    for s in study.subjects:
+        try:
+            target = calibration_file(s, store, accept_truncated)
+        except OSError as error:
+            failures[f"{s.name} (calibration)"] = f"{error.filename}: cannot read it " \
+                                                  f"({error.strerror})"
+            continue
+        calibrations[s.name] = Job(s.name, target, calibrate_subject,
+                                   (Calibration(s, target, accept_truncated),))
     run_jobs(pending(calibrations.values(), _readable_text), calibrated, workers=where.workers,
              executor=where.executor)
     command = f"fccgrb batch {study.source.name}"
     trials: list[Job] = []
     for s in study.subjects:
-        model = calibrations[s.name].target
+        model = calibrations[s.name].target if s.name in calibrations else None
         options = study.options.with_(mapping=s.mapping)
         for trial in s.trials:
             name = s.trial_name(trial)
-            if not model.exists():
+            if model is None or not model.exists():
                 failures[name] = f"not solved: the calibration of {s.name} failed"
                 continue
-            target = trial_file(s, model, trial, options, accept_truncated)
+            try:
+                target = trial_file(s, model, trial, options, accept_truncated)
+            except OSError as error:
+                failures[name] = f"{trial}: cannot read it ({error.strerror})"
+                continue
             trials.append(Job(name, target, solve_trial_cell, (TrialSolve(
                 s.name, name, model, trial, options, target, command, accept_truncated),)))
     todo = pending(trials, _readable_run)
@@ -120,10 +129,10 @@ def run_study(study: Study, output: Path, where: Executors = Executors(), *,
         collect(job, error)
         finished += 1
         if progress is not None:
-            progress(finished, study.n_trials, job.name + (" failed" if error else ""))
+            progress(finished, len(trials), job.name + (" failed" if error else ""))
 
     if progress is not None and todo:
-        progress(finished, study.n_trials, "")
+        progress(finished, len(trials), "")
     run_jobs(todo, solved, workers=where.workers, executor=where.executor)
     runs = [s.trial_name(t) for s in study.subjects for t in s.trials]
     order = [*(f"{s.name} (calibration)" for s in study.subjects), *runs]

@@ -24,13 +24,19 @@ CELL_VERSION = 1  # bump when a job's output changes for the same inputs (old ce
 
 def digest(*parts: object) -> str:
     """8 hex digits identifying a job's inputs (its file's name carries them, so a study whose
-    options, template, map or trials change solves again instead of reusing old cells)."""
+    options, template, map or trial files change — their contents, not only their names — solves
+    again instead of reusing old cells)."""
     text = json.dumps([CELL_VERSION, *parts], sort_keys=True, default=str)
     return hashlib.sha1(text.encode()).hexdigest()[:8]
 
 
 def file_digest(path: Path) -> str:
-    return hashlib.sha1(path.read_bytes()).hexdigest()
+    """A file's content, as SHA-1 (a trial re-exported under the same name is a new trial)."""
+    sha = hashlib.sha1()
+    with path.open("rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            sha.update(block)
+    return sha.hexdigest()
 
 
 @dataclass(frozen=True)
@@ -60,16 +66,17 @@ class TrialSolve:
 
 def calibration_file(subject: SubjectSpec, store: Path, accept_truncated: bool) -> Path:
     """Where a subject's personalized model is kept (named by a digest of what makes it)."""
-    key = digest(file_digest(subject.template), str(subject.static), subject.frames,
-                 subject.mass, subject.measurements, subject.mapping, accept_truncated)
+    key = digest(file_digest(subject.template), str(subject.static), file_digest(subject.static),
+                 subject.frames, subject.mass, subject.measurements, subject.mapping,
+                 accept_truncated)
     return store / subject.name / f"model-{key}.yaml"
 
 
 def trial_file(subject: SubjectSpec, model: Path, trial: Path, options: SolveOptions,
                accept_truncated: bool) -> Path:
     """Where a trial's run is kept: named by the trial and a digest of the model file (itself
-    named by its inputs), the trial's path and the options."""
-    key = digest(model.name, str(trial), options.to_json(), accept_truncated)
+    named by its inputs), the trial's path and content, and the options."""
+    key = digest(model.name, str(trial), file_digest(trial), options.to_json(), accept_truncated)
     return model.parent / f"{trial.stem}-{key}.h5"
 
 

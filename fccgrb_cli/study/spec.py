@@ -64,6 +64,7 @@ class SubjectSpec:
     mass: float | None
     measurements: str | tuple[tuple[str, float], ...] | None
     mapping: tuple[tuple[str, str], ...]
+    map_file: Path | None = None
 
     def trial_name(self, trial: Path) -> str:
         """A trial's run name in the study file: subject, then the trial file's stem."""
@@ -86,16 +87,12 @@ class Study:
         """Every file the study reads (none may be its output)."""
         out = [self.source]
         for s in self.subjects:
-            out += [s.template, s.static, *s.trials]
+            out += [s.template, s.static, *s.trials, *([s.map_file] if s.map_file else [])]
         return tuple(out)
 
     def relative(self, path: Path) -> str:
         """A path as seen from the study file's folder (as the study names it)."""
         return os.path.relpath(path, self.source.parent)
-
-    @property
-    def n_trials(self) -> int:
-        return sum(len(s.trials) for s in self.subjects)
 
 
 class _Reader:
@@ -148,14 +145,16 @@ class _Reader:
                                                       f" ({path} not found)"))
         return [path.resolve()]
 
-    def mapping_pairs(self, value: Any, where: str) -> tuple[tuple[str, str], ...]:
-        """A label map: a YAML file of NAME: LABEL lines, or those pairs inline."""
+    def mapping_pairs(self, value: Any, where: str
+                      ) -> tuple[tuple[tuple[str, str], ...], Path | None]:
+        """A label map: a YAML file of NAME: LABEL lines (and its path), or those pairs
+        inline."""
         if isinstance(value, dict):
             if not all(isinstance(k, str) and isinstance(v, str) for k, v in value.items()):
                 self.fail(where, "NAME: LABEL pairs of strings")
-            return tuple(value.items())
+            return tuple(value.items()), None
         path = self.file(value, where, "label map file")
-        return tuple(label_map_file(str(path)))
+        return tuple(label_map_file(str(path))), path
 
     def frames(self, value: Any, where: str) -> tuple[int, int]:
         text = "" if value is None else str(value)
@@ -257,9 +256,12 @@ def _subject(r: _Reader, where: str, item: Any, defaults: dict) -> SubjectSpec:
     spec = defaults | item
     if "template" not in spec:
         r.fail(f"{where}.template", "a template here or at the top of the study")
-    template = r.file(spec["template"], f"{where}.template" if "template" in item else
-                      "template", "template model file")
-    _check_template(template)
+    template_where = f"{where}.template" if "template" in item else "template"
+    template = r.file(spec["template"], template_where, "template model file")
+    try:
+        method = _calibration_method(template)
+    except InputError as error:
+        raise InputError(f"{r.source}: {template_where}: {error}") from None
     patterns = item["trials"] if isinstance(item["trials"], list) else [item["trials"]]
     if not patterns:
         r.fail(f"{where}.trials", "a trial file or glob, or a non-empty list of them", [])
@@ -275,7 +277,15 @@ def _subject(r: _Reader, where: str, item: Any, defaults: dict) -> SubjectSpec:
         r.fail(f"{where}.trials", "trials with different file names (each run is named after "
                                   "its subject and trial)", twice[0])
     map_where = f"{where}.map" if "map" in item else "map"
+    mapping, map_file = r.mapping_pairs(spec["map"], map_where) \
+        if spec.get("map") is not None else ((), None)
     measurements_where = f"{where}.measurements" if "measurements" in item else "measurements"
+    measurements = r.measurements(spec["measurements"], measurements_where) \
+        if spec.get("measurements") is not None else None
+    if isinstance(measurements, tuple) and method != "davis":
+        r.fail(measurements_where, f"{FROM_C3D} or nothing: {template.name} maps the medial "
+                                   "markers, whose midpoints are the joint centres (knee and "
+                                   "ankle widths serve Helen Hayes/Davis templates)")
     return SubjectSpec(
         name=r.name(item["name"], f"{where}.name"),
         group=r.name(item.get("group", DEFAULT_GROUP), f"{where}.group"),
@@ -284,16 +294,15 @@ def _subject(r: _Reader, where: str, item: Any, defaults: dict) -> SubjectSpec:
         frames=r.frames(item["frames"], f"{where}.frames") if "frames" in item else None,
         trials=tuple(trials),
         mass=r.mass(item["mass"], f"{where}.mass") if item.get("mass") is not None else None,
-        measurements=r.measurements(spec["measurements"], measurements_where)
-        if spec.get("measurements") is not None else None,
-        mapping=r.mapping_pairs(spec["map"], map_where) if spec.get("map") is not None else ())
+        measurements=measurements,
+        mapping=mapping, map_file=map_file)
 
 
 @lru_cache(maxsize=16)
-def _check_template(path: Path) -> None:
-    """A template that loads and maps the landmarks of a calibration method (a one-line error
-    from the model's own reader otherwise), checked before any subject is calibrated."""
+def _calibration_method(path: Path) -> str:
+    """The calibration method of a template that loads and maps a method's landmarks (a
+    one-line error from the model's own reader otherwise), checked before anything runs."""
     from fccgrb_cli.anatomy.calibrate import calibration_method
     from fccgrb_cli.model import load_model
 
-    calibration_method(load_model(path))
+    return calibration_method(load_model(path))
