@@ -28,7 +28,7 @@ from fccgrb_cli.anatomy.calibrate import calibrate
 from fccgrb_cli.dynamics import convert
 from fccgrb_cli.io.trial import read_trial
 from fccgrb_cli.model import Model, load_model, parse_model
-from fccgrb_cli.options import SolveOptions
+from fccgrb_cli.options import SolveOptions, prepared
 from fccgrb_cli.system import compile_system
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -42,7 +42,7 @@ def stage_ms(model: Model, trial, options: SolveOptions, repeat: int, batched: b
     options = SolveOptions(**{**options.__dict__, "engine": engine})
     run = pipeline.solve_trial(model, trial, SolveOptions(**{**options.__dict__,
                                                             "dynamics": False}))
-    model = pipeline.prepared(model, options)
+    model = prepared(model, options)
     system = compile_system(model, angles="coordinate", track=True)
     best, tau = float("inf"), float("nan")
     path = partial(convert.classical_dynamics, batched=batched)

@@ -25,7 +25,7 @@ __all__ = ["RESULTS_FORMAT", "InputError", "NamedArray", "Run", "SolveOptions", 
 # Loaded on first use, so that `fccgrb --help` and `import fccgrb_cli` stay fast.
 _PUBLIC = {**dict.fromkeys(("load_model", "read_trial", "solve", "calibrate", "read_results"),
                            "fccgrb_cli.api"),
-           "SolveOptions": "fccgrb_cli.options", "Run": "fccgrb_cli.pipeline",
+           "SolveOptions": "fccgrb_cli.options", "Run": "fccgrb_cli.run",
            "NamedArray": "fccgrb_cli.named", "InputError": "fccgrb_cli.errors"}
 
 

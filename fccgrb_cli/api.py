@@ -23,7 +23,7 @@ from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.model import Model
 from fccgrb_cli.options import SolveOptions, describe
-from fccgrb_cli.pipeline import Run
+from fccgrb_cli.run import Run
 
 
 def load_model(source: str | Path | Mapping[str, Any]) -> Model:
@@ -104,7 +104,7 @@ def calibrate(template: Model, trial: Trial, *, mass: float | None = None,
 def read_results(path: str | Path) -> dict[str, Run]:
     """Every run of a results file written by ``fccgrb solve`` or :meth:`Run.to_hdf5`, by
     name, as the same Run objects :func:`solve` returns (arrays, options, warnings, dynamics)."""
-    from fccgrb_cli.io.results import read_runs
+    from fccgrb_cli.io.runs import read_runs
 
     return read_runs(path)
 

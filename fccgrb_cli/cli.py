@@ -22,7 +22,7 @@ from fccgrb_cli.progress import Progress
 from fccgrb_cli.system.structure import analyse
 
 if TYPE_CHECKING:
-    from fccgrb_cli.pipeline import Run
+    from fccgrb_cli.run import Run
 
 FORM = click.Choice(["model", "full", "reduced"])
 ACCEPT_TRUNCATED = click.option(
@@ -249,7 +249,7 @@ def _solve_one(model: Model, path: str, options: SolveOptions, accept_truncated:
 def _write_and_show(run: Run, output: str) -> None:
     from fccgrb_cli.clinical import clinical_table
     from fccgrb_cli.io.results import write_run
-    from fccgrb_cli.pipeline import summary
+    from fccgrb_cli.run import summary
 
     write_run(output, run, " ".join(["fccgrb", *sys.argv[1:]]))
     for message in (*run.result.messages, *run.warnings):
@@ -658,7 +658,7 @@ def export(results: str, fmt: str, run_name: str | None, trial: str | None,
     CSV's trusted column, the header's untrustedFrames, the C3D's FCCGRB:UNTRUSTED)."""
     from fccgrb_cli.io.export import choose_run, default_output
     from fccgrb_cli.io.export import export as write
-    from fccgrb_cli.io.results import read_runs
+    from fccgrb_cli.io.runs import read_runs
 
     runs = read_runs(results)
     run = choose_run(runs, run_name, results)

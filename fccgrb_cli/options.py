@@ -4,16 +4,20 @@
 and the Python API (``fccgrb_cli.solve``) all build one and hand it, unchanged, to
 ``pipeline.solve_trial``. The command-line flags (:func:`click_options`), the sweep keys
 (:meth:`SolveOptions.from_mapping`) and the API's documentation (:func:`describe`) are generated
-from the fields below, so an option added here reaches all three.
+from the fields below, so an option added here reaches all three. :func:`prepared` applies the
+options that change the model (its bodies' form, the tracked markers).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from fccgrb_cli.errors import InputError
+
+if TYPE_CHECKING:
+    from fccgrb_cli.model import Model
 
 METHODS = ("ad", "nrm-ls", "nrm-wls", "cno-sqp", "cno-ip", "mo-tc", "mo-ed")
 
@@ -359,3 +363,16 @@ def label_map_file(path: str) -> list[tuple[str, str]]:
 
 
 SWEEP_KEYS = tuple(f.metadata["sweep"] or f.name for f in fields(SolveOptions))
+
+
+def prepared(model: Model, options: SolveOptions) -> Model:
+    """The model as the options ask: every body in one form, only some markers tracked."""
+    if options.form != "model":
+        model = model.with_form(options.form)
+    if options.track:
+        unknown = sorted(set(options.track) - set(model.marker_labels))
+        if unknown:
+            raise InputError(f"--track: expected marker names of {model.source} "
+                             f"({', '.join(model.marker_labels)}), got {', '.join(unknown)}")
+        model = model.with_tracked(options.track)
+    return model

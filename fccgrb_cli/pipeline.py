@@ -1,284 +1,39 @@
 """One solve, as the design's steps: load (labels, truth) → perturb → kinematic solve → quality
 assessment → angular drivers (filtered) → inverse dynamics → a Run, whatever asked for it (the
-CLI, a sweep cell or the Python API), every option coming in one ``SolveOptions``."""
+CLI, a sweep cell or the Python API), every option coming in one ``SolveOptions``.
+
+What the stages use lives in their layers: the trial's labels each marker follows
+(``io.labels``), the force plates as loads (``io.plate_loads``), the result (``run.Run``)."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
-from functools import cached_property
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from fccgrb_cli.clinical import ClinicalResults, clinical_results
-from fccgrb_cli.dynamics.contact import MAX_DISTANCE, assign
+from fccgrb_cli.clinical import clinical_results
 from fccgrb_cli.dynamics.convert import Dynamics, classical_dynamics
-from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.errors import InputError
-from fccgrb_cli.gait.analysis import GaitResults, analyse_gait, landmark_labels
+from fccgrb_cli.gait.analysis import analyse_gait, landmark_labels
+from fccgrb_cli.io.labels import match_labels, vector_targets
+from fccgrb_cli.io.plate_loads import plate_loads
 from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.io.truth import Truth, read_truth, truth_path
 from fccgrb_cli.model import Model
-from fccgrb_cli.named import NamedArray
-from fccgrb_cli.options import METHODS, SolveOptions
+from fccgrb_cli.options import SolveOptions, prepared
 from fccgrb_cli.perturb import perturb
+from fccgrb_cli.run import Run
 from fccgrb_cli.solvers import KinematicResult, solve_ad
 from fccgrb_cli.solvers.baseline import solve_baseline
 from fccgrb_cli.solvers.nrm import NrmSettings, solve_nrm
 from fccgrb_cli.solvers.quality import JUMP, assessed
 from fccgrb_cli.system import System, compile_system
 
-__all__ = ["METHODS", "Run", "solve_trial", "summary"]
+__all__ = ["solve_trial"]
 
 Progress = Callable[[int, int], None] | None
-
-
-@dataclass(frozen=True, repr=False)
-class Run:
-    """A solved trial: the options it was solved with, the kinematic result (with each frame's
-    quality flags), the markers it saw, the model points it reached, and the inverse dynamics."""
-
-    name: str
-    options: SolveOptions
-    result: KinematicResult
-    labels: tuple[str, ...]
-    rate: float
-    reference: np.ndarray
-    markers_input: np.ndarray
-    model_points: np.ndarray
-    ed: np.ndarray
-    ed_input: np.ndarray
-    truth_theta: np.ndarray | None
-    form: str
-    model_text: str
-    trial_path: str
-    dynamics: Dynamics | None = None
-    warnings: tuple[str, ...] = ()
-    notes: tuple[str, ...] = ()
-    clinical: ClinicalResults | None = None
-    gait: GaitResults | None = None
-
-    def __repr__(self) -> str:
-        r = self.result
-        return (f"Run({self.name!r}: {self.options.method}, {len(r.time)} frames, "
-                f"{int((~r.converged).sum())} failed, {int((~r.trusted).sum())} not trusted, "
-                f"dynamics {'on' if self.dynamics is not None else 'off'})")
-
-    # --- what the results file records of the options, as they applied to this run -------
-    @property
-    def perturb_level_m(self) -> float:
-        return self.options.perturb_level_m
-
-    @property
-    def perturb_markers(self) -> tuple[str, ...]:
-        """The perturbed markers: those named, else every tracked one when perturbed."""
-        return self.options.perturb_markers or (self.labels if self.perturb_level_m > 0 else ())
-
-    @property
-    def perturb_seed(self) -> int:
-        return self.options.seed
-
-    @property
-    def tracking_weight(self) -> float | None:
-        return None if self.options.method == "nrm-ls" else self.options.tracking_weight
-
-    @property
-    def warm_start(self) -> str:
-        return self.options.warm_start
-
-    @property
-    def hessian(self) -> str:
-        return "" if self.options.method == "ad" else self.options.hessian
-
-    @property
-    def ad_drivers(self) -> str:
-        return self.options.ad_drivers if self.options.method == "ad" else ""
-
-    @property
-    def filter_cutoff(self) -> float | None:
-        return self.options.filter_cutoff
-
-    # --- the Python API's view: named arrays with units ------------------------------------
-    @cached_property
-    def model(self) -> Model:
-        """The model as solved (the run's YAML with the options' form and tracked markers)."""
-        from fccgrb_cli.model import parse_model
-
-        return prepared(parse_model(self.model_text, self.trial_path), self.options)
-
-    def _named(self, values: np.ndarray, names: tuple[str, ...], units: tuple[str, ...]
-               ) -> NamedArray:
-        return NamedArray(values, names, units, self.result.time)
-
-    @property
-    def _angle_units(self) -> tuple[str, ...]:
-        return tuple("m" if getattr(a, "kind", "angle") == "distance" else "rad"
-                     for a in self.model.angles)
-
-    @property
-    def angles(self) -> NamedArray:
-        """Every joint angle (rad; a distance coordinate in m) per frame."""
-        return self._named(self.result.theta, self.result.angle_names, self._angle_units)
-
-    @property
-    def angular_velocities(self) -> NamedArray:
-        """θ̇ (rad/s; m/s for distances), by central differences of the solved θ."""
-        return self._named(self.result.theta_d, self.result.angle_names,
-                           tuple(f"{u}/s" for u in self._angle_units))
-
-    @property
-    def angular_accelerations(self) -> NamedArray:
-        """θ̈ (rad/s²; m/s² for distances)."""
-        return self._named(self.result.theta_dd, self.result.angle_names,
-                           tuple(f"{u}/s²" for u in self._angle_units))
-
-    def _coordinates(self, values: np.ndarray, per: str) -> NamedArray:
-        names, units = [], []
-        for body in self.model.bodies:
-            for vector in ("r", "u", "v", "w")[: 4 if body.form == "full" else 3]:
-                names += [f"{body.name}.{vector}.{axis}" for axis in "xyz"]
-                units += [("m" if vector == "r" else "1") + per] * 3
-        if values.shape[1] > len(names):  # mixed coordinates: the angles follow
-            names += list(self.result.angle_names)
-            units += [u + per for u in self._angle_units]
-        return self._named(values, tuple(names), tuple(units))
-
-    @property
-    def q(self) -> NamedArray:
-        """The system coordinates per frame (Eq. 9): each body's r (m) and unit vectors, then
-        the mixed coordinates (rad, m)."""
-        return self._coordinates(self.result.q, "")
-
-    @property
-    def qd(self) -> NamedArray:
-        """q̇, consistent with the topological equations (per s)."""
-        return self._coordinates(self.result.qd, "/s")
-
-    @property
-    def qdd(self) -> NamedArray:
-        """q̈, consistent with the topological equations (per s²)."""
-        return self._coordinates(self.result.qdd, "/s²")
-
-    @property
-    def moments(self) -> NamedArray | None:
-        """Joint moments conjugate to the angles (N·m; N for distances), None without the
-        dynamics."""
-        if self.dynamics is None:
-            return None
-        return self._named(self.dynamics.inverse.joint_moments, self.result.angle_names,
-                           tuple("N" if u == "m" else "N·m" for u in self._angle_units))
-
-    @property
-    def clinical_angles(self) -> NamedArray | None:
-        """Clinical angles (deg) of the angles that declare a clinical sign."""
-        c = self.clinical
-        return None if c is None else self._named(c.angles, c.names, ("deg",) * len(c.names))
-
-    @property
-    def clinical_moments(self) -> NamedArray | None:
-        """Their conjugate moments, N·m/kg when the subject's mass is known, else N·m."""
-        c = self.clinical
-        if c is None or c.moments is None:
-            return None
-        per_kg = c.moments_per_kg
-        values, unit = (per_kg, "N·m/kg") if per_kg is not None else (c.moments, "N·m")
-        return self._named(values, c.names, (unit,) * len(c.names))
-
-    @property
-    def trusted(self) -> np.ndarray:
-        """Per frame: converged and not flagged by the quality checks."""
-        return self.result.trusted
-
-    def summary(self) -> dict[str, float | str | int]:
-        """The one-row summary the command line prints."""
-        return summary(self)
-
-    def to_hdf5(self, path: str | Path, command: str = "fccgrb_cli.solve (Python API)") -> None:
-        """Add this run to a results file (created when absent), atomically."""
-        from fccgrb_cli.io.results import write_run
-
-        write_run(path, self, command)
-
-    def to_dataframe(self):
-        """One row per frame: time, trusted, the angles, their moments and the clinical curves
-        (columns 'name [unit]'); needs pandas."""
-        import pandas as pd
-
-        parts = [self.angles.to_dataframe()]
-        parts += [a.to_dataframe().add_prefix(prefix) for prefix, a in (
-            ("moment ", self.moments), ("clinical ", self.clinical_angles),
-            ("clinical moment ", self.clinical_moments)) if a is not None]
-        frame = pd.concat(parts, axis=1)
-        frame.insert(0, "trusted", self.trusted)
-        return frame
-
-
-def match_labels(model: Model, trial: Trial, mapping: dict[str, str]) -> list[str]:
-    """The file label each tracked marker follows: the CLI mapping, else the YAML's marker name;
-    a file label 'Subject:NAME' matches NAME when NAME itself is absent. A label not found is an
-    error naming, for each, the file's closest labels."""
-    unknown = sorted(set(mapping) - set(model.marker_labels))
-    if unknown:
-        raise InputError(f"--map: expected marker names of the model "
-                         f"({', '.join(model.marker_labels)}), got "
-                         f"{_with_closest(unknown, model.marker_labels)}")
-    out, missing = [], []
-    for name in model.marker_labels:
-        wanted = mapping.get(name, name)
-        label = trial.find(wanted)
-        if label is None:
-            missing.append(wanted)
-        out.append(label)
-    if missing:
-        free = [label for label in trial.labels if label not in out]
-        shown = ", ".join(free[:12]) + (" …" if len(free) > 12 else "")
-        raise InputError(f"{trial.path}: expected the labels tracked by {model.source}; not "
-                         f"found: {_with_closest(missing, free)}; the file's labels no marker "
-                         f"follows: {shown or 'none'} (map names with --map NAME=LABEL or "
-                         "--map FILE.yaml)")
-    return out
-
-
-def _with_closest(names: list[str], known: tuple[str, ...] | list[str]) -> str:
-    """'A (closest: B, C), D (closest: none)': each name with the nearest of ``known``."""
-    from difflib import get_close_matches
-
-    bare = {k.split(":")[-1].lower(): k for k in known}
-    parts = []
-    for name in names:
-        near = get_close_matches(name.split(":")[-1].lower(), list(bare), n=3, cutoff=0.4)
-        parts.append(f"{name} (closest: {', '.join(bare[n] for n in near) or 'none'})")
-    return ", ".join(parts)
-
-
-def _vector_targets(model: Model, trial: Trial, markers: dict[str, np.ndarray]) -> np.ndarray:
-    out = []
-    for tv in model.tracked_vectors:
-        ends = []
-        for label in (tv.from_marker, tv.to_marker):
-            if label not in markers:
-                if label not in trial.labels:
-                    raise InputError(f"{trial.path}: expected the label {label} used by a "
-                                     f"tracked vector of {model.source}")
-                markers[label] = trial.select([label])[:, 0]
-            ends.append(markers[label])
-        d = ends[1] - ends[0]
-        out.append(d / np.linalg.norm(d, axis=1, keepdims=True))
-    return np.stack(out, axis=1) if out else np.zeros((trial.n_frames, 0, 3))
-
-
-def prepared(model: Model, options: SolveOptions) -> Model:
-    """The model as the options ask: every body in one form, only some markers tracked."""
-    if options.form != "model":
-        model = model.with_form(options.form)
-    if options.track:
-        unknown = sorted(set(options.track) - set(model.marker_labels))
-        if unknown:
-            raise InputError(f"--track: expected marker names of {model.source} "
-                             f"({', '.join(model.marker_labels)}), got {', '.join(unknown)}")
-        model = model.with_tracked(options.track)
-    return model
 
 
 def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None, *,
@@ -431,7 +186,7 @@ def _kinematics(model: Model, trial: Trial, inputs: np.ndarray, options: SolveOp
                                       order=o.filter_order, tol=o.tol, progress=progress)
     system = compile_system(model, angles="coordinate", track=True)
     by_label = dict(zip(model.marker_labels, np.moveaxis(inputs, 1, 0), strict=True))
-    vectors = _vector_targets(model, trial, by_label)
+    vectors = vector_targets(model, trial, by_label)
     targets = np.concatenate([inputs, vectors], axis=1) if vectors.shape[1] else inputs
     if o.method.startswith("nrm"):
         labels = model.marker_labels + tuple(tv.marker for tv in model.tracked_vectors)
@@ -532,79 +287,6 @@ def points_along(system: System, q: np.ndarray, which: list[tuple[str, str]],
     return out
 
 
-def plate_loads(model: Model, trial: Trial, warnings: list[str],
-                contact_points: dict[str, np.ndarray] | None = None,
-                notes: list[str] | None = None) -> list[ExternalLoad]:
-    """The trial's force platforms as external loads: those ``loads.force_plates`` assigns to a
-    body, and every other plate's contacts to the nearest of ``loads.contact``'s bodies (whose
-    point positions, frames × points × 3, are ``contact_points``)."""
-    if not model.force_plates and not model.contact_bodies:
-        return []
-    if not trial.path.lower().endswith(".c3d"):
-        if not model.force_plates:
-            return []
-        raise InputError(f"{model.source}: loads.force_plates: expected a C3D trial with force "
-                         f"platforms, got {trial.path}")
-    from fccgrb_cli.io.c3d_header import read_parameters
-    from fccgrb_cli.io.forceplates import read_force_plates
-
-    used = read_parameters(trial.path).get("FORCE_PLATFORM:USED")
-    none = used is not None and used.values.size and not used.values[0]
-    # FORCE_PLATFORM:USED 0: ezc3d would find no plate after loading every frame's points
-    plates = {} if none else {p.number: p for p in read_force_plates(
-        trial.path, trial.n_frames, model.plate_threshold)}
-    loads = []
-    for k, assignment in enumerate(model.force_plates):
-        plate = plates.get(assignment.plate)
-        key = f"loads.force_plates[{k}].plate"
-        if plate is None:
-            raise InputError(f"{model.source}: {key}: expected a plate of {trial.path} "
-                             f"(it has {len(plates)}), got {assignment.plate}")
-        if plate.problem is not None:
-            raise InputError(f"{trial.path}: FORCE_PLATFORM plate {plate.number}: expected "
-                             f"{plate.problem} (assigned by {model.source} {key})")
-        if not np.abs(plate.force).any():
-            warnings.append(f"{trial.path}: force plate {plate.number} carries no load above "
-                            f"{model.plate_threshold:g} N in any frame")
-        loads.append(ExternalLoad(f"plate{plate.number}", assignment.body, plate.force,
-                                  plate.cop, plate.free_moment))
-    assigned = {a.plate for a in model.force_plates}
-    for number, plate in plates.items():
-        if number in assigned or not model.contact_bodies:
-            continue
-        if plate.problem is not None:
-            warnings.append(f"{trial.path}: FORCE_PLATFORM plate {number} ignored: expected "
-                            f"{plate.problem}")
-            continue
-        loads.extend(_contact_loads(plate, contact_points or {}, trial.path, warnings,
-                                    notes if notes is not None else []))
-    return loads
-
-
-def _contact_loads(plate, contact_points: dict[str, np.ndarray], path: str,
-                   warnings: list[str], notes: list[str]) -> list[ExternalLoad]:
-    """One plate's loads, each contact given to the nearest contact body."""
-    loaded = np.abs(plate.force).any(axis=1)
-    mask: dict[str, np.ndarray] = {}
-    for c in assign(loaded, plate.cop, contact_points):
-        if c.body is None:
-            warnings.append(f"{path}: force plate {plate.number}, frame indices {c.start}:"
-                            f"{c.stop}: no contact body within {1e3 * MAX_DISTANCE:.0f} mm of "
-                            f"the centre of pressure (nearest {1e3 * c.distance:.0f} mm); load "
-                            "ignored")
-            continue
-        notes.append(f"force plate {plate.number}, frame indices {c.start}:{c.stop} → {c.body} "
-                     f"(centre of pressure {1e3 * c.distance:.0f} mm from its nearest point)")
-        mask.setdefault(c.body, np.zeros(len(loaded), dtype=bool))[c.start:c.stop] = True
-    out = []
-    for body, frames in mask.items():
-        keep = frames[:, None]
-        name = f"plate{plate.number}" if len(mask) == 1 else f"plate{plate.number}_{body}"
-        out.append(ExternalLoad(name, body, np.where(keep, plate.force, 0.0), plate.cop,
-                                np.where(keep, plate.free_moment, 0.0)))
-    return out
-
-
 def _truth_for(trial: Trial, model: Model) -> Truth | None:
     sidecar = truth_path(trial.path)
     if not Path(sidecar).exists():
@@ -627,42 +309,3 @@ def _solve_with_true_angles(system: System, trial: Trial, truth: Truth | None, t
                     system.layout.pose_q(model), tol=tol, progress=progress)
 
 
-def mean_jump(points: np.ndarray) -> float:
-    """Mean frame-to-frame displacement of the model points (m): noise in a trajectory shows
-    as a larger jump than the motion itself needs (compare runs of the same trial)."""
-    if len(points) < 2:
-        return 0.0
-    return float(np.nanmean(np.linalg.norm(np.diff(points, axis=0), axis=2)))
-
-
-def summary(run: Run) -> dict[str, float | str | int]:
-    """The one-row summary: method, ms/frame, iterations/frame, ‖Φ‖, topology, ED (mm)."""
-    r = run.result
-    ok = np.isfinite(run.ed).all(axis=1) & r.converged
-    per_frame = r.wall_s / r.n_frames if np.isfinite(r.wall_s) else float(np.mean(r.time_s))
-    row: dict[str, float | str | int] = {
-        "run": run.name, "method": r.method, "ms/frame": 1e3 * per_frame,
-        "iter/frame": float(np.mean(r.iterations)),
-        "mean |Phi|": float(np.nanmean(r.phi_norm)),
-        "max |Phi_top|": float(np.nanmax(r.phi_top_max)),
-        "mean ED mm": 1e3 * float(np.nanmean(run.ed[ok])) if ok.any() else float("nan"),
-        "max ED mm": 1e3 * float(np.nanmax(run.ed[ok])) if ok.any() else float("nan"),
-        "jump mm": 1e3 * mean_jump(run.model_points),
-        "failed": int((~r.converged).sum()),
-        "flagged": int((r.converged & ~r.trusted).sum()),
-    }
-    if run.truth_theta is not None:
-        err = np.abs(r.theta - run.truth_theta)[ok]
-        distance = np.array(run._angle_units) == "m"
-        angle_err = err[:, ~distance]
-        row["max |dθ| deg"] = float(np.degrees(angle_err.max())) if angle_err.size else float("nan")
-        if distance.any():
-            row["max |dd| mm"] = 1e3 * float(err[:, distance].max()) if err.size else float("nan")
-    if run.dynamics is not None:
-        loads = np.abs(run.dynamics.inverse.joint_moments)
-        distance = np.array(run._angle_units) == "m"
-        row["max |τ| N·m"] = float(loads[:, ~distance].max()) if (~distance).any() else \
-            float("nan")
-        if distance.any():  # a slide's joint force (N) is not a moment
-            row["max |F| N"] = float(loads[:, distance].max())
-    return row

@@ -67,7 +67,7 @@ def _series(h5, name: str, run, top) -> Series:
 
 def load_series(path: Path, wanted: tuple[str, ...]) -> list[Series]:
     """Runs of a results file (by run name) or cells of a sweep file (by key prefix)."""
-    from fccgrb_cli.io.results import open_results
+    from fccgrb_cli.io.datasets import open_results
 
     h5 = open_results(path)
     out = []

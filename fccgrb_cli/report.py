@@ -93,7 +93,7 @@ def _row(run, points: str, extra: str = "") -> Row:
     n = len(time_s)
     attrs = run.attrs
     wall = float(attrs.get("wall_s", np.nan))
-    from fccgrb_cli.pipeline import mean_jump
+    from fccgrb_cli.run import mean_jump
 
     values = {
         "ms/frame": 1e3 * (wall / n if np.isfinite(wall) else float(np.mean(time_s))),
@@ -114,7 +114,7 @@ def _row(run, points: str, extra: str = "") -> Row:
 def collect(path: str | Path) -> tuple[str, list[Row]]:
     """The table name (a sweep's 'table', else '') and one Row per run in a results or sweep
     file."""
-    from fccgrb_cli.io.results import open_results
+    from fccgrb_cli.io.datasets import open_results
 
     h5 = open_results(path)
     rows: list[Row] = []

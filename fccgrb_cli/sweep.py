@@ -88,7 +88,7 @@ def _expand(grid: dict) -> Iterator[dict]:
 
 def load_sweep(path: str | Path) -> Sweep:
     """Read and validate a sweep config; paths inside it are relative to the config."""
-    from fccgrb_cli.pipeline import METHODS
+    from fccgrb_cli.options import METHODS
 
     path = Path(path)
     if path.is_dir():

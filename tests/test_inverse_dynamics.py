@@ -39,9 +39,9 @@ from fccgrb_cli.dynamics.convert import classical_dynamics
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.filtering import lowpass
 from fccgrb_cli.io.forceplates import read_force_plates
+from fccgrb_cli.io.plate_loads import plate_loads
 from fccgrb_cli.io.trial import read_trial
 from fccgrb_cli.model import load_model
-from fccgrb_cli.pipeline import plate_loads
 from fccgrb_cli.solvers import solve_ad
 from fccgrb_cli.solvers.baseline import solve_baseline
 from fccgrb_cli.solvers.nrm import NrmSettings, solve_nrm

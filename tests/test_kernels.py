@@ -29,7 +29,6 @@ from fccgrb_cli.solvers.nrm_compiled import sparse_of
 from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import Drive, compile_system
 from fccgrb_cli.system.sparse import supported
-from fccgrb_cli.system.structure import pose_of
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ROOT / "configs" / "models"
@@ -71,7 +70,7 @@ def test_pieces_equal_the_dense_system(name: str) -> None:
     rng = np.random.default_rng(abs(hash(name)) % 2**32)
     n_rows = system.n_rows
     for _ in range(3):
-        q = pose_of(system) + 0.05 * rng.standard_normal(system.nq)
+        q = system.pose() + 0.05 * rng.standard_normal(system.nq)
         ref = rng.standard_normal((system.n_targets, 3))
         w = rng.uniform(0.1, 2.0, n_rows)
         F, phi = np.empty(len(s.f0)), np.empty(n_rows)

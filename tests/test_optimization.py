@@ -66,7 +66,8 @@ from fccgrb_cli.model import load_model
 from fccgrb_cli.model.elements import FrozenMap
 from fccgrb_cli.options import SolveOptions
 from fccgrb_cli.perturb import perturb
-from fccgrb_cli.pipeline import mean_jump, solve_trial, summary
+from fccgrb_cli.pipeline import solve_trial
+from fccgrb_cli.run import mean_jump, summary
 from fccgrb_cli.solvers.frame_problem import ED_SMOOTHING, FrameProblem
 from fccgrb_cli.solvers.optimize import Settings, solve_optimization
 from fccgrb_cli.synth import synthesize

@@ -18,9 +18,10 @@ import pytest
 import fccgrb_cli as fc
 from fccgrb_cli.io.datasets import LARGE
 from fccgrb_cli.io.export import write_csv
-from fccgrb_cli.io.results import read_runs, write_run
-from fccgrb_cli.pipeline import summary
+from fccgrb_cli.io.results import write_run
+from fccgrb_cli.io.runs import read_runs
 from fccgrb_cli.report import collect
+from fccgrb_cli.run import summary
 
 ROOT = Path(__file__).resolve().parents[1]
 FIVE_BAR = ROOT / "configs" / "models" / "five_bar.yaml"

@@ -22,7 +22,8 @@ import fccgrb_cli as fc
 from fccgrb_cli.io.c3d_header import read_parameters
 from fccgrb_cli.io.results import write_run
 from fccgrb_cli.io.spill import Spill, StoredArray
-from fccgrb_cli.pipeline import distances, points_along, solve_trial, summary
+from fccgrb_cli.pipeline import distances, points_along, solve_trial
+from fccgrb_cli.run import summary
 from fccgrb_cli.system import compile_system
 
 SPILLED = ("reference", "markers_input", "model_points", "ed", "ed_input")

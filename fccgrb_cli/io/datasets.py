@@ -1,11 +1,15 @@
 """How the results files store arrays: a large one chunked and compressed, so that a long trial
 (120,000 frames × 96 coordinates is 92 MB per array) is written and read a chunk at a time and
 takes less disk; a small one contiguous, as HDF5 stores it by default. Lossless either way: what
-is read back equals what was written bit for bit."""
+is read back equals what was written bit for bit. :func:`open_results` opens such a file to read."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
+
+from fccgrb_cli.errors import InputError
 
 LARGE = 1 << 16  # bytes: an array at least this large is stored chunked and compressed
 
@@ -20,3 +24,16 @@ def put(group, key: str, data) -> object:
         return group.create_dataset(key, data=data, chunks=True, compression="gzip",
                                     compression_opts=1, shuffle=True)
     return group.create_dataset(key, data=data)
+
+
+def open_results(path: str | Path):
+    """An existing results or sweep file, read-only (h5py.File); one-line errors otherwise."""
+    import h5py
+
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: results file not found")
+    try:
+        return h5py.File(path, "r")
+    except OSError:
+        raise InputError(f"{path}: not an HDF5 results file") from None

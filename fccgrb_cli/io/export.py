@@ -20,7 +20,7 @@ import numpy as np
 
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.atomic import atomic_path
-from fccgrb_cli.pipeline import Run
+from fccgrb_cli.run import Run
 
 FORMATS = ("mot", "sto", "csv", "c3d")
 

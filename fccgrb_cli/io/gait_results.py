@@ -20,7 +20,7 @@ import numpy as np
 from fccgrb_cli.gait.analysis import GaitResults
 from fccgrb_cli.gait.cycles import PARAMETERS, SideCycles
 from fccgrb_cli.gait.events import Events
-from fccgrb_cli.io.datasets import put
+from fccgrb_cli.io.datasets import open_results, put
 
 
 def _strings(values) -> tuple[str, ...]:
@@ -93,8 +93,6 @@ def read_gait(g) -> GaitResults:
 
 def read_all_gait(path) -> dict[str, GaitResults]:
     """The gait analysis of every run of a results file that has one, by run name."""
-    from fccgrb_cli.io.results import open_results
-
     with open_results(path) as h5:
         runs = h5.get("runs", {})
         return {name: read_gait(g["gait"]) for name, g in runs.items() if "gait" in g}

@@ -28,6 +28,7 @@ from fccgrb_cli.model import Model
 from fccgrb_cli.system.constraints import AXES, collect
 from fccgrb_cli.system.features import FeatureTable
 from fccgrb_cli.system.layout import Layout, build_layout, skew
+from fccgrb_cli.system.rank import rank_of
 
 TOPOLOGY, DRIVER, TRACKING = 0, 1, 2
 _EMPTY = np.zeros(0)
@@ -288,6 +289,13 @@ class System:
             out[self.sine_of] = np.arctan2(sine, dot[self.sine_of])
         return out
 
+    def pose(self) -> np.ndarray:
+        """q at the model's pose, mixed coordinates set to the angles the pose has."""
+        q = self.layout.pose_q(self.model)
+        if self.mixed:
+            q[self.layout.n_body_q:] = self.angles_at(q)
+        return q
+
     @property
     def full_angles(self) -> np.ndarray:
         """Per coordinate: a signed angle that may take any value (``range: full``)."""
@@ -308,9 +316,7 @@ class System:
         where they are dependent: a closed planar loop written in 3D, a signed angle's cosine
         and sine rows. Optimizers that cannot take dependent equality constraints keep this
         many rows (see FrameProblem.keep_independent)."""
-        from fccgrb_cli.system.structure import pose_of, rank_of
-
-        return rank_of(self.jacobian(pose_of(self))[self.kinds == TOPOLOGY])
+        return rank_of(self.jacobian(self.pose())[self.kinds == TOPOLOGY])
 
     @property
     def redundant_topology(self) -> bool:

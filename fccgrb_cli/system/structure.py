@@ -13,8 +13,9 @@ import numpy as np
 
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.model import Model
-from fccgrb_cli.system.compiled import System, compile_system
+from fccgrb_cli.system.compiled import compile_system
 from fccgrb_cli.system.constraints import floating_bases
+from fccgrb_cli.system.rank import dependent_rows, rank_of
 
 
 @dataclass(frozen=True)
@@ -57,43 +58,12 @@ class StructureReport:
         return out
 
 
-def rank_of(J: np.ndarray) -> int:
-    """Numerical rank (singular values above the largest × max(shape) × 1e-10)."""
-    return _rank(J)
-
-
-def _rank(J: np.ndarray) -> int:
-    if J.size == 0:
-        return 0
-    s = np.linalg.svd(J, compute_uv=False)
-    return int((s > s[0] * max(J.shape) * 1e-10).sum()) if s[0] > 0 else 0
-
-
-def dependent_rows(J: np.ndarray, labels: tuple[str, ...]) -> tuple[str, ...]:
-    """Rows of J that are linear combinations of earlier-pivoted rows (QR with pivoting of Jᵀ)."""
-    rank = _rank(J)
-    if rank == J.shape[0]:
-        return ()
-    import scipy.linalg  # 0.1 s to import: only for a model with redundant equations
-
-    _, _, pivots = scipy.linalg.qr(J.T, pivoting=True, mode="economic")
-    return tuple(labels[k] for k in sorted(pivots[rank:]))
-
-
-def pose_of(system: System) -> np.ndarray:
-    """q at the model's pose, mixed coordinates set to the angles the pose has."""
-    q = system.layout.pose_q(system.model)
-    if system.mixed:
-        q[system.layout.n_body_q:] = system.angles_at(q)
-    return q
-
-
 def analyse(model: Model) -> StructureReport:
     """Rank analysis; raises InputError when the constraints cannot determine the coordinates."""
     ad = compile_system(model, angles="driver")
-    J = ad.jacobian(pose_of(ad))
+    J = ad.jacobian(ad.pose())
     top = ad.masks()["topology"]
-    top_rank = _rank(J[top])
+    top_rank = rank_of(J[top])
     dof = ad.nq - top_rank
     n_angles = len(model.angles)
     n_distances = sum(a.kind == "distance" for a in model.angles)
@@ -111,7 +81,7 @@ def analyse(model: Model) -> StructureReport:
             f"{model.source}: angles: expected {joint_dof} {what} for the "
             f"{joint_dof} degrees of freedom the joints leave{floating}, got {n_angles} "
             f"({detail})")
-    ad_rank = _rank(J)
+    ad_rank = rank_of(J)
     if ad_rank < ad.nq:
         order = np.concatenate([np.flatnonzero(top), np.flatnonzero(~top)])
         culprits = [name for name in dependent_rows(J[order], tuple(ad.labels[k] for k in order))
@@ -122,10 +92,10 @@ def analyse(model: Model) -> StructureReport:
             f"{', '.join(culprits) or 'the angles'} repeat another coordinate's motion or have "
             "parallel vectors there (a distance: an axis perpendicular to its slide)")
     mc = compile_system(model, angles="coordinate", track=True)
-    Jm = mc.jacobian(pose_of(mc))
+    Jm = mc.jacobian(mc.pose())
     return StructureReport(
         n_bodies=len(model.bodies), nq=ad.nq, n_topology_rows=int(top.sum()),
         topology_rank=top_rank, dof=dof, n_angles=n_angles, ad_rank=ad_rank,
         redundant=dependent_rows(J, ad.labels),
-        n_tracking_rows=int(mc.masks()["tracking"].sum()), mc_rank=_rank(Jm), nq_mixed=mc.nq,
+        n_tracking_rows=int(mc.masks()["tracking"].sum()), mc_rank=rank_of(Jm), nq_mixed=mc.nq,
         floating=bases, n_distances=n_distances)
