@@ -24,7 +24,7 @@ import numpy as np
 from fccgrb_cli.model import load_model
 from fccgrb_cli.perturb import perturb
 from fccgrb_cli.solvers import solve_ad
-from fccgrb_cli.solvers.nrm import NrmSettings, solve_nrm
+from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
 from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import compile_system
 

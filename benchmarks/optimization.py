@@ -22,7 +22,7 @@ import numpy as np
 
 from fccgrb_cli.model import load_model
 from fccgrb_cli.perturb import perturb
-from fccgrb_cli.solvers.optimize import Settings, solve_optimization
+from fccgrb_cli.solvers.optimize.solve import Settings, solve_optimization
 from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import compile_system
 

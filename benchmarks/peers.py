@@ -70,8 +70,8 @@ import numpy as np
 
 from fccgrb_cli.model import GROUND, Model, load_model
 from fccgrb_cli.perturb import perturb
-from fccgrb_cli.solvers.nrm import NrmSettings, solve_nrm
-from fccgrb_cli.solvers.optimize import Settings, solve_optimization
+from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
+from fccgrb_cli.solvers.optimize.solve import Settings, solve_optimization
 from fccgrb_cli.synth import Synthesis, synthesize
 from fccgrb_cli.system import System, compile_system
 

@@ -26,8 +26,8 @@ from fccgrb_cli.options import SolveOptions, prepared
 from fccgrb_cli.perturb import perturb
 from fccgrb_cli.run import Run
 from fccgrb_cli.solvers import KinematicResult, solve_ad
-from fccgrb_cli.solvers.baseline import solve_baseline
-from fccgrb_cli.solvers.nrm import NrmSettings, solve_nrm
+from fccgrb_cli.solvers.ad.baseline import solve_baseline
+from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
 from fccgrb_cli.solvers.quality import JUMP, assessed
 from fccgrb_cli.system import System, compile_system
 
@@ -192,7 +192,7 @@ def _kinematics(model: Model, trial: Trial, inputs: np.ndarray, options: SolveOp
         labels = model.marker_labels + tuple(tv.marker for tv in model.tracked_vectors)
         return system, solve_nrm(system, time, targets, NrmSettings.from_options(o),
                                  labels=labels, source=trial.path, progress=progress)
-    from fccgrb_cli.solvers.optimize import Settings, solve_optimization  # scipy.optimize: 0.1 s
+    from fccgrb_cli.solvers.optimize.solve import Settings, solve_optimization  # scipy.optimize: 0.1 s
 
     return system, solve_optimization(system, time, targets, Settings.from_options(o),
                                       progress)

@@ -33,7 +33,7 @@ from fccgrb_cli.io.trial import read_trial
 from fccgrb_cli.model import load_model, parse_model
 from fccgrb_cli.options import SolveOptions
 from fccgrb_cli.pipeline import solve_trial
-from fccgrb_cli.solvers import ad
+from fccgrb_cli.solvers.ad import solve as ad
 from fccgrb_cli.solvers.batched import Drives, Stacked, factor
 from fccgrb_cli.solvers.newton import linear_solve
 from fccgrb_cli.synth import synthesize

@@ -31,8 +31,8 @@ from fccgrb_cli.io.trial import read_trial
 from fccgrb_cli.model import load_model
 from fccgrb_cli.options import SolveOptions
 from fccgrb_cli.pipeline import solve_trial
-from fccgrb_cli.solvers import ad
-from fccgrb_cli.solvers.nrm import numba_available
+from fccgrb_cli.solvers.ad import solve as ad
+from fccgrb_cli.solvers.nrm.solve import numba_available
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -121,7 +121,7 @@ def test_solvers_lapack_is_scipys_without_scipy_linalg() -> None:
     _, x, info = lapack.dposv(A, np.array([1.0, 2.0]))
     assert info == 0 and np.allclose(A @ x, [1.0, 2.0], rtol=0, atol=1e-15)
     assert lapack.dposv(np.array([[1.0, 2.0], [2.0, 1.0]]), np.ones(2))[2] > 0  # indefinite
-    code = ("import sys, fccgrb_cli.cli, fccgrb_cli.pipeline, fccgrb_cli.solvers.nrm; "
+    code = ("import sys, fccgrb_cli.cli, fccgrb_cli.pipeline, fccgrb_cli.solvers.nrm.solve; "
             "from fccgrb_cli.blas import lapack; print('scipy.linalg' in sys.modules)")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           check=True)

@@ -25,7 +25,7 @@ from click.testing import CliRunner
 from fccgrb_cli.cli import main
 from fccgrb_cli.dynamics.convert import classical_dynamics
 from fccgrb_cli.model import BaseMotion, Motion, parse_model
-from fccgrb_cli.solvers.nrm import NrmSettings, solve_nrm
+from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
 from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import compile_system
 from fccgrb_cli.system.constraints import floating_bases

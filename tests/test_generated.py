@@ -46,9 +46,9 @@ from fccgrb_cli.model import parse_model
 from fccgrb_cli.options import SolveOptions
 from fccgrb_cli.pipeline import solve_trial
 from fccgrb_cli.solvers import solve_ad
-from fccgrb_cli.solvers.baseline import solve_baseline
-from fccgrb_cli.solvers.nrm import NrmSettings, solve_nrm
-from fccgrb_cli.solvers.optimize import Settings, solve_optimization
+from fccgrb_cli.solvers.ad.baseline import solve_baseline
+from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
+from fccgrb_cli.solvers.optimize.solve import Settings, solve_optimization
 from fccgrb_cli.synth import base_trajectory
 from fccgrb_cli.system import compile_system
 

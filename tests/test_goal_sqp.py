@@ -24,12 +24,13 @@ import numpy as np
 import pytest
 
 import fccgrb_cli as fc
-from fccgrb_cli.solvers import goal_kernels, kernels
-from fccgrb_cli.solvers.frame_problem import ED_SMOOTHING, FrameProblem
-from fccgrb_cli.solvers.goal import kkt_satisfied
-from fccgrb_cli.solvers.goal_sqp import active_set_sqp
-from fccgrb_cli.solvers.nrm_compiled import sparse_of
-from fccgrb_cli.solvers.optimize import Settings, solve_frame, solve_optimization
+from fccgrb_cli.solvers import kernels
+from fccgrb_cli.solvers.goal import kernels as goal_kernels
+from fccgrb_cli.solvers.optimize.problem import ED_SMOOTHING, FrameProblem
+from fccgrb_cli.solvers.goal.reference import kkt_satisfied
+from fccgrb_cli.solvers.goal.sqp import active_set_sqp
+from fccgrb_cli.solvers.nrm.compiled import sparse_of
+from fccgrb_cli.solvers.optimize.solve import Settings, solve_frame, solve_optimization
 from tests import test_full_turns as full_turns
 from tests.test_sqp import case
 

@@ -16,8 +16,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fccgrb_cli.solvers.frame_problem import ANGLE_MARGIN, FrameProblem
-from fccgrb_cli.solvers.optimize import Settings, solve_optimization
+from fccgrb_cli.solvers.optimize.problem import ANGLE_MARGIN, FrameProblem
+from fccgrb_cli.solvers.optimize.solve import Settings, solve_optimization
 from tests.test_sqp import case, kkt_residuals
 
 

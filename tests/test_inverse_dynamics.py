@@ -43,8 +43,8 @@ from fccgrb_cli.io.plate_loads import plate_loads
 from fccgrb_cli.io.trial import read_trial
 from fccgrb_cli.model import load_model
 from fccgrb_cli.solvers import solve_ad
-from fccgrb_cli.solvers.baseline import solve_baseline
-from fccgrb_cli.solvers.nrm import NrmSettings, solve_nrm
+from fccgrb_cli.solvers.ad.baseline import solve_baseline
+from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
 from fccgrb_cli.solvers.rates import central_derivatives
 from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import compile_system

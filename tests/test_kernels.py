@@ -24,8 +24,8 @@ from fccgrb_cli.errors import InputError
 from fccgrb_cli.model import load_model, parse_model
 from fccgrb_cli.perturb import perturb
 from fccgrb_cli.solvers import kernels
-from fccgrb_cli.solvers.nrm import NrmSettings, row_weights, solve_nrm
-from fccgrb_cli.solvers.nrm_compiled import sparse_of
+from fccgrb_cli.solvers.nrm.solve import NrmSettings, row_weights, solve_nrm
+from fccgrb_cli.solvers.nrm.compiled import sparse_of
 from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import Drive, compile_system
 from fccgrb_cli.system.sparse import supported
@@ -340,7 +340,7 @@ def test_frames_the_compiled_batch_leaves_take_the_frame_by_frame_path(monkeypat
     from dataclasses import replace
 
     from fccgrb_cli.dynamics.convert import classical_dynamics
-    from fccgrb_cli.solvers import ad
+    from fccgrb_cli.solvers.ad import solve as ad
 
     model, system = mixed("five_bar")
     truth = synthesize(model)

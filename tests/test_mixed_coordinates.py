@@ -38,7 +38,7 @@ from fccgrb_cli.errors import InputError
 from fccgrb_cli.model import load_model
 from fccgrb_cli.perturb import perturb
 from fccgrb_cli.solvers.initial import initial_guess, rigid_fit
-from fccgrb_cli.solvers.nrm import NrmSettings, solve_nrm
+from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
 from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import Drive, compile_system
 

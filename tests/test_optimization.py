@@ -59,7 +59,7 @@ import pytest
 from cli_helpers import runner
 from scipy.linalg import null_space
 
-import fccgrb_cli.solvers.optimize as optimize
+import fccgrb_cli.solvers.optimize.solve as optimize
 from fccgrb_cli.cli import main
 from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.model import load_model
@@ -68,8 +68,8 @@ from fccgrb_cli.options import SolveOptions
 from fccgrb_cli.perturb import perturb
 from fccgrb_cli.pipeline import solve_trial
 from fccgrb_cli.run import mean_jump, summary
-from fccgrb_cli.solvers.frame_problem import ED_SMOOTHING, FrameProblem
-from fccgrb_cli.solvers.optimize import Settings, solve_optimization
+from fccgrb_cli.solvers.optimize.problem import ED_SMOOTHING, FrameProblem
+from fccgrb_cli.solvers.optimize.solve import Settings, solve_optimization
 from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import Drive, compile_system
 

@@ -219,7 +219,7 @@ def test_the_dynamics_stage_by_blocks_of_frames(monkeypatch) -> None:
     central difference of x along q̇, and the reductions of all frames at once, bit for bit
     where nothing but the blocks changed (a block skipped or shifted leaves frames unset)."""
     from fccgrb_cli.solvers import batched
-    from fccgrb_cli.solvers.ad import _result, stacked_drives
+    from fccgrb_cli.solvers.ad.solve import _result, stacked_drives
 
     system = compile_system(fc.load_model(FIVE_BAR).with_form("reduced"), angles="driver")
     assert len(system.layout.reduced_w)

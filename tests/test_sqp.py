@@ -21,10 +21,10 @@ import pytest
 
 from fccgrb_cli.model import load_model
 from fccgrb_cli.perturb import perturb
-from fccgrb_cli.solvers import optimize
-from fccgrb_cli.solvers.frame_problem import FrameProblem
+from fccgrb_cli.solvers.optimize import solve as optimize
+from fccgrb_cli.solvers.optimize.problem import FrameProblem
 from fccgrb_cli.solvers.newton import Iterate
-from fccgrb_cli.solvers.optimize import Settings, solve_optimization
+from fccgrb_cli.solvers.optimize.solve import Settings, solve_optimization
 from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import compile_system
 

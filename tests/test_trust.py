@@ -27,8 +27,8 @@ from fccgrb_cli.options import SolveOptions
 from fccgrb_cli.perturb import perturb
 from fccgrb_cli.pipeline import solve_trial
 from fccgrb_cli.run import Run, summary
-from fccgrb_cli.solvers import optimize
-from fccgrb_cli.solvers.optimize import Settings, solve_optimization
+from fccgrb_cli.solvers.optimize import solve as optimize
+from fccgrb_cli.solvers.optimize.solve import Settings, solve_optimization
 from fccgrb_cli.solvers.quality import JUMP, TOPOLOGY, UNCONVERGED, flags_of, jump_ratio
 from fccgrb_cli.system import compile_system
 

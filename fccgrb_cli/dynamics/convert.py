@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from fccgrb_cli.dynamics.inverse import InverseDynamics, KernelInverse, inverse_dynamics
 from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.model import Model
-from fccgrb_cli.solvers.baseline import driven_by
+from fccgrb_cli.solvers.ad.baseline import driven_by
 from fccgrb_cli.solvers.batched import Stacked
 from fccgrb_cli.solvers.result import KinematicResult
 from fccgrb_cli.system import System, compile_system
@@ -67,7 +67,7 @@ def kernels_for(system: System, engine: str, n_frames: int) -> bool:
     """Whether the classical model's batch runs in the compiled kernels (nrm.use_kernels);
     where they cannot take the model, or numba is missing, it stays in numpy even with
     'compiled' (the kinematic stage has already said so when it ran in them)."""
-    from fccgrb_cli.solvers.nrm import numba_available, use_kernels
+    from fccgrb_cli.solvers.nrm.solve import numba_available, use_kernels
     from fccgrb_cli.system.sparse import compilable
 
     return compilable(system) and numba_available() and use_kernels(engine, True, n_frames)

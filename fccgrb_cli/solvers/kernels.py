@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 
 from fccgrb_cli.solvers.newton import LARGE, NEAR, ROUNDING, SLOW
-from fccgrb_cli.solvers.sqp import (
+from fccgrb_cli.solvers.cno.sqp import (
     DELTA,
     FEASIBLE_TOP,
     KAPPA,

@@ -168,7 +168,7 @@ def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray,
         raise ValueError("solve_nrm needs angles='coordinate' and track=True")
     labels = labels or tuple(f"target {k}" for k in range(system.n_targets))
     if settings.compiled(system, len(time)):
-        from fccgrb_cli.solvers.nrm_compiled import solve_compiled
+        from fccgrb_cli.solvers.nrm.compiled import solve_compiled
 
         return solve_compiled(system, time, targets, settings, labels=labels, source=source,
                               progress=progress)

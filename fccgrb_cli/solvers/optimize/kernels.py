@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from fccgrb_cli.solvers import goal_sqp
-from fccgrb_cli.solvers.goal_kernels import goal_frame, goal_workspace
+from fccgrb_cli.solvers.goal import sqp as goal_sqp
+from fccgrb_cli.solvers.goal.kernels import goal_frame, goal_workspace
 from fccgrb_cli.solvers.kernels import (
     DONE,
     NEED_FALLBACK,
@@ -23,8 +23,8 @@ from fccgrb_cli.solvers.kernels import (
     stabilized_sqp,
     workspace,
 )
-from fccgrb_cli.solvers.sqp import DELTA, FAR
-from fccgrb_cli.solvers.sqp import MAX_ITER as MAX_SQP
+from fccgrb_cli.solvers.cno.sqp import DELTA, FAR
+from fccgrb_cli.solvers.cno.sqp import MAX_ITER as MAX_SQP
 from fccgrb_cli.system.sparse import SparseSystem
 
 SQP, INTERIOR, GOAL_TC, GOAL_ED = 0, 1, 2, 3

@@ -11,14 +11,16 @@ from collections.abc import Callable
 
 import numpy as np
 
-from fccgrb_cli.solvers import kernels, optimizer_kernels
-from fccgrb_cli.solvers.frame_problem import FrameProblem
+from fccgrb_cli.solvers import kernels
+
+from fccgrb_cli.solvers.optimize import kernels as optimizer_kernels
+from fccgrb_cli.solvers.optimize.problem import FrameProblem
 from fccgrb_cli.solvers.initial import initial_guess
 from fccgrb_cli.solvers.newton import Iterate
-from fccgrb_cli.solvers.nrm import row_weights
-from fccgrb_cli.solvers.nrm_compiled import BLOCK, sparse_of
-from fccgrb_cli.solvers.optimize import STRUCTURED, FrameRecord, Settings, solve_frame
-from fccgrb_cli.solvers.optimizer_kernels import KINDS
+from fccgrb_cli.solvers.nrm.solve import row_weights
+from fccgrb_cli.solvers.nrm.compiled import BLOCK, sparse_of
+from fccgrb_cli.solvers.optimize.solve import STRUCTURED, FrameRecord, Settings, solve_frame
+from fccgrb_cli.solvers.optimize.kernels import KINDS
 from fccgrb_cli.system import System
 
 SQP_HISTORY = 3

@@ -14,7 +14,7 @@ import numpy as np
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.solvers import kernels
 from fccgrb_cli.solvers.initial import initial_guess
-from fccgrb_cli.solvers.nrm import (
+from fccgrb_cli.solvers.nrm.solve import (
     HISTORY,
     NrmSettings,
     mixed_result,

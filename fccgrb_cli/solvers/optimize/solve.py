@@ -23,15 +23,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fccgrb_cli.blas import limit_this_process, single_threaded
-from fccgrb_cli.solvers.cno import solve_cno_frame
-from fccgrb_cli.solvers.frame_problem import FrameProblem
-from fccgrb_cli.solvers.goal import FrameOutcome, solve_goal_frame
-from fccgrb_cli.solvers.goal_sqp import FAR as FAR_GOAL
-from fccgrb_cli.solvers.goal_sqp import MAX_ITER as MAX_GOAL
-from fccgrb_cli.solvers.goal_sqp import active_set_sqp
+from fccgrb_cli.solvers.cno.reference import solve_cno_frame
+from fccgrb_cli.solvers.optimize.problem import FrameProblem
+from fccgrb_cli.solvers.goal.reference import FrameOutcome, solve_goal_frame
+from fccgrb_cli.solvers.goal.sqp import FAR as FAR_GOAL
+from fccgrb_cli.solvers.goal.sqp import MAX_ITER as MAX_GOAL
+from fccgrb_cli.solvers.goal.sqp import active_set_sqp
 from fccgrb_cli.solvers.initial import initial_guess
 from fccgrb_cli.solvers.newton import Iterate, gauss_newton
-from fccgrb_cli.solvers.nrm import (
+from fccgrb_cli.solvers.nrm.solve import (
     NrmSettings,
     mixed_result,
     predict,
@@ -42,8 +42,8 @@ from fccgrb_cli.solvers.nrm import (
 )
 from fccgrb_cli.solvers.quality import flags_of
 from fccgrb_cli.solvers.result import FrameStats, KinematicResult
-from fccgrb_cli.solvers.sqp import FAR, sqp_weights, stabilized_sqp
-from fccgrb_cli.solvers.sqp import MAX_ITER as MAX_SQP
+from fccgrb_cli.solvers.cno.sqp import FAR, sqp_weights, stabilized_sqp
+from fccgrb_cli.solvers.cno.sqp import MAX_ITER as MAX_SQP
 from fccgrb_cli.system import System
 
 if TYPE_CHECKING:
@@ -246,7 +246,7 @@ def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
     init = settings.init
     compiled = not settings.parallel and compiled_structured(system, settings, n)
     if compiled:
-        from fccgrb_cli.solvers.sqp_compiled import run_frames_compiled
+        from fccgrb_cli.solvers.optimize.compiled import run_frames_compiled
 
         records = run_frames_compiled(system, settings, targets, progress)
         wall = float("nan")
@@ -285,8 +285,8 @@ def compiled_structured(system: System, settings: Settings, n_frames: int) -> bo
 
     fits = supported(system)
     if fits and settings.method == "mo-ed":
-        from fccgrb_cli.solvers.goal_kernels import ed_fits
-        from fccgrb_cli.solvers.nrm_compiled import sparse_of
+        from fccgrb_cli.solvers.goal.kernels import ed_fits
+        from fccgrb_cli.solvers.nrm.compiled import sparse_of
 
         fits = ed_fits(sparse_of(system), len(system.trk_weight))
     return settings.structured and use_kernels(settings.engine, fits, n_frames,

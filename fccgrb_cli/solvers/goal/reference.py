@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import minimize
 
-from fccgrb_cli.solvers.frame_problem import FrameProblem
+from fccgrb_cli.solvers.optimize.problem import FrameProblem
 
 
 @dataclass(frozen=True)

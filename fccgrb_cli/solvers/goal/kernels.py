@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from fccgrb_cli.solvers.frame_problem import ED_SMOOTHING
-from fccgrb_cli.solvers.goal_sqp import (
+from fccgrb_cli.solvers.optimize.problem import ED_SMOOTHING
+from fccgrb_cli.solvers.goal.sqp import (
     ACTIVE,
     CEILING,
     MAX_SWAPS,
@@ -28,7 +28,7 @@ from fccgrb_cli.solvers.kernels import (
     residual,
     substitute,
 )
-from fccgrb_cli.solvers.sqp import DELTA, FEASIBLE_TOP
+from fccgrb_cli.solvers.cno.sqp import DELTA, FEASIBLE_TOP
 from fccgrb_cli.system.sparse import SparseSystem
 
 

@@ -48,9 +48,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from fccgrb_cli.blas import lapack
-from fccgrb_cli.solvers.frame_problem import ED_SMOOTHING, FrameProblem
+from fccgrb_cli.solvers.optimize.problem import ED_SMOOTHING, FrameProblem
 from fccgrb_cli.solvers.newton import Iterate
-from fccgrb_cli.solvers.sqp import DELTA, FEASIBLE_TOP
+from fccgrb_cli.solvers.cno.sqp import DELTA, FEASIBLE_TOP
 
 MAX_ITER = 50
 MAX_SWAPS = 200  # working-set changes per iteration

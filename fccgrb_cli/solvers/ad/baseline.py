@@ -14,7 +14,7 @@ import numpy as np
 
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.filtering import lowpass
-from fccgrb_cli.solvers.ad import solve_ad, solve_ad_batched
+from fccgrb_cli.solvers.ad.solve import solve_ad, solve_ad_batched
 from fccgrb_cli.solvers.initial import initial_guess
 from fccgrb_cli.solvers.rates import central_derivatives
 from fccgrb_cli.solvers.result import KinematicResult
