@@ -32,7 +32,7 @@ from fccgrb_cli.model import load_model
 from fccgrb_cli.options import SolveOptions
 from fccgrb_cli.pipeline import solve_trial
 from fccgrb_cli.solvers.ad import solve as ad
-from fccgrb_cli.solvers.nrm.solve import numba_available
+from fccgrb_cli.solvers.engine import numba_available
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -1,4 +1,4 @@
-"""Goal attainment's structured active-set SQP (solvers/goal_sqp.py, goal_kernels.py) against the
+"""Goal attainment's structured active-set SQP (solvers/goal/sqp.py, goal/kernels.py) against the
 paper's reference optimizer (SLSQP) and against the optimality conditions themselves.
 
 * γ, the largest weighted residual component ('tc') or distance ('ed'), is measured here from
@@ -26,11 +26,11 @@ import pytest
 import fccgrb_cli as fc
 from fccgrb_cli.solvers import kernels
 from fccgrb_cli.solvers.goal import kernels as goal_kernels
-from fccgrb_cli.solvers.optimize.problem import ED_SMOOTHING, FrameProblem
 from fccgrb_cli.solvers.goal.reference import kkt_satisfied
 from fccgrb_cli.solvers.goal.sqp import active_set_sqp
-from fccgrb_cli.solvers.nrm.compiled import sparse_of
+from fccgrb_cli.solvers.optimize.problem import ED_SMOOTHING, FrameProblem
 from fccgrb_cli.solvers.optimize.solve import Settings, solve_frame, solve_optimization
+from fccgrb_cli.system.sparse import sparse_of
 from tests import test_full_turns as full_turns
 from tests.test_sqp import case
 

@@ -25,10 +25,9 @@ from fccgrb_cli.model import load_model, parse_model
 from fccgrb_cli.perturb import perturb
 from fccgrb_cli.solvers import kernels
 from fccgrb_cli.solvers.nrm.solve import NrmSettings, row_weights, solve_nrm
-from fccgrb_cli.solvers.nrm.compiled import sparse_of
 from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import Drive, compile_system
-from fccgrb_cli.system.sparse import supported
+from fccgrb_cli.system.sparse import sparse_of, supported
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ROOT / "configs" / "models"

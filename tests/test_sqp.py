@@ -1,4 +1,4 @@
-"""The stabilized SQP (solvers/sqp.py) against the paper's reference optimizer and against the
+"""The stabilized SQP (solvers/cno/sqp.py) against the paper's reference optimizer and against the
 optimality conditions themselves.
 
 * SLSQP (scipy, tightened to ftol 1e-14) reaches the same optimum on the five-bar at P0–P30, on
@@ -21,9 +21,9 @@ import pytest
 
 from fccgrb_cli.model import load_model
 from fccgrb_cli.perturb import perturb
-from fccgrb_cli.solvers.optimize import solve as optimize
-from fccgrb_cli.solvers.optimize.problem import FrameProblem
 from fccgrb_cli.solvers.newton import Iterate
+from fccgrb_cli.solvers.optimize import frame
+from fccgrb_cli.solvers.optimize.problem import FrameProblem
 from fccgrb_cli.solvers.optimize.solve import Settings, solve_optimization
 from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import compile_system
@@ -126,13 +126,13 @@ def test_compiled_equals_numpy(name: str) -> None:
 
 def test_a_frame_the_sqp_cannot_solve_goes_to_slsqp(monkeypatch) -> None:
     system, time, markers = case("five_bar", 7.5e-3, 8)
-    real = optimize.stabilized_sqp
+    real = frame.stabilized_sqp
 
     def capped(system, q0, drive, weights, tol, max_iter=1, bounds=None):
         out = real(system, q0, drive, weights, tol, 1, bounds)
         return Iterate(out.q, out.iterations, out.converged)
 
-    monkeypatch.setattr(optimize, "stabilized_sqp", capped)
+    monkeypatch.setattr(frame, "stabilized_sqp", capped)
     result = run(system, time, markers, engine="numpy")
     reference = run(system, time, markers, optimizer="scipy")
     assert result.converged.all()

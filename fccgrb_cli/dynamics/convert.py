@@ -64,10 +64,10 @@ def classical_dynamics(model: Model, result: KinematicResult, *, cutoff: float |
 
 
 def kernels_for(system: System, engine: str, n_frames: int) -> bool:
-    """Whether the classical model's batch runs in the compiled kernels (nrm.use_kernels);
+    """Whether the classical model's batch runs in the compiled kernels (engine.use_kernels);
     where they cannot take the model, or numba is missing, it stays in numpy even with
     'compiled' (the kinematic stage has already said so when it ran in them)."""
-    from fccgrb_cli.solvers.nrm.solve import numba_available, use_kernels
+    from fccgrb_cli.solvers.engine import numba_available, use_kernels
     from fccgrb_cli.system.sparse import compilable
 
     return compilable(system) and numba_available() and use_kernels(engine, True, n_frames)

@@ -134,7 +134,7 @@ def _stacked(system: System, M: np.ndarray, g: np.ndarray, q: np.ndarray, qd: np
     rhs = rhs_x if xq is None else np.einsum("fxq,fx->fq", xq, rhs_x)
     if compiled:
         from fccgrb_cli.solvers.kernels import multipliers_frames
-        from fccgrb_cli.solvers.nrm.compiled import sparse_of
+        from fccgrb_cli.system.sparse import sparse_of
 
         some, misfit = np.empty((len(frames), system.n_rows)), np.empty(len(frames))
         multipliers_frames(sparse_of(system), np.ascontiguousarray(q),

@@ -18,7 +18,6 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from fccgrb_cli.solvers.newton import LARGE, NEAR, ROUNDING, SLOW
 from fccgrb_cli.solvers.cno.sqp import (
     DELTA,
     FEASIBLE_TOP,
@@ -28,6 +27,7 @@ from fccgrb_cli.solvers.cno.sqp import (
     TAU,
     THETA,
 )
+from fccgrb_cli.solvers.newton import LARGE, NEAR, ROUNDING, SLOW
 from fccgrb_cli.system.sparse import SparseSystem
 
 DONE, NEED_GUESS, NEED_RANK, NEED_FALLBACK = 0, 1, 2, 3

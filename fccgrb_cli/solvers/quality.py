@@ -23,7 +23,7 @@ checked after its solve, and each frame gets a bit mask:
   five-bar with P4 and P9 at 30 mm: inaccurate, but the pre-analysis's own). A frame on the
   other assembly branch shows as a jump where it leaves and where it rejoins the branch; the
   frames between are found by re-solving from a trusted neighbour (the parallel modes' repair,
-  ``solvers/optimize.py``). A frame whose neighbour jumps is flagged too: its central
+  ``solvers/optimize/``). A frame whose neighbour jumps is flagged too: its central
   differences include the jump.
 
 A trusted frame has mask 0. ``converged`` in the results file means trusted.

@@ -80,7 +80,7 @@ def _compiled_rates(system: System, q: np.ndarray, theta_d: np.ndarray, theta_dd
                     base: tuple[np.ndarray, np.ndarray, np.ndarray] | None
                     ) -> tuple[np.ndarray, np.ndarray]:
     from fccgrb_cli.solvers.kernels import rates_frames
-    from fccgrb_cli.solvers.nrm.compiled import sparse_of
+    from fccgrb_cli.system.sparse import sparse_of
 
     n = len(q)
     columns = np.asarray(base[0] if base is not None else np.zeros(0), dtype=np.int64)

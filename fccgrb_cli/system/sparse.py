@@ -11,6 +11,7 @@ of the lower triangle.
 
 from __future__ import annotations
 
+import weakref
 from typing import NamedTuple
 
 import numpy as np
@@ -169,3 +170,13 @@ def _envelope(graph: np.ndarray) -> np.ndarray:
     inside this envelope (fill-in never reaches left of a row's first entry)."""
     lower = np.tril(graph)
     return np.argmax(lower, axis=1).astype(np.int64)
+
+
+_BUILT: weakref.WeakKeyDictionary[System, SparseSystem] = weakref.WeakKeyDictionary()
+
+
+def sparse_of(system: System) -> SparseSystem:
+    """The system's sparse arrays, built once per System."""
+    if system not in _BUILT:
+        _BUILT[system] = sparse_system(system)
+    return _BUILT[system]

@@ -144,7 +144,7 @@ def solve_ad_batched(system: System, time: np.ndarray, theta: np.ndarray, theta_
     phi, qd, qdd = np.empty((n, system.n_rows)), np.empty_like(q), np.empty_like(q)
     if compiled:
         from fccgrb_cli.solvers.kernels import NO_INVERSE, driven_frames
-        from fccgrb_cli.solvers.nrm.compiled import sparse_of
+        from fccgrb_cli.system.sparse import sparse_of
 
         arrays = (drives.theta, drives.theta_d, drives.theta_dd, drives.ref, drives.ref_d,
                   drives.ref_dd)

@@ -15,8 +15,8 @@ import warnings
 import numpy as np
 from scipy.optimize import Bounds, NonlinearConstraint, minimize
 
-from fccgrb_cli.solvers.optimize.problem import FrameProblem
 from fccgrb_cli.solvers.goal.reference import FEASIBLE, FrameOutcome, judged
+from fccgrb_cli.solvers.optimize.problem import FrameProblem
 
 
 def solve_cno_frame(problem: FrameProblem, q0: np.ndarray, *, algorithm: str, objective: str,

@@ -20,7 +20,7 @@ frames' extrapolation, 3–4 iterations per frame on the five-bar from P0 to P30
 treatment: −δI keeps the system regular.
 
 The SQP takes no bounds: its result is checked against FrameProblem's bounds, and a frame whose
-optimum lies outside them, or that does not converge, is handed to SLSQP (cno.py).
+optimum lies outside them, or that does not converge, is handed to SLSQP (cno/reference.py).
 
 CNO-IP is the same iteration with a primal-dual logarithmic barrier on the bounds l ≤ q ≤ u
 (the interior point of FORMULATION §3, as MATLAB's fmincon 'interior-point', on this linear
@@ -47,7 +47,7 @@ from fccgrb_cli.system import Drive, System
 DELTA = 1e-6
 FEASIBLE_TOP = 1e-11  # max |Φ_top| at a converged frame (m and dimensionless)
 MAX_ITER = 50
-FAR = 1e-3  # max |Φ_top| of a guess that goes through NRM-WLS before the SQP (optimize.py)
+FAR = 1e-3  # max |Φ_top| of a guess that goes through NRM-WLS before the SQP (optimize/frame.py)
 
 
 def sqp_weights(system: System, point_weights: np.ndarray) -> np.ndarray:

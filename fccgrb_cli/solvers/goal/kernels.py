@@ -1,14 +1,14 @@
-"""Goal attainment's active-set SQP (solvers/goal_sqp.py) in the compiled kernels: the same
+"""Goal attainment's active-set SQP (solvers/goal/sqp.py) in the compiled kernels: the same
 iteration on :class:`~fccgrb_cli.system.sparse.SparseSystem`, N = Φ_top,qᵀΦ_top,q + δρI (+ δH)
 factored inside its envelope, N⁻¹Gᵀ by substitution, and the working-set rounds on small dense
-systems (the loop over frames: optimizer_kernels.solve_frames)."""
+systems (the loop over frames: optimize/kernels.py's solve_frames)."""
 
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-from fccgrb_cli.solvers.optimize.problem import ED_SMOOTHING
+from fccgrb_cli.solvers.cno.sqp import DELTA, FEASIBLE_TOP
 from fccgrb_cli.solvers.goal.sqp import (
     ACTIVE,
     CEILING,
@@ -28,7 +28,7 @@ from fccgrb_cli.solvers.kernels import (
     residual,
     substitute,
 )
-from fccgrb_cli.solvers.cno.sqp import DELTA, FEASIBLE_TOP
+from fccgrb_cli.solvers.optimize.problem import ED_SMOOTHING
 from fccgrb_cli.system.sparse import SparseSystem
 
 

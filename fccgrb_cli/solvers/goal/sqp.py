@@ -5,7 +5,7 @@ smoothed at zero as in FrameProblem.distances ('ed').
 
 Each iteration solves the SQP's quadratic subproblem with the exact Lagrangian Hessian
 H = Σ λ_i ∇²Φ_top,i + Σ z_j ∇²c_j and the topological block stabilized as in the CNO-SQP
-(solvers/sqp.py: −δI, the multipliers carried as the shift s = δλ), plus a proximal term ρ‖Δq‖²/2
+(cno/sqp.py: −δI, the multipliers carried as the shift s = δλ), plus a proximal term ρ‖Δq‖²/2
 (ρ = 1e-2 m⁻¹, with 'tc' down to 1e-4 over the first iterations: :func:`proximal`) that
 keeps it strictly convex where the minimax is flat: the optimum of a noisy frame is often a
 face, not a point, and the term picks its point nearest the current iterate.
@@ -31,10 +31,10 @@ is (ρI + H)Δq, which ρ‖Δq‖ does not bound). Some noisy
 frames have no such point within reach: the minimax falls along a valley by nanometres per
 millimetre, and the steps keep their length; after STALL steps in a row that shrink by less
 than a quarter while γ moves by less than a micron, the frame is given up. A frame that is not
-converged, or whose optimum leaves the bounds, goes to SLSQP (goal.py) from the same guess
+converged, or whose optimum leaves the bounds, goes to SLSQP (goal/reference.py) from the same guess
 (SLSQP's function-change test stops in such a valley; started where this method stopped, it
 found the crank-rocker's other assembly branch at an exact fit); a guess far off the
-constraints first goes through NRM-WLS (optimize.py). The iteration has no line search: a KKT
+constraints first goes through NRM-WLS (optimize/frame.py). The iteration has no line search: a KKT
 point whose γ exceeds the guess's by more than 10 times the guess's max |Φ_top| (the optimum
 near a guess exceeds the guess's γ by up to 1.3 times it on the five-bar) is another local
 optimum it wandered to (the RSSR's other assembly branch at an exact fit, 89° away), and is not
@@ -48,9 +48,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from fccgrb_cli.blas import lapack
-from fccgrb_cli.solvers.optimize.problem import ED_SMOOTHING, FrameProblem
-from fccgrb_cli.solvers.newton import Iterate
 from fccgrb_cli.solvers.cno.sqp import DELTA, FEASIBLE_TOP
+from fccgrb_cli.solvers.newton import Iterate
+from fccgrb_cli.solvers.optimize.problem import ED_SMOOTHING, FrameProblem
 
 MAX_ITER = 50
 MAX_SWAPS = 200  # working-set changes per iteration

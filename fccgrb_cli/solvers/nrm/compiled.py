@@ -1,12 +1,11 @@
 """NRM through the compiled kernels: the frames run in machine code in blocks; Python steps in
 for what only it does (the first guess after a gap in the history, the rank test of a new set
-of missing markers, progress, messages). Same iteration as the numpy path in nrm.py, to
+of missing markers, progress, messages). Same iteration as the numpy path in nrm/solve.py, to
 rounding (tests/test_kernels.py)."""
 
 from __future__ import annotations
 
 import time as clock
-import weakref
 from collections.abc import Callable
 
 import numpy as np
@@ -14,10 +13,10 @@ import numpy as np
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.solvers import kernels
 from fccgrb_cli.solvers.initial import initial_guess
-from fccgrb_cli.solvers.nrm.solve import (
+from fccgrb_cli.solvers.mixed import mixed_result
+from fccgrb_cli.solvers.nrm.problem import (
     HISTORY,
     NrmSettings,
-    mixed_result,
     no_convergence_text,
     row_weights,
     solvable,
@@ -26,18 +25,10 @@ from fccgrb_cli.solvers.nrm.solve import (
 )
 from fccgrb_cli.solvers.result import FrameStats, KinematicResult
 from fccgrb_cli.system import System
-from fccgrb_cli.system.sparse import SparseSystem, sparse_system
+from fccgrb_cli.system.sparse import sparse_of
 
 BLOCK = 2000  # frames per call between progress reports
 HESSIAN_CODES = {"gauss-newton": 0, "exact": 1, "auto": 2}
-_compiled: weakref.WeakKeyDictionary[System, SparseSystem] = weakref.WeakKeyDictionary()
-
-
-def sparse_of(system: System) -> SparseSystem:
-    """The system's sparse arrays, built once per System."""
-    if system not in _compiled:
-        _compiled[system] = sparse_system(system)
-    return _compiled[system]
 
 
 def solve_compiled(system: System, time: np.ndarray, targets: np.ndarray,

@@ -12,16 +12,16 @@ from collections.abc import Callable
 import numpy as np
 
 from fccgrb_cli.solvers import kernels
-
-from fccgrb_cli.solvers.optimize import kernels as optimizer_kernels
-from fccgrb_cli.solvers.optimize.problem import FrameProblem
 from fccgrb_cli.solvers.initial import initial_guess
 from fccgrb_cli.solvers.newton import Iterate
-from fccgrb_cli.solvers.nrm.solve import row_weights
-from fccgrb_cli.solvers.nrm.compiled import BLOCK, sparse_of
-from fccgrb_cli.solvers.optimize.solve import STRUCTURED, FrameRecord, Settings, solve_frame
+from fccgrb_cli.solvers.nrm.compiled import BLOCK
+from fccgrb_cli.solvers.nrm.problem import row_weights
+from fccgrb_cli.solvers.optimize import kernels as optimizer_kernels
+from fccgrb_cli.solvers.optimize.frame import STRUCTURED, FrameRecord, Settings, solve_frame
 from fccgrb_cli.solvers.optimize.kernels import KINDS
+from fccgrb_cli.solvers.optimize.problem import FrameProblem
 from fccgrb_cli.system import System
+from fccgrb_cli.system.sparse import sparse_of
 
 SQP_HISTORY = 3
 
@@ -29,7 +29,7 @@ SQP_HISTORY = 3
 def run_frames_compiled(system: System, settings: Settings, targets: np.ndarray,
                         progress: Callable[[int, int], None] | None = None
                         ) -> list[FrameRecord]:
-    """optimize._run_frames over every frame, chained, with the structured optimizer
+    """optimize/solve.py's _run_frames over every frame, chained, with the structured optimizer
     compiled."""
     s = sparse_of(system)
     n, nq = len(targets), system.nq

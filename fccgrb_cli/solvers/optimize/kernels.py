@@ -1,6 +1,6 @@
 """The sequential loop over frames of the structured optimizers in the compiled kernels
-(optimize._run_frames with the stabilized SQP, its interior point or goal attainment's
-active-set SQP per frame: kernels.stabilized_sqp, goal_kernels.goal_frame). Each frame starts
+(optimize/solve.py's _run_frames with the stabilized SQP, its interior point or goal attainment's
+active-set SQP per frame: kernels.stabilized_sqp, goal/kernels.py's goal_frame). Each frame starts
 from the quadratic extrapolation of up to 3 solutions; a guess far off the constraints goes
 through NRM-WLS first, as in optimize.structured_frame."""
 
@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from fccgrb_cli.solvers.cno.sqp import DELTA, FAR
+from fccgrb_cli.solvers.cno.sqp import MAX_ITER as MAX_SQP
 from fccgrb_cli.solvers.goal import sqp as goal_sqp
 from fccgrb_cli.solvers.goal.kernels import goal_frame, goal_workspace
 from fccgrb_cli.solvers.kernels import (
@@ -23,8 +25,6 @@ from fccgrb_cli.solvers.kernels import (
     stabilized_sqp,
     workspace,
 )
-from fccgrb_cli.solvers.cno.sqp import DELTA, FAR
-from fccgrb_cli.solvers.cno.sqp import MAX_ITER as MAX_SQP
 from fccgrb_cli.system.sparse import SparseSystem
 
 SQP, INTERIOR, GOAL_TC, GOAL_ED = 0, 1, 2, 3

@@ -1,0 +1,65 @@
+"""The result of any mixed-coordinate method from its solved q per frame: θ, θ̇, θ̈, q̇ and q̈
+consistent with the topology, and warnings for angles near 0 or π."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fccgrb_cli.solvers.rates import central_derivatives, consistent_rates
+from fccgrb_cli.solvers.result import FrameStats, KinematicResult
+from fccgrb_cli.system import System
+from fccgrb_cli.system.constraints import floating_bases
+
+NEAR_SINGULAR = np.radians(5.0)
+
+
+def mixed_result(system: System, time: np.ndarray, q_all: np.ndarray, stats: FrameStats, *,
+                 method: str, tol: float, messages: list[str] | tuple[str, ...] = (),
+                 wall_s: float = float("nan"), compiled: bool = False) -> KinematicResult:
+    """The result of any mixed-coordinate method: θ from q, θ̇ and θ̈ by central differences,
+    consistent q̇ and q̈, and warnings for angles near 0 or π. A signed angle is the same
+    configuration every 2π: frames solved apart (in parallel, or from a fresh guess after a gap)
+    are brought onto one continuous count of turns, starting from the first solved frame's
+    angle in (−π, π] (as the markers give it). ``compiled``: the rates through the compiled
+    kernels (a solve that ran in them)."""
+    n_body = system.layout.n_body_q
+    full = n_body + np.flatnonzero(system.full_angles)
+    if len(full):
+        solved = np.flatnonzero(np.isfinite(q_all[:, full]).all(axis=1))
+        q_all = q_all.copy()
+        turns = q_all[np.ix_(solved, full)]
+        turns[0] -= 2 * np.pi * np.round(turns[0] / (2 * np.pi))
+        q_all[np.ix_(solved, full)] = np.unwrap(turns, axis=0)
+    theta = q_all[:, n_body:]
+    dt = float(time[1] - time[0]) if len(time) > 1 else 1.0
+    theta_d, theta_dd = central_derivatives(theta, dt)
+    columns = np.concatenate([np.arange(n_body)[system.layout.q_slice(b)]
+                              for b in floating_bases(system.model)] or [np.zeros(0, int)])
+    base = (columns, *central_derivatives(q_all[:, columns], dt)) if columns.size else None
+    qd, qdd = consistent_rates(system, q_all, theta_d, theta_dd, base, compiled=compiled)
+    return KinematicResult(
+        method=method, tol=tol, time=np.asarray(time, dtype=float), q=q_all, qd=qd, qdd=qdd,
+        theta=theta, theta_d=theta_d, theta_dd=theta_dd, angle_names=system.layout.angle_names,
+        iterations=stats.iterations, time_s=stats.seconds, phi_norm=stats.phi_norm,
+        phi_top_max=stats.phi_top, converged=stats.converged, messages=(*messages, *near_singular(
+            theta, system.layout.angle_names, time,
+            system.distance_rows | system.full_angles)), wall_s=wall_s,
+        status=stats.status)
+
+
+def near_singular(theta: np.ndarray, names: tuple[str, ...], time: np.ndarray,
+                  distance: np.ndarray | None = None) -> list[str]:
+    """Warnings for angles that come within 5° of 0 or π, where s1·s2 = cos θ loses θ's sign
+    (coordinates marked in ``distance`` have no such point: distances and signed angles)."""
+    out = []
+    for k, name in enumerate(names):
+        if distance is not None and distance[k]:
+            continue
+        close = np.flatnonzero(np.minimum(theta[:, k], np.pi - theta[:, k]) < NEAR_SINGULAR)
+        if len(close):
+            f = int(close[0])
+            out.append(f"angle {name} comes within 5 deg of 0 or 180 deg ({len(close)} frames, "
+                       f"first frame index {f}, t = {time[f]:.3f} s, "
+                       f"{np.degrees(theta[f, k]):.1f} deg); "
+                       "cos θ is ambiguous there: choose vectors 90 deg apart at the neutral pose")
+    return out
