@@ -11,8 +11,9 @@ import numpy as np
 class NamedArray:
     """A frames × columns array with the name and unit of every column and the frame times.
 
-    ``a["knee_flexion_r"]`` is one column (a 1-D array over frames); ``a.values`` the whole
-    array; ``a.to_dataframe()`` a pandas DataFrame indexed by time (pandas is optional).
+    ``a["knee_flexion_r"]`` is one column (a 1-D array over frames); ``a.values`` or
+    ``np.asarray(a)`` the whole array (``a.shape``: frames × columns); ``a.to_dataframe()`` a
+    pandas DataFrame indexed by time (pandas is optional).
     """
 
     values: np.ndarray
@@ -35,6 +36,27 @@ class NamedArray:
 
     def __len__(self) -> int:
         return len(self.values)
+
+    def __array__(self, dtype: np.dtype | None = None, copy: bool | None = None) -> np.ndarray:
+        """The values to numpy (``np.asarray(a)``, ``np.mean(a, axis=0)``), with numpy 2's
+        ``copy`` contract: None copies only to change the dtype, True always, False never (a
+        ValueError where the dtype asks for one)."""
+        values = np.asarray(self.values)
+        if dtype is None or np.dtype(dtype) == values.dtype:
+            return values.copy() if copy else values
+        if copy is False:
+            raise ValueError(f"NamedArray: {values.dtype} values cannot become {np.dtype(dtype)} "
+                             "without a copy")
+        return values.astype(dtype)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """(frames, columns)."""
+        return self.values.shape
+
+    @property
+    def dtype(self) -> np.dtype:
+        return self.values.dtype
 
     def __repr__(self) -> str:
         units = sorted(set(self.units))

@@ -183,6 +183,28 @@ def test_run_coordinates_are_named_as_the_system_lays_them_out():
         np.testing.assert_array_equal(q[name], run.angles[name])
 
 
+def test_named_arrays_are_arrays_to_numpy():
+    """np.asarray of a NamedArray is its frames × columns values (not a 0-d object array),
+    column k being a["name k"]; numpy 2's copy contract holds."""
+    from fccgrb_cli.named import NamedArray
+
+    rng = np.random.default_rng(7)
+    values = rng.normal(size=(5, 3))
+    a = NamedArray(values, ("a", "b", "c"), ("rad",) * 3, np.arange(5) / 100.0)
+    plain = np.asarray(a)
+    assert plain.shape == a.shape == (5, 3) and plain.dtype == a.dtype == np.float64
+    for k, name in enumerate(a.names):
+        np.testing.assert_array_equal(plain[:, k], a[name])
+    np.testing.assert_array_equal(np.mean(a, axis=0), values.mean(axis=0))
+    np.testing.assert_array_equal(np.asarray(a, dtype=np.float32), values.astype(np.float32))
+    copied = np.array(a, copy=True)
+    copied[0, 0] += 1.0
+    assert a.values[0, 0] == values[0, 0] != copied[0, 0]
+    assert np.asarray(a, copy=False) is values
+    with pytest.raises(ValueError, match="without a copy"):
+        np.asarray(a, dtype=np.float32, copy=False)
+
+
 def test_results_of_another_format_version_are_refused(tmp_path: Path):
     path = tmp_path / "old.h5"
     run = fc.solve(fc.load_model(MODEL), fc.read_trial(TRIAL), dynamics=False, name="old")
