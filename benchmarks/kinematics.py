@@ -24,6 +24,7 @@ import numpy as np
 from fccgrb_cli.model import load_model
 from fccgrb_cli.perturb import perturb
 from fccgrb_cli.solvers import solve_ad
+from fccgrb_cli.solvers.ad.solve import stacked_drives
 from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
 from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import compile_system
@@ -63,9 +64,9 @@ def main() -> None:
             r = truth.result
             rows = []
             for tol in (1e-6, 1e-10):
+                drives = stacked_drives(ad, r.theta, r.theta_d, r.theta_dd, None)
                 rows.append(("ad", "numpy", tol, 0.0, partial(
-                    solve_ad, ad, r.time, r.theta, r.theta_d, r.theta_dd,
-                    ad.layout.pose_q(model), tol=tol)))
+                    solve_ad, ad, r.time, drives, ad.layout.pose_q(model), tol=tol)))
                 for level in (0.0, 7.5e-3, 30e-3):
                     markers = perturb(truth.markers, truth.labels, truth.rate, level, seed=0)
                     for method, weight in (("nrm-ls", None), ("nrm-wls", 1e-3)):

@@ -27,6 +27,7 @@ from fccgrb_cli.perturb import perturb
 from fccgrb_cli.run import Run
 from fccgrb_cli.solvers import KinematicResult, solve_ad
 from fccgrb_cli.solvers.ad.baseline import solve_baseline
+from fccgrb_cli.solvers.ad.solve import stacked_drives
 from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
 from fccgrb_cli.solvers.quality import JUMP, assessed
 from fccgrb_cli.system import System, compile_system
@@ -308,7 +309,8 @@ def _solve_with_true_angles(system: System, trial: Trial, truth: Truth | None, t
         raise InputError(f"{trial.path}: --method ad drives the model with the true angles of a "
                          f"synthesized trial, and {truth_path(trial.path)} (written by "
                          "'fccgrb synth') was not found or does not match the model")
-    return solve_ad(system, truth.time, truth.theta, truth.theta_d, truth.theta_dd,
-                    system.layout.pose_q(model), tol=tol, progress=progress)
+    drives = stacked_drives(system, truth.theta, truth.theta_d, truth.theta_dd, None)
+    return solve_ad(system, truth.time, drives, system.layout.pose_q(model), tol=tol,
+                    progress=progress)
 
 

@@ -16,6 +16,7 @@ import numpy as np
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.model import BaseMotion, Model
 from fccgrb_cli.solvers import KinematicResult, solve_ad
+from fccgrb_cli.solvers.ad.solve import stacked_drives
 from fccgrb_cli.system import System, compile_system
 from fccgrb_cli.system.constraints import joint_neighbours, reachable
 
@@ -88,8 +89,8 @@ def synthesize(model: Model, duration: float = 3.0, rate: float = 100.0, tol: fl
     time = np.arange(n_frames) / rate
     theta, theta_d, theta_dd = prescribed(model, time)
     system = compile_system(model, angles="driver")
-    result = solve_ad(system, time, theta, theta_d, theta_dd, start_pose(system), tol=tol,
-                      base=base_trajectory(model, time), progress=progress)
+    drives = stacked_drives(system, theta, theta_d, theta_dd, base_trajectory(model, time))
+    result = solve_ad(system, time, drives, start_pose(system), tol=tol, progress=progress)
     if len(result.failed_frames):
         f = int(result.failed_frames[0])
         raise InputError(f"{model.source}: frame {f} (t = {time[f]:.3f} s): the kinematic "

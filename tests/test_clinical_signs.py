@@ -55,6 +55,7 @@ from fccgrb_cli.dynamics import ExternalLoad
 from fccgrb_cli.dynamics.convert import classical_dynamics
 from fccgrb_cli.model import Model, parse_model
 from fccgrb_cli.solvers import KinematicResult, solve_ad
+from fccgrb_cli.solvers.ad.solve import stacked_drives
 from fccgrb_cli.system import System, compile_system
 
 MODEL_PATH = Path(__file__).resolve().parents[1] / "configs" / "models" / "lower_limb.yaml"
@@ -195,8 +196,9 @@ def _held(system: System, theta: np.ndarray, q_guess: np.ndarray, base: np.ndarr
     thetas = np.tile(theta, (n_frames, 1))
     bases = np.tile(base, (n_frames, 1, 1))
     still = np.zeros_like(thetas)
-    result = solve_ad(system, np.arange(n_frames, dtype=float), thetas, still, still, q_guess,
-                      base=(bases, np.zeros_like(bases), np.zeros_like(bases)))
+    drives = stacked_drives(system, thetas, still, still,
+                            (bases, np.zeros_like(bases), np.zeros_like(bases)))
+    result = solve_ad(system, np.arange(n_frames, dtype=float), drives, q_guess)
     assert result.converged.all()
     return result
 

@@ -158,7 +158,7 @@ def exact(model_text: str, rate: float = 500.0, duration: float = 1.0):
     model = parse_model(model_text, "model.yaml")
     s = synthesize(model, duration=duration, rate=rate)
     r = s.result
-    return model, r, inverse_dynamics(s.system, r.q, r.qd, r.qdd, r.theta)
+    return model, r, inverse_dynamics(s.system, r)
 
 
 @pytest.mark.parametrize("source", ["slider", "sleeve_block"])

@@ -47,6 +47,7 @@ from fccgrb_cli.options import SolveOptions
 from fccgrb_cli.pipeline import solve_trial
 from fccgrb_cli.solvers import solve_ad
 from fccgrb_cli.solvers.ad.baseline import solve_baseline
+from fccgrb_cli.solvers.ad.solve import stacked_drives
 from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
 from fccgrb_cli.solvers.optimize.solve import Settings, solve_optimization
 from fccgrb_cli.synth import base_trajectory
@@ -188,14 +189,13 @@ def check_classical(structure: Structure) -> None:
         for mine, theirs in zip(base, base_trajectory(model, t), strict=True):
             assert rel(theirs, mine) < 1e-12
     th = ref.theta
-    result = solve_ad(system, t, th[:, 0], th[:, 1], th[:, 2], body_q(layout, model, ref.x)[0],
-                      tol=1e-12, base=base)
+    result = solve_ad(system, t, stacked_drives(system, th[:, 0], th[:, 1], th[:, 2], base),
+                      body_q(layout, model, ref.x)[0], tol=1e-12)
     assert result.converged.all()
     assert rel(result.q, body_q(layout, model, ref.x)) < 1e-10
     assert rel(result.qd, body_q(layout, model, ref.xd)) < 1e-9
     assert rel(result.qdd, body_q(layout, model, ref.xdd)) < 1e-9
-    inv = inverse_dynamics(system, result.q, result.qd, result.qdd, result.theta,
-                           [load_of(case, ref)])
+    inv = inverse_dynamics(system, result, [load_of(case, ref)])
     assert inv.angle_names == tuple(c.name for c in case.coordinates)
     assert np.abs(ref.tau).max() > 1.0
     assert rel(inv.joint_moments, ref.tau) < 1e-8, np.abs(inv.joint_moments - ref.tau).max(axis=0)

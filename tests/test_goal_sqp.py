@@ -167,10 +167,10 @@ def test_kernel_equals_numpy_frame_by_frame(method: str) -> None:
         problem = FrameProblem(system, markers[f])
         ours, _ = active_set_sqp(problem, chain.q[f - 1], method[3:], 1e-10)
         present = np.isfinite(markers[f]).all(axis=1)
+        goals = goal_kernels.Goals(present, np.ones(n_points), method == "mo-ed")
         k, ok = goal_kernels.goal_frame(s, chain.q[f - 1].copy(),
-                                        np.where(present[:, None], markers[f], 0.0), present,
-                                        np.ones(n_points), method == "mo-ed", 1e-10, 50, q,
-                                        ws, gw, np.zeros(4 * n_points))
+                                        np.where(present[:, None], markers[f], 0.0), goals,
+                                        kernels.Limits(1e-10, 50), q, ws, gw)
         assert (k, ok) == (ours.iterations, ours.converged), f
         assert np.abs(q - ours.q).max() < (1e-8 if method == "mo-tc" else 2e-6)
         assert abs(gamma(system, q[None], markers[f:f + 1], method)[0]

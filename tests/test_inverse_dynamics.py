@@ -44,6 +44,7 @@ from fccgrb_cli.io.trial import read_trial
 from fccgrb_cli.model import load_model
 from fccgrb_cli.solvers import solve_ad
 from fccgrb_cli.solvers.ad.baseline import solve_baseline
+from fccgrb_cli.solvers.ad.solve import stacked_drives
 from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
 from fccgrb_cli.solvers.rates import central_derivatives
 from fccgrb_cli.synth import synthesize
@@ -175,16 +176,16 @@ def truncation_check(name: str, rate: float) -> tuple[float, float, float]:
     predicted truncation, relative) for the AD run with the true angles."""
     s = synthesized(name, "full", rate)
     r, h = s.result, 1.0 / rate
-    analytic = inverse_dynamics(s.system, r.q, r.qd, r.qdd, r.theta).joint_moments
+    analytic = inverse_dynamics(s.system, r).joint_moments
     differenced = classical_dynamics(s.system.model, r).inverse.joint_moments
     # Predicted central-difference errors: θ̇ gains h²/6 θ''', θ̈ gains h²/12 θ''''
     # (θ''' and θ'''' differenced from the analytic θ̈: their own O(h²) error is negligible).
     third = np.gradient(r.theta_dd, h, axis=0)
     fourth = np.gradient(third, h, axis=0)
-    predicted_run = solve_ad(s.system, r.time, r.theta, r.theta_d + h**2 / 6 * third,
-                             r.theta_dd + h**2 / 12 * fourth, r.q[0], tol=1e-12)
-    predicted = inverse_dynamics(s.system, predicted_run.q, predicted_run.qd, predicted_run.qdd,
-                                 predicted_run.theta).joint_moments
+    drives = stacked_drives(s.system, r.theta, r.theta_d + h**2 / 6 * third,
+                            r.theta_dd + h**2 / 12 * fourth, None)
+    predicted_run = solve_ad(s.system, r.time, drives, r.q[0], tol=1e-12)
+    predicted = inverse_dynamics(s.system, predicted_run).joint_moments
     scale = np.abs(analytic).max()
     diff, pred = differenced - analytic, predicted - analytic
     inner = slice(2, -2)  # the end frames use one-sided stencils (error 2× and 11× larger)

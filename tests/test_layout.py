@@ -151,6 +151,11 @@ def test_no_import_cycle():
     assert cycles(import_graph()) == []
 
 
+def test_no_function_over_eight_parameters():
+    over = {name: n for name, n in parameter_counts().items() if n > MAX_PARAMETERS}
+    assert over == {}
+
+
 # --- the checks themselves, on small packages written here ----------------------------------
 def _package(tmp_path: Path, files: dict[str, str]) -> Path:
     root = tmp_path / "pkg"

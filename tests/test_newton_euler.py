@@ -33,6 +33,7 @@ import yaml
 from fccgrb_cli.dynamics import ExternalLoad, inverse_dynamics
 from fccgrb_cli.model import parse_model
 from fccgrb_cli.solvers import solve_ad
+from fccgrb_cli.solvers.ad.solve import stacked_drives
 from fccgrb_cli.system import compile_system
 
 MODEL_YAML = """
@@ -356,9 +357,9 @@ def package(request):
     """(result of solve_ad, inverse dynamics, layout) for one body form."""
     model = parse_model(MODEL_YAML, "chain.yaml").with_form(request.param)
     system = compile_system(model, angles="driver")
-    res = solve_ad(system, TIME, REF["theta"], REF["theta_d"], REF["theta_dd"],
-                   system.layout.pose_q(model), tol=1e-12)
-    idr = inverse_dynamics(system, res.q, res.qd, res.qdd, res.theta, [LOAD])
+    drives = stacked_drives(system, REF["theta"], REF["theta_d"], REF["theta_dd"], None)
+    res = solve_ad(system, TIME, drives, system.layout.pose_q(model), tol=1e-12)
+    idr = inverse_dynamics(system, res, [LOAD])
     return res, idr, system.layout
 
 

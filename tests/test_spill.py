@@ -220,6 +220,7 @@ def test_the_dynamics_stage_by_blocks_of_frames(monkeypatch) -> None:
     where nothing but the blocks changed (a block skipped or shifted leaves frames unset)."""
     from fccgrb_cli.solvers import batched
     from fccgrb_cli.solvers.ad.solve import _result, stacked_drives
+    from fccgrb_cli.solvers.kernel_arrays import DrivenMotion
 
     system = compile_system(fc.load_model(FIVE_BAR).with_form("reduced"), angles="driver")
     assert len(system.layout.reduced_w)
@@ -234,9 +235,10 @@ def test_the_dynamics_stage_by_blocks_of_frames(monkeypatch) -> None:
     central = (stacked.expand(q + h * qd) - stacked.expand(q - h * qd)) / (2 * h)
     assert np.allclose(stacked.expand_rate(q, qd), central, rtol=0, atol=1e-8)
     theta = np.zeros((n, len(system.model.angles)))
-    result = _result(system, np.arange(n) / 100.0, q, qd, qd,
-                     stacked_drives(system, theta, theta, theta, None), phi,
-                     np.zeros(n, dtype=int), np.zeros(n), np.ones(n, dtype=bool), 1e-10)
+    motion = DrivenMotion(q, qd, qd, phi, np.zeros(n, dtype=int), np.ones(n, dtype=bool))
+    result = _result(system, np.arange(n) / 100.0,
+                     stacked_drives(system, theta, theta, theta, None), motion, np.zeros(n),
+                     1e-10)
     topology = system.masks()["topology"]
     assert topology.any()
     assert np.array_equal(result.phi_norm, np.linalg.norm(phi, axis=1))

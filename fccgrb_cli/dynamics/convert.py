@@ -5,12 +5,13 @@ the square system gives consistent q, q̇, q̈ for the inverse dynamics."""
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from fccgrb_cli.dynamics.inverse import InverseDynamics, KernelInverse, inverse_dynamics
 from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.model import Model
-from fccgrb_cli.solvers.ad.baseline import driven_by
+from fccgrb_cli.solvers.ad.baseline import drivers_from
+from fccgrb_cli.solvers.ad.solve import solve_ad, solve_ad_batched
 from fccgrb_cli.solvers.batched import Stacked
 from fccgrb_cli.solvers.result import KinematicResult
 from fccgrb_cli.system import System, compile_system
@@ -53,12 +54,15 @@ def classical_dynamics(model: Model, result: KinematicResult, *, cutoff: float |
     compiled = compiled and batched
     # the kernels solve the multipliers on the factor the drive leaves at each frame
     solved = KernelInverse.prepare(system, loads, len(body_q)) if compiled else None
-    kinematics = driven_by(system, result.time, result.theta, body_q[0].copy(), cutoff=cutoff,
-                           order=order, tol=tol, method=result.method, base=base,
-                           guesses=body_q if batched else None, compiled=compiled,
-                           inverse=None if solved is None else solved.arrays)
-    inverse = inverse_dynamics(system, kinematics.q, kinematics.qd, kinematics.qdd,
-                               kinematics.theta, loads, batched=batched, compiled=compiled,
+    drives = drivers_from(system, result.time, result.theta, base, cutoff, order)
+    if batched:
+        kinematics = solve_ad_batched(system, result.time, drives, body_q, tol=tol,
+                                      compiled=compiled,
+                                      inverse=None if solved is None else solved.arrays)
+    else:
+        kinematics = solve_ad(system, result.time, drives, body_q[0].copy(), tol=tol)
+    kinematics = replace(kinematics, method=result.method)
+    inverse = inverse_dynamics(system, kinematics, loads, batched=batched, compiled=compiled,
                                solved=solved)
     return Dynamics(kinematics, inverse, tuple(loads), cutoff)
 

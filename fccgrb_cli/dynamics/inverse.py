@@ -22,6 +22,7 @@ from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.dynamics.mass import gravity_forces, mass_blocks, mass_matrix
 from fccgrb_cli.solvers.batched import Stacked, blocks, factor
 from fccgrb_cli.solvers.newton import linear_solve
+from fccgrb_cli.solvers.result import KinematicResult
 from fccgrb_cli.system import System
 
 
@@ -68,11 +69,12 @@ class KernelInverse:
                     np.zeros(n), np.zeros(n, dtype=bool)))
 
 
-def inverse_dynamics(system: System, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
-                     theta: np.ndarray, loads: Sequence[ExternalLoad] = (), *,
-                     batched: bool = True, compiled: bool = False,
-                     solved: KernelInverse | None = None) -> InverseDynamics:
-    """λ and τ for every frame of an AD system's motion (q, q̇, q̈: frames × nq; θ the drivers):
+def inverse_dynamics(system: System, motion: KinematicResult,
+                     loads: Sequence[ExternalLoad] = (), *, batched: bool = True,
+                     compiled: bool = False, solved: KernelInverse | None = None
+                     ) -> InverseDynamics:
+    """λ and τ for every frame of an AD system's ``motion`` (its q, q̇, q̈: frames × nq; θ the
+    drivers):
     all frames at once on stacked arrays (``batched``), or frame by frame (the reference);
     ``compiled`` (with ``batched``): the multipliers' solves in the compiled kernels, ``solved``
     holding those the drive's kernel already did (the other frames are solved here)."""
@@ -81,11 +83,11 @@ def inverse_dynamics(system: System, q: np.ndarray, qd: np.ndarray, qdd: np.ndar
     model = system.model
     M = mass_matrix(model)
     g = gravity_forces(model)
+    theta = motion.theta
     if batched:
-        lam, residual, xs, xds, power = _stacked(system, M, g, q, qd, qdd, loads, compiled,
-                                                 solved)
+        lam, residual, xs, xds, power = _stacked(system, M, g, motion, loads, compiled, solved)
     else:
-        lam, residual, xs, xds, power = _frame_by_frame(system, M, g, q, qd, qdd, loads)
+        lam, residual, xs, xds, power = _frame_by_frame(system, M, g, motion, loads)
     driver_rows = system.n_linear_rows + system.angle_rows
     bases, force, moment = _base_wrenches(system, xs, lam)
     potential = -(xs @ g)
@@ -104,12 +106,13 @@ def inverse_dynamics(system: System, q: np.ndarray, qd: np.ndarray, qdd: np.ndar
 Multipliers = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
-def _stacked(system: System, M: np.ndarray, g: np.ndarray, q: np.ndarray, qd: np.ndarray,
-             qdd: np.ndarray, loads: Sequence[ExternalLoad], compiled: bool = False,
+def _stacked(system: System, M: np.ndarray, g: np.ndarray, motion: KinematicResult,
+             loads: Sequence[ExternalLoad], compiled: bool = False,
              solved: KernelInverse | None = None) -> Multipliers:
     """λ (frames × rows), ‖Φ_qᵀλ − rhs‖, x, ẋ and the loads' power of every frame at once:
     ẍ = X_q q̈ + V̇ q̇, rhs = X_qᵀ (g_x + Σ loads − M_x ẍ), Φ_qᵀ λ = rhs by stacked solves; the
     frames ``solved`` by the drive's kernel are taken from it."""
+    q, qd, qdd = motion.q, motion.qd, motion.qdd
     stacked = Stacked(system)
     n = len(q)
     x, xd = stacked.expand(q), stacked.expand_rate(q, qd)
@@ -150,10 +153,10 @@ def _stacked(system: System, M: np.ndarray, g: np.ndarray, q: np.ndarray, qd: np
     return lam, residual, x, xd, power
 
 
-def _frame_by_frame(system: System, M: np.ndarray, g: np.ndarray, q: np.ndarray,
-                    qd: np.ndarray, qdd: np.ndarray,
+def _frame_by_frame(system: System, M: np.ndarray, g: np.ndarray, motion: KinematicResult,
                     loads: Sequence[ExternalLoad]) -> Multipliers:
     """What ``_stacked`` computes, one frame at a time (``linear_solve`` on each Φ_qᵀ)."""
+    q, qd, qdd = motion.q, motion.qd, motion.qdd
     layout = system.layout
     n = len(q)
     lam = np.zeros((n, system.n_rows))

@@ -27,6 +27,16 @@ from fccgrb_cli.solvers.cno.sqp import (
     TAU,
     THETA,
 )
+from fccgrb_cli.solvers.kernel_arrays import (
+    BaseRates,
+    Bounds,
+    DrivenMotion,
+    Drivers,
+    FrameOutputs,
+    Limits,
+    NrmTrial,
+    WarmStart,
+)
 from fccgrb_cli.solvers.newton import LARGE, NEAR, ROUNDING, SLOW
 from fccgrb_cli.system.sparse import SparseSystem
 
@@ -202,12 +212,13 @@ def workspace(s: SparseSystem, n_rows: int):
 
 
 @njit(cache=True)
-def gauss_newton(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, w: np.ndarray, tol: float,
-                 max_iter: int, hessian: int, q: np.ndarray, ws) -> tuple[int, bool]:
+def gauss_newton(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, w: np.ndarray,
+                 limits: Limits, hessian: int, q: np.ndarray, ws) -> tuple[int, bool]:
     """One frame of fccgrb_cli.solvers.newton.gauss_newton (hessian 0 Gauss–Newton, 1 exact,
     2 auto): the iterate is left in ``q``; returns (iterations, converged). ``ws``: see
     :func:`workspace`."""
     n_rows, nq = len(w), s.nq
+    tol, max_iter = limits
     F, phi, values, trial_phi, c, N, L, g, step_p, step, trial = ws
     q[:] = q0
     residual(s, q, q[s.nb:], ref, F, phi)
@@ -269,20 +280,15 @@ def gauss_newton(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, w: np.ndarray
 
 
 @njit(cache=True)
-def solve_frames(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
-                 pattern_of: np.ndarray, solvable: np.ndarray, base_w: np.ndarray,
-                 tol: float, max_iter: int, hessian: int, extrapolate: bool,
-                 start: int, stop: int, guess: np.ndarray, use_guess: bool,
-                 history: np.ndarray, state: np.ndarray,
-                 q_all: np.ndarray, iterations: np.ndarray, phi_norm: np.ndarray,
-                 phi_top: np.ndarray, converged: np.ndarray, unsolved: np.ndarray
-                 ) -> tuple[int, int]:
-    """Frames ``start`` to ``stop`` of solve_nrm's loop. ``history`` holds up to 5 solutions
-    (newest last), ``state`` = [number in history, last frame's iterations]; ``missing``
-    (frames × targets) the gaps, ``pattern_of`` each frame's set of gaps by number and
-    ``solvable`` what the rank test said of each set (UNKNOWN until asked). Returns
-    (frame, DONE | NEED_GUESS | NEED_RANK): Python supplies ``guess`` (use_guess) and calls
-    again from that frame."""
+def solve_frames(s: SparseSystem, trial: NrmTrial, limits: Limits, hessian: int, start: int,
+                 stop: int, warm: WarmStart, out: FrameOutputs) -> tuple[int, int]:
+    """Frames ``start`` to ``stop`` of solve_nrm's loop (the history holds up to 5 solutions).
+    Returns (frame, DONE | NEED_GUESS | NEED_RANK): Python supplies the warm start's guess
+    (use_guess) and calls again from that frame."""
+    targets, missing, pattern_of, solvable, base_w = trial
+    tol, max_iter = limits
+    guess, use_guess, history, state, extrapolate = warm
+    q_all, iterations, phi_norm, phi_top, converged, unsolved = out
     n_rows, nq = len(base_w), s.nq
     ws = workspace(s, n_rows)
     w = np.empty(n_rows)
@@ -314,9 +320,9 @@ def solve_frames(s: SparseSystem, targets: np.ndarray, missing: np.ndarray,
                 for d in range(3):
                     w[s.trk_start + 3 * t + d] = 0.0
         cap = max_iter if count else 4 * max_iter
-        k, ok = gauss_newton(s, q0, y, w, tol, cap, hessian, q, ws)
+        k, ok = gauss_newton(s, q0, y, w, Limits(tol, cap), hessian, q, ws)
         if not ok and count and extrapolate:
-            k2, ok = gauss_newton(s, history[count - 1], y, w, tol, max_iter, hessian, q, ws)
+            k2, ok = gauss_newton(s, history[count - 1], y, w, limits, hessian, q, ws)
             k += k2
         q_all[f] = q
         iterations[f] = k
@@ -375,14 +381,15 @@ def _statistics(s: SparseSystem, q: np.ndarray, y: np.ndarray, keep: np.ndarray,
 
 
 @njit(cache=True)
-def stabilized_sqp(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, w: np.ndarray, tol: float,
-                   max_iter: int, q: np.ndarray, ws, lower: np.ndarray, upper: np.ndarray,
-                   interior: bool, z: np.ndarray) -> tuple[int, bool]:
+def stabilized_sqp(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, w: np.ndarray,
+                   limits: Limits, q: np.ndarray, ws, bounds: Bounds) -> tuple[int, bool]:
     """One frame of fccgrb_cli.solvers.sqp.stabilized_sqp (``w`` from sqp_weights); with
     ``interior``, its interior point on ``lower`` ≤ q ≤ ``upper`` (sqp.Barrier), the bound
     multipliers z_l, z_u in ``z`` (4 × nq: z_l, z_u, 0 where unbounded, and their steps).
     The iterate is left in ``q``; returns (iterations, converged)."""
     n_rows, nq = len(w), s.nq
+    tol, max_iter = limits
+    lower, upper, interior, z = bounds
     F, phi, values, shifted, shift, N, L, g, step_p, step, _ = ws
     q[:] = q0
     shift[:] = 0.0
@@ -485,14 +492,15 @@ def _barrier_advance(q: np.ndarray, step: np.ndarray, lower: np.ndarray, upper: 
 
 @njit(cache=True)
 def rates_frames(s: SparseSystem, q_all: np.ndarray, theta_d: np.ndarray,
-                 theta_dd: np.ndarray, base_cols: np.ndarray, base_d: np.ndarray,
-                 base_dd: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> None:
+                 theta_dd: np.ndarray, base: BaseRates, qd: np.ndarray, qdd: np.ndarray
+                 ) -> None:
     """Consistent q̇ and q̈ of every frame (fccgrb_cli/solvers/rates.py): with θ̇, θ̈ given,
     the body rates solve Φ_top,b q̇_b = −Φ_top,θ θ̇ and Φ_top,b q̈_b = γ_top − Φ_top,θ θ̈, with a
     floating base's differenced rates as extra rows, in the least-squares sense (exact where
     they are consistent, as rates.py's LU or QR). Normal equations on NRM's envelope with the
     θ rows and columns set to the identity: one factorization per frame serves both. Frames
     with a NaN are left NaN."""
+    base_cols, base_d, base_dd = base
     n_rows, nq, nb = len(s.c_const) + len(s.dot_c), s.nq, s.nb
     F, Fd = np.empty(len(s.f0)), np.empty(len(s.f0))
     values = np.empty(len(s.j_col))
@@ -589,12 +597,8 @@ def _gamma_top(s: SparseSystem, q: np.ndarray, qd: np.ndarray, Fd: np.ndarray,
 
 
 @njit(cache=True)
-def driven_frames(s: SparseSystem, guesses: np.ndarray, theta: np.ndarray,
-                  theta_d: np.ndarray, theta_dd: np.ndarray, ref: np.ndarray,
-                  ref_d: np.ndarray, ref_dd: np.ndarray, tol: float, max_iter: int,
-                  q_out: np.ndarray, qd_out: np.ndarray, qdd_out: np.ndarray,
-                  phi_out: np.ndarray, iterations: np.ndarray, converged: np.ndarray,
-                  inverse) -> None:
+def driven_frames(s: SparseSystem, guesses: np.ndarray, drivers: Drivers, limits: Limits,
+                  motion: DrivenMotion, inverse) -> None:
     """The classical model driven by θ*(t) (and a floating base's features), every frame from
     its own guess moved by the correction (solution − guess) of the frames before it,
     extrapolated linearly (the drivers' filtering and the WLS topology misfit change slowly;
@@ -615,6 +619,9 @@ def driven_frames(s: SparseSystem, guesses: np.ndarray, theta: np.ndarray,
     matrix's fixed point J_Lᵀ Φ = 0 is not the least-squares one Φ_qᵀ Φ = 0.) Frames that do
     not converge within ``max_iter`` steps are left for Python (converged False); frames with
     a non-finite guess are skipped."""
+    theta, theta_d, theta_dd, ref, ref_d, ref_dd = drivers
+    tol, max_iter = limits
+    q_out, qd_out, qdd_out, phi_out, iterations, converged = motion
     n_rows, nq = phi_out.shape[1], s.nq
     square = n_rows == nq
     F, Fd = np.empty(len(s.f0)), np.empty(len(s.f0))
@@ -693,8 +700,7 @@ def driven_frames(s: SparseSystem, guesses: np.ndarray, theta: np.ndarray,
         for p in range(nq):
             qdd_out[f, s.perm[p]] = out[p]
         if len(inverse[-1]):
-            _frame_multipliers(s, values, L, f, q_out[f], qd_out[f], qdd_out[f], inverse,
-                               total, g, out)
+            _frame_multipliers(s, values, L, f, motion, inverse, (total, g, out))
 
 
 @njit(cache=True)
@@ -712,13 +718,14 @@ def _largest(v: np.ndarray) -> float:
 
 @njit(cache=True)
 def _frame_multipliers(s: SparseSystem, values: np.ndarray, L: np.ndarray, f: int,
-                       q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, inverse,
-                       total: np.ndarray, rhs: np.ndarray, y: np.ndarray) -> None:
+                       motion: DrivenMotion, inverse, work) -> None:
     """One frame of the inverse dynamics on the factor of its Φ_qᵀΦ_q (inverse.py, x = q):
     rhs = g_x + Σ C_Pᵀf + ½ n × (u, v, w) − M_x q̈ with M_x = blockdiag(K_i ⊗ I3), λ = Φ_q
     (Φ_qᵀΦ_q)⁻¹ rhs (exact, or min-norm for a taller Φ_q of full column rank), the misfit
     ‖Φ_qᵀλ − rhs‖ and the loads' power f · ṙ_P + n · ω (= Q_load · ẋ, loads.py)."""
     mass, gravity, load_at, force, point, moment, lam, misfit, power, solved = inverse
+    q, qd, qdd = motion.q[f], motion.qd[f], motion.qdd[f]
+    total, rhs, y = work  # scratch: nq each
     nq = s.nq
     for b in range(len(mass)):
         for i in range(4):

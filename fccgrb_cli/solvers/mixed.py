@@ -14,8 +14,7 @@ NEAR_SINGULAR = np.radians(5.0)
 
 
 def mixed_result(system: System, time: np.ndarray, q_all: np.ndarray, stats: FrameStats, *,
-                 method: str, tol: float, messages: list[str] | tuple[str, ...] = (),
-                 wall_s: float = float("nan"), compiled: bool = False) -> KinematicResult:
+                 method: str, tol: float, compiled: bool = False) -> KinematicResult:
     """The result of any mixed-coordinate method: θ from q, θ̇ and θ̈ by central differences,
     consistent q̇ and q̈, and warnings for angles near 0 or π. A signed angle is the same
     configuration every 2π: frames solved apart (in parallel, or from a fresh guess after a gap)
@@ -41,10 +40,10 @@ def mixed_result(system: System, time: np.ndarray, q_all: np.ndarray, stats: Fra
         method=method, tol=tol, time=np.asarray(time, dtype=float), q=q_all, qd=qd, qdd=qdd,
         theta=theta, theta_d=theta_d, theta_dd=theta_dd, angle_names=system.layout.angle_names,
         iterations=stats.iterations, time_s=stats.seconds, phi_norm=stats.phi_norm,
-        phi_top_max=stats.phi_top, converged=stats.converged, messages=(*messages, *near_singular(
-            theta, system.layout.angle_names, time,
-            system.distance_rows | system.full_angles)), wall_s=wall_s,
-        status=stats.status)
+        phi_top_max=stats.phi_top, converged=stats.converged,
+        messages=(*stats.messages, *near_singular(theta, system.layout.angle_names, time,
+                                                  system.distance_rows | system.full_angles)),
+        wall_s=stats.wall_s, status=stats.status)
 
 
 def near_singular(theta: np.ndarray, names: tuple[str, ...], time: np.ndarray,

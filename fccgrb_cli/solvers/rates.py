@@ -79,7 +79,7 @@ def consistent_rates(system: System, q: np.ndarray, theta_d: np.ndarray, theta_d
 def _compiled_rates(system: System, q: np.ndarray, theta_d: np.ndarray, theta_dd: np.ndarray,
                     base: tuple[np.ndarray, np.ndarray, np.ndarray] | None
                     ) -> tuple[np.ndarray, np.ndarray]:
-    from fccgrb_cli.solvers.kernels import rates_frames
+    from fccgrb_cli.solvers.kernels import BaseRates, rates_frames
     from fccgrb_cli.system.sparse import sparse_of
 
     n = len(q)
@@ -88,6 +88,7 @@ def _compiled_rates(system: System, q: np.ndarray, theta_d: np.ndarray, theta_dd
     base_dd = base[2] if base is not None else np.zeros((n, 0))
     qd, qdd = np.full_like(q, np.nan), np.full_like(q, np.nan)
     rates_frames(sparse_of(system), np.ascontiguousarray(q), np.ascontiguousarray(theta_d),
-                 np.ascontiguousarray(theta_dd), columns, np.ascontiguousarray(base_d),
-                 np.ascontiguousarray(base_dd), qd, qdd)
+                 np.ascontiguousarray(theta_dd),
+                 BaseRates(columns, np.ascontiguousarray(base_d), np.ascontiguousarray(base_dd)),
+                 qd, qdd)
     return qd, qdd

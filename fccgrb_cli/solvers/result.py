@@ -59,7 +59,8 @@ class KinematicResult:
 class FrameStats:
     """What a solver records of each frame (arrays over frames): Newton or optimizer iterations,
     wall-clock seconds, ‖Φ‖ over the active equations, max |topological Φ|, the solver's
-    verdict, and (optimizers) its own message."""
+    verdict, and (optimizers) its own message; and of the whole solve: its messages, and its
+    wall-clock time where frames ran in parallel (else NaN)."""
 
     iterations: np.ndarray
     seconds: np.ndarray
@@ -67,3 +68,5 @@ class FrameStats:
     phi_top: np.ndarray
     converged: np.ndarray
     status: tuple[str, ...] = field(default=())
+    messages: tuple[str, ...] | list[str] = field(default=())
+    wall_s: float = float("nan")

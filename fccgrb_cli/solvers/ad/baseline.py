@@ -14,7 +14,8 @@ import numpy as np
 
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.filtering import lowpass
-from fccgrb_cli.solvers.ad.solve import solve_ad, solve_ad_batched
+from fccgrb_cli.solvers.ad.solve import solve_ad, stacked_drives
+from fccgrb_cli.solvers.batched import Drives
 from fccgrb_cli.solvers.initial import initial_guess
 from fccgrb_cli.solvers.rates import central_derivatives
 from fccgrb_cli.solvers.result import KinematicResult
@@ -36,36 +37,24 @@ def marker_fits(system: System, targets: np.ndarray) -> list[np.ndarray]:
     return fits
 
 
-def driven_by(model_system: System, time: np.ndarray, theta: np.ndarray, q_guess: np.ndarray, *,
-              cutoff: float | None, order: int, tol: float, method: str,
-              base: np.ndarray | None = None,
-              progress: Callable[[int, int], None] | None = None,
-              guesses: np.ndarray | None = None, compiled: bool = False,
-              inverse: tuple | None = None) -> KinematicResult:
-    """AD analysis with drivers θ(t) (optionally low-passed), θ̇ and θ̈ by central differences;
-    a floating base follows ``base`` (frames × slots × 3), filtered and differentiated alike.
-    With ``guesses`` (frames × nq, one starting point per frame) all frames are solved at once
-    (``solve_ad_batched``, in the compiled kernels with ``compiled``, which also fill
-    ``inverse``); without, frame by frame from ``q_guess`` (``solve_ad``)."""
+def drivers_from(system: System, time: np.ndarray, theta: np.ndarray, base: np.ndarray | None,
+                 cutoff: float | None, order: int) -> Drives:
+    """The drives of an AD analysis from angles θ(t) (frames × coordinates), optionally
+    low-passed (zero-lag Butterworth of ``order`` at ``cutoff`` Hz), θ̇ and θ̈ by central
+    differences; a floating base follows ``base`` (frames × slots × 3), filtered and
+    differentiated alike."""
     rate = 1.0 / float(time[1] - time[0]) if len(time) > 1 else 1.0
     if cutoff is not None:
         theta = lowpass(theta, rate, cutoff, order)
     theta_d, theta_dd = central_derivatives(theta, 1.0 / rate)
     base_rates = None
-    if model_system.n_base_slots:
+    if system.n_base_slots:
         flat = base.reshape(len(time), -1)
         if cutoff is not None:
             flat = lowpass(flat, rate, cutoff, order)
         d1, d2 = central_derivatives(flat, 1.0 / rate)
         base_rates = tuple(a.reshape(base.shape) for a in (flat, d1, d2))
-    if guesses is None:
-        result = solve_ad(model_system, time, theta, theta_d, theta_dd, q_guess, tol=tol,
-                          base=base_rates, progress=progress)
-    else:
-        result = solve_ad_batched(model_system, time, theta, theta_d, theta_dd, guesses,
-                                  tol=tol, base=base_rates, progress=progress,
-                                  compiled=compiled, inverse=inverse)
-    return KinematicResult(**{**result.__dict__, "method": method})
+    return stacked_drives(system, theta, theta_d, theta_dd, base_rates)
 
 
 def solve_baseline(model, time: np.ndarray, targets: np.ndarray, *, cutoff: float | None,
@@ -80,5 +69,5 @@ def solve_baseline(model, time: np.ndarray, targets: np.ndarray, *, cutoff: floa
     ad = compile_system(model, angles="driver")
     n_body = ad.layout.n_body_q
     base = np.array([ad.base_reference(q[:n_body]) for q in fits])
-    return driven_by(ad, time, theta, fits[0][:n_body], cutoff=cutoff, order=order, tol=tol,
-                     method="ad", base=base, progress=progress)
+    return solve_ad(ad, time, drivers_from(ad, time, theta, base, cutoff, order),
+                    fits[0][:n_body], tol=tol, progress=progress)

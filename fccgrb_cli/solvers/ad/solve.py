@@ -19,6 +19,7 @@ import numpy as np
 from fccgrb_cli.blas import single_threaded
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.solvers.batched import Drives, Stacked, blocks, factor, newton_stacked
+from fccgrb_cli.solvers.kernel_arrays import DrivenMotion, Drivers, Limits
 from fccgrb_cli.solvers.newton import linear_solve, newton_raphson
 from fccgrb_cli.solvers.result import KinematicResult
 from fccgrb_cli.system import Drive, System
@@ -27,6 +28,7 @@ ASSEMBLY_STEP = np.radians(5.0)
 ASSEMBLY_STEP_DISTANCE = 0.02  # m
 # Newton iterations a frame gets in the batch before it goes through the frame-by-frame path
 BATCH_ITER = 8
+MAX_ITER = 50  # Newton iterations of a frame on its own
 Base = tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
@@ -78,22 +80,19 @@ def frame_rates(system: System, q: np.ndarray, drive: Drive) -> tuple[np.ndarray
 
 
 @single_threaded
-def solve_ad(system: System, time: np.ndarray, theta: np.ndarray, theta_d: np.ndarray,
-             theta_dd: np.ndarray, q_guess: np.ndarray, *, tol: float = 1e-10,
-             max_iter: int = 50, base: Base | None = None,
+def solve_ad(system: System, time: np.ndarray, drives: Drives, q_guess: np.ndarray, *,
+             tol: float = 1e-10, max_iter: int = MAX_ITER,
              progress: Callable[[int, int], None] | None = None) -> KinematicResult:
-    """AD analysis over all frames; θ, θ̇, θ̈ are (frames × n_coordinates) in rad, rad/s, rad/s²
-    (m, m/s, m/s² for distances);
-    ``base``: the floating bases' driven features and their rates (frames × slots × 3 each,
-    see ``System.base_reference``), required when the model has floating bases."""
-    drives = stacked_drives(system, theta, theta_d, theta_dd, base)
+    """AD analysis over all frames driven by ``drives`` (see :func:`stacked_drives`: θ, θ̇, θ̈
+    frames × n_coordinates in rad, rad/s, rad/s², m, m/s, m/s² for distances, and the floating
+    bases' driven features and rates), from ``q_guess`` assembled to the first frame."""
     n, nq = len(time), system.nq
     out = {k: np.zeros((n, nq)) for k in ("q", "qd", "qdd")}
     iterations = np.zeros(n, dtype=int)
     seconds = np.zeros(n)
     converged = np.zeros(n, dtype=bool)
     phi = np.zeros((n, system.n_rows))
-    q = assemble(system, q_guess, theta[0], tol, max_iter, drives.ref[0])
+    q = assemble(system, q_guess, drives.theta[0], tol, max_iter, drives.ref[0])
     qd = qdd = np.zeros(nq)
     for f in range(n):
         drive = drives.frame(f)
@@ -110,15 +109,13 @@ def solve_ad(system: System, time: np.ndarray, theta: np.ndarray, theta_d: np.nd
         iterations[f], converged[f] = it.iterations, it.converged
         if progress is not None:
             progress(f + 1, n)
-    return _result(system, time, out["q"], out["qd"], out["qdd"], drives, phi,
-                   iterations, seconds, converged, tol)
+    motion = DrivenMotion(out["q"], out["qd"], out["qdd"], phi, iterations, converged)
+    return _result(system, time, drives, motion, seconds, tol)
 
 
 @single_threaded
-def solve_ad_batched(system: System, time: np.ndarray, theta: np.ndarray, theta_d: np.ndarray,
-                     theta_dd: np.ndarray, guesses: np.ndarray, *, tol: float = 1e-10,
-                     max_iter: int = 50, base: Base | None = None,
-                     progress: Callable[[int, int], None] | None = None,
+def solve_ad_batched(system: System, time: np.ndarray, drives: Drives, guesses: np.ndarray, *,
+                     tol: float = 1e-10, progress: Callable[[int, int], None] | None = None,
                      compiled: bool = False, inverse: tuple | None = None) -> KinematicResult:
     """``solve_ad`` with every frame solved at once from its own guess (``guesses``: frames
     × nq, e.g. the mixed-coordinate solution's body coordinates): Newton–Raphson on the
@@ -132,7 +129,7 @@ def solve_ad_batched(system: System, time: np.ndarray, theta: np.ndarray, theta_
     instead of the stacked numpy arrays, the same equations; ``inverse``: the kernels'
     inverse-dynamics arrays (dynamics.inverse.KernelInverse), filled for the frames they
     solve."""
-    drives = stacked_drives(system, theta, theta_d, theta_dd, base)
+    max_iter = MAX_ITER
     stacked = Stacked(system)
     started = clock.perf_counter()
     n = len(time)
@@ -148,9 +145,10 @@ def solve_ad_batched(system: System, time: np.ndarray, theta: np.ndarray, theta_
 
         arrays = (drives.theta, drives.theta_d, drives.theta_dd, drives.ref, drives.ref_d,
                   drives.ref_dd)
-        driven_frames(sparse_of(system), q, *(np.ascontiguousarray(a, dtype=float)
-                                              for a in arrays),
-                      tol, min(BATCH_ITER, max_iter), q, qd, qdd, phi, iterations, converged,
+        driven_frames(sparse_of(system), q,
+                      Drivers(*(np.ascontiguousarray(a, dtype=float) for a in arrays)),
+                      Limits(tol, min(BATCH_ITER, max_iter)),
+                      DrivenMotion(q, qd, qdd, phi, iterations, converged),
                       NO_INVERSE if inverse is None else inverse)
         done[:] = converged
     for block in blocks(len(finite)) if not compiled else ():
@@ -160,7 +158,7 @@ def solve_ad_batched(system: System, time: np.ndarray, theta: np.ndarray, theta_
         q[frames], iterations[frames], converged[frames] = it.q, it.iterations, it.converged
     for f in np.flatnonzero(~converged):
         if f == 0:
-            start = assemble(system, guesses[0], theta[0], tol, max_iter, drives.ref[0])
+            start = assemble(system, guesses[0], drives.theta[0], tol, max_iter, drives.ref[0])
         else:
             velocity, acceleration = frame_rates(system, q[f - 1], drives.frame(f - 1))
             dt = time[f] - time[f - 1]
@@ -179,14 +177,15 @@ def solve_ad_batched(system: System, time: np.ndarray, theta: np.ndarray, theta_
     seconds = np.full(n, (clock.perf_counter() - started) / max(n, 1))
     if progress is not None:
         progress(n, n)
-    return _result(system, time, q, qd, qdd, drives, phi, iterations, seconds, converged, tol)
+    return _result(system, time, drives, DrivenMotion(q, qd, qdd, phi, iterations, converged),
+                   seconds, tol)
 
 
-def _result(system: System, time: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
-            drives: Drives, phi: np.ndarray, iterations: np.ndarray, seconds: np.ndarray,
-            converged: np.ndarray, tol: float) -> KinematicResult:
+def _result(system: System, time: np.ndarray, drives: Drives, motion: DrivenMotion,
+            seconds: np.ndarray, tol: float) -> KinematicResult:
     """The AD run's KinematicResult, with ‖Φ‖ and max |topological Φ| per frame (a block of
     frames at a time: a long trial's frames × rows temporaries would each be as large as Φ)."""
+    q, qd, qdd, phi, iterations, converged = motion
     topology = system.masks()["topology"]
     phi_norm, phi_top = np.empty(len(q)), np.zeros(len(q))
     for b in blocks(len(q)):

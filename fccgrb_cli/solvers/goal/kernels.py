@@ -5,6 +5,8 @@ systems (the loop over frames: optimize/kernels.py's solve_frames)."""
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -21,6 +23,7 @@ from fccgrb_cli.solvers.goal.sqp import (
     VALLEY,
 )
 from fccgrb_cli.solvers.kernels import (
+    Limits,
     add_hessian,
     cholesky,
     jacobian,
@@ -44,25 +47,62 @@ def ed_fits(s: SparseSystem, n_points: int) -> bool:
     return True
 
 
+class Goals(NamedTuple):
+    """A frame's goals: which tracked points have a marker (and a weight), their weights, and
+    whether each point's distance is one goal ('ed') or each residual component two ('tc')."""
+
+    present: np.ndarray
+    point_w: np.ndarray
+    ed: bool
+
+
+class GoalWorkspace(NamedTuple):
+    """The arrays of one frame's iteration beside kernels.workspace's (m = 6 per point at
+    most): constraint values c, weights w, their Jacobian G (factor order), U = N⁻¹Gᵀ (by
+    rows), M = GN⁻¹Gᵀ, the base values, ζ, the working set, the curved matrix, N⁻¹rhs, the
+    small system, its right-hand side, constraint values at the current and the target point,
+    its solution, a column, 'ed''s unit directions and distances (4 per point), the slacks
+    c − wγ and the Newton right-hand side."""
+
+    c: np.ndarray
+    w: np.ndarray
+    G: np.ndarray
+    U: np.ndarray
+    M: np.ndarray
+    base: np.ndarray
+    zeta: np.ndarray
+    working: np.ndarray
+    curved: np.ndarray
+    u0: np.ndarray
+    K: np.ndarray
+    small_rhs: np.ndarray
+    values: np.ndarray
+    target: np.ndarray
+    x: np.ndarray
+    col: np.ndarray
+    normals: np.ndarray
+    slack: np.ndarray
+    rhs_q: np.ndarray
+
+
 @njit(cache=True)
-def goal_workspace(s: SparseSystem, n_points: int):
-    """The arrays of one frame's iteration beside kernels.workspace's: constraint values c,
-    weights w, their Jacobian G (factor order), U = N⁻¹Gᵀ (by rows), M = GN⁻¹Gᵀ, the base
-    values, ζ, the working set, the curved matrix, N⁻¹rhs, the small system, its right-hand
-    side, constraint values at the current and the target point, its solution, a column."""
+def goal_workspace(s: SparseSystem, n_points: int) -> GoalWorkspace:
+    """A :class:`GoalWorkspace` for ``n_points`` tracked points, allocated once per solve."""
     nq, m = s.nq, 6 * n_points
-    return (np.empty(m), np.empty(m), np.zeros((m, nq)), np.zeros((m, nq)), np.zeros((m, m)),
-            np.empty(m), np.zeros(m), np.zeros(m + 1, dtype=np.int64), np.zeros((nq, nq)),
-            np.empty(nq), np.zeros((m + 1, m + 1)), np.empty(m + 1), np.empty(m), np.empty(m),
-            np.zeros(m + 1), np.empty(nq))
+    return GoalWorkspace(
+        np.empty(m), np.empty(m), np.zeros((m, nq)), np.zeros((m, nq)), np.zeros((m, m)),
+        np.empty(m), np.zeros(m), np.zeros(m + 1, dtype=np.int64), np.zeros((nq, nq)),
+        np.empty(nq), np.zeros((m + 1, m + 1)), np.empty(m + 1), np.empty(m), np.empty(m),
+        np.zeros(m + 1), np.empty(nq), np.zeros(4 * n_points), np.empty(m), np.empty(nq))
 
 
 @njit(cache=True)
-def _goals(s: SparseSystem, phi: np.ndarray, values: np.ndarray, present: np.ndarray,
-           point_w: np.ndarray, ed: bool, c: np.ndarray, w: np.ndarray, G: np.ndarray,
-           normals: np.ndarray) -> int:
-    """goal_sqp.goals: c, w and G (factor order) of the points with markers; the number m.
-    'ed' keeps each point's unit direction n = d/s and s in ``normals`` (4 per point)."""
+def _goals(s: SparseSystem, phi: np.ndarray, values: np.ndarray, goals: Goals,
+           gw: GoalWorkspace) -> int:
+    """goal_sqp.goals: c, w and G (factor order) of the points with markers, into ``gw``; the
+    number m. 'ed' keeps each point's unit direction n = d/s and s in ``gw.normals``."""
+    present, point_w, ed = goals
+    c, w, G, normals = gw.c, gw.w, gw.G, gw.normals
     n_present = 0
     for t in range(len(present)):
         n_present += present[t]
@@ -152,10 +192,11 @@ def _small_solve(K: np.ndarray, rhs: np.ndarray, n: int, out: np.ndarray) -> boo
 
 
 @njit(cache=True)
-def _columns(s: SparseSystem, L: np.ndarray, G: np.ndarray, U: np.ndarray, M: np.ndarray,
-             have: np.ndarray, working: np.ndarray, n_w: int, m: int, col: np.ndarray) -> None:
+def _columns(s: SparseSystem, L: np.ndarray, gw: GoalWorkspace, have: np.ndarray, n_w: int,
+             m: int) -> None:
     """U_j = N⁻¹G_jᵀ and M's column j = GU_j for the working set's constraints that lack
     them (computed once per iteration, as a constraint first enters the working set)."""
+    G, U, M, working, col = gw.G, gw.U, gw.M, gw.working, gw.col
     for a in range(n_w):
         j = working[a]
         if have[j]:
@@ -171,11 +212,10 @@ def _columns(s: SparseSystem, L: np.ndarray, G: np.ndarray, U: np.ndarray, M: np
 
 
 @njit(cache=True)
-def _minimizer(M: np.ndarray, base: np.ndarray, w: np.ndarray, working: np.ndarray, n_w: int,
-               m: int, K: np.ndarray, rhs: np.ndarray, x: np.ndarray,
-               values: np.ndarray) -> bool:
-    """goal_sqp's ``minimizer``: ζ_W and Δγ in x[:n_w], x[n_w]; constraint values there (M's
-    columns of the working set are in place: :func:`_columns`)."""
+def _minimizer(gw: GoalWorkspace, n_w: int, m: int, values: np.ndarray) -> bool:
+    """goal_sqp's ``minimizer``: ζ_W and Δγ in gw.x[:n_w], gw.x[n_w]; constraint values there
+    in ``values`` (M's columns of the working set are in place: :func:`_columns`)."""
+    M, base, w, working, K, rhs, x = gw.M, gw.base, gw.w, gw.working, gw.K, gw.small_rhs, gw.x
     for a in range(n_w):
         for b in range(n_w):
             K[a, b] = M[working[a], working[b]]
@@ -194,12 +234,14 @@ def _minimizer(M: np.ndarray, base: np.ndarray, w: np.ndarray, working: np.ndarr
 
 
 @njit(cache=True)
-def _working_step(s: SparseSystem, N: np.ndarray, L: np.ndarray, rhs_q: np.ndarray,
-                  m: int, slack: np.ndarray, working: np.ndarray, n_w: int, gw,
-                  step: np.ndarray, zeta: np.ndarray) -> tuple[int, float]:
-    """goal_sqp._working_step: Δq (factor order) in ``step``, ζ (every constraint) in
-    ``zeta``, the working set in ``working``; returns (its size, Δγ), size −1 on failure."""
-    _, w, G, U, M, base, _, _, _, u0, K, small_rhs, values, target, x, col = gw
+def _working_step(s: SparseSystem, N: np.ndarray, L: np.ndarray, m: int, n_w: int,
+                  gw: GoalWorkspace, step: np.ndarray, zeta: np.ndarray) -> tuple[int, float]:
+    """goal_sqp._working_step from the slacks and the right-hand side in ``gw``: Δq (factor
+    order) in ``step``, ζ (every constraint) in ``zeta``, the working set in ``gw.working``;
+    returns (its size, Δγ), size −1 on failure."""
+    w, G, U, base, u0, values, target, x = gw.w, gw.G, gw.U, gw.base, gw.u0, gw.values, \
+        gw.target, gw.x
+    rhs_q, slack, working = gw.rhs_q, gw.slack, gw.working
     if not cholesky(s.first, N, L):
         return -1, 0.0
     substitute(s.first, L, rhs_q, u0)
@@ -209,8 +251,8 @@ def _working_step(s: SparseSystem, N: np.ndarray, L: np.ndarray, rhs_q: np.ndarr
         for k in range(s.nq):
             total += G[a, k] * u0[k]
         base[a] = total
-    _columns(s, L, G, U, M, have, working, n_w, m, col)
-    feasible = _minimizer(M, base, w, working, n_w, m, K, small_rhs, x, values)
+    _columns(s, L, gw, have, n_w, m)
+    feasible = _minimizer(gw, n_w, m, values)
     for j in range(m):
         feasible = feasible and values[j] <= ACTIVE
     if not feasible:  # not a feasible start: restart from the largest constraint
@@ -226,8 +268,8 @@ def _working_step(s: SparseSystem, N: np.ndarray, L: np.ndarray, rhs_q: np.ndarr
     for a in range(n_w):
         inside[working[a]] = True
     for _ in range(MAX_SWAPS):
-        _columns(s, L, G, U, M, have, working, n_w, m, col)
-        if not _minimizer(M, base, w, working, n_w, m, K, small_rhs, x, target):
+        _columns(s, L, gw, have, n_w, m)
+        if not _minimizer(gw, n_w, m, target):
             return -1, 0.0
         alpha, blocking = np.inf, -1
         for j in range(m):
@@ -269,25 +311,25 @@ def _working_step(s: SparseSystem, N: np.ndarray, L: np.ndarray, rhs_q: np.ndarr
 
 
 @njit(cache=True)
-def goal_frame(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, present: np.ndarray,
-               point_w: np.ndarray, ed: bool, tol: float, max_iter: int, q: np.ndarray, ws,
-               gw, normals: np.ndarray) -> tuple[int, bool]:
+def goal_frame(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, goals: Goals,
+               limits: Limits, q: np.ndarray, ws, gw: GoalWorkspace) -> tuple[int, bool]:
     """One frame of goal_sqp.active_set_sqp from q0; the iterate in ``q``."""
     n_rows, nq = len(s.c_const) + len(s.dot_c), s.nq
+    tol, max_iter = limits
+    ed = goals.ed
     F, phi, values, shifted, shift, N, L, g, step_p, step, _ = ws
-    c, w, G, _, _, _, zeta, working, curved, _, _, _, _, _, _, _ = gw
+    c, w, zeta, working, curved = gw.c, gw.w, gw.zeta, gw.working, gw.curved
+    slack, rhs_q, normals = gw.slack, gw.rhs_q, gw.normals
     w_top = np.zeros(n_rows)
     for r in s.top_rows:
         w_top[r] = 1.0
-    slack = np.empty(len(c))
-    rhs_q = np.empty(nq)
     trial_zeta = np.empty(len(c))
     kept = np.empty_like(working)
     q[:] = q0
     shift[:] = 0.0
     residual(s, q, q[s.nb:], ref, F, phi)
     jacobian(s, q, F, values)
-    m = _goals(s, phi, values, present, point_w, ed, c, w, G, normals)
+    m = _goals(s, phi, values, goals, gw)
     if m == 0:  # no marker: nothing to attain
         return 0, False
     best = 0
@@ -305,7 +347,7 @@ def goal_frame(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, present: np.nda
     for k in range(max_iter + 1):
         residual(s, q, q[s.nb:], ref, F, phi)
         jacobian(s, q, F, values)
-        m = _goals(s, phi, values, present, point_w, ed, c, w, G, normals)
+        m = _goals(s, phi, values, goals, gw)
         violation, worst = 0.0, -np.inf
         for r in s.top_rows:
             violation = max(violation, abs(phi[r]))
@@ -328,16 +370,14 @@ def goal_frame(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, present: np.nda
                 curved[i, j] = N[i, j]
         add_hessian(s, q, shift, curved)
         if ed:
-            _add_distance_curvature(s, present, values, normals, zeta, curved)
+            _add_distance_curvature(s, goals.present, values, normals, zeta, curved)
         kept[:] = working
         n_kept = n_w
-        n_w, d_gamma = _working_step(s, curved, L, rhs_q, m, slack, working, n_w, gw, step_p,
-                                     trial_zeta)
+        n_w, d_gamma = _working_step(s, curved, L, m, n_w, gw, step_p, trial_zeta)
         exact = n_w >= 0
         if not exact:  # the Lagrangian's curvature not convex here, or the rounds failed
             working[:] = kept
-            n_w, d_gamma = _working_step(s, N, L, rhs_q, m, slack, working, n_kept, gw,
-                                         step_p, trial_zeta)
+            n_w, d_gamma = _working_step(s, N, L, m, n_kept, gw, step_p, trial_zeta)
         if n_w < 0:
             return k + 1, False
         zeta[:m] = trial_zeta[:m]

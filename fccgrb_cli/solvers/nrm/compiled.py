@@ -45,16 +45,19 @@ def solve_compiled(system: System, time: np.ndarray, targets: np.ndarray,
     state = Frames(n, nq, len(patterns))
     base_w = row_weights(system, settings.tracking_weight)
     guess, use_guess = np.zeros(nq), False
+    trial = kernels.NrmTrial(targets, missing, pattern_of, state.solvable, base_w)
+    limits = kernels.Limits(settings.tol, settings.max_iter)
+    extrapolate = settings.warm_start != "previous"
+    outputs = kernels.FrameOutputs(state.q, state.iterations, state.phi_norm, state.phi_top,
+                                   state.converged, state.unsolved)
     f = 0
     while f < n:
         stop = min(n, f + BLOCK)
         started = clock.perf_counter()
         g, reason = kernels.solve_frames(
-            s, targets, missing, pattern_of, state.solvable, base_w,
-            settings.tol, settings.max_iter, HESSIAN_CODES[settings.hessian],
-            settings.warm_start != "previous", f, stop, guess, use_guess, state.history,
-            state.counts, state.q, state.iterations, state.phi_norm, state.phi_top,
-            state.converged, state.unsolved)
+            s, trial, limits, HESSIAN_CODES[settings.hessian], f, stop,
+            kernels.WarmStart(guess, use_guess, state.history, state.counts, extrapolate),
+            outputs)
         if g > f:
             state.seconds[f:g] = (clock.perf_counter() - started) / (g - f)
         use_guess = False
@@ -72,9 +75,8 @@ def solve_compiled(system: System, time: np.ndarray, targets: np.ndarray,
     return mixed_result(
         system, time, state.q,
         FrameStats(state.iterations, state.seconds, state.phi_norm, state.phi_top,
-                   state.converged),
-        method=settings.method, tol=settings.tol,
-        messages=state.messages(time, missing, labels, source), compiled=True)
+                   state.converged, messages=state.messages(time, missing, labels, source)),
+        method=settings.method, tol=settings.tol, compiled=True)
 
 
 class Frames:

@@ -107,7 +107,8 @@ def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray,
         if progress is not None:
             progress(f + 1, n)
     return mixed_result(system, time, q_all,
-                        FrameStats(iterations, seconds, phi_norm, phi_top, converged),
-                        method=settings.method, tol=tol, messages=messages)
+                        FrameStats(iterations, seconds, phi_norm, phi_top, converged,
+                                   messages=messages),
+                        method=settings.method, tol=tol)
 
 

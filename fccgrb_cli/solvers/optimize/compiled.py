@@ -45,14 +45,18 @@ def run_frames_compiled(system: System, settings: Settings, targets: np.ndarray,
     fallback: dict[int, FrameRecord] = {}
     done = STRUCTURED[settings.method][1]
     guess, use_guess = initial_guess(system, targets[0]), True
+    trial = optimizer_kernels.OptimizerTrial(targets, missing, weights, nrm_weights, lower,
+                                             upper)
+    limits = kernels.Limits(settings.tol, settings.max_iter)
+    extrapolate = settings.warm_start != "previous"
+    outputs = kernels.FrameOutputs(q_all, iterations, phi_norm, phi_top, converged,
+                                   np.zeros(n, dtype=bool))
     f = 0
     while f < n:
         started = clock.perf_counter()
         g, reason = optimizer_kernels.solve_frames(
-            s, KINDS[settings.method], targets, missing, weights, nrm_weights, lower, upper,
-            settings.tol, settings.max_iter, settings.warm_start != "previous", f,
-            min(n, f + BLOCK), guess, use_guess, history, state, q_all, iterations, phi_norm,
-            phi_top, converged)
+            s, KINDS[settings.method], trial, limits, f, min(n, f + BLOCK),
+            kernels.WarmStart(guess, use_guess, history, state, extrapolate), outputs)
         if g > f:
             seconds[f:g] = (clock.perf_counter() - started) / (g - f)
         use_guess = False

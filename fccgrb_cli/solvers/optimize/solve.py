@@ -119,9 +119,9 @@ def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
                        np.array([r.phi_norm for r in records]),
                        np.array([r.phi_top for r in records]),
                        np.array([r.converged for r in records]),
-                       tuple(r.message for r in records))
+                       tuple(r.message for r in records), messages, wall)
     return mixed_result(system, time, np.array([r.q for r in records]), stats, method=label,
-                        tol=settings.tol, messages=messages, wall_s=wall, compiled=compiled)
+                        tol=settings.tol, compiled=compiled)
 
 
 def compiled_structured(system: System, settings: Settings, n_frames: int) -> bool:
