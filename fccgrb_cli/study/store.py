@@ -39,9 +39,9 @@ from fccgrb_cli.errors import InputError
 from fccgrb_cli.gait.analysis import GaitResults
 from fccgrb_cli.gait.cycles import PARAMETERS, SideCycles, pooled
 from fccgrb_cli.io.atomic import atomic_path
-from fccgrb_cli.io.datasets import put
+from fccgrb_cli.io.datasets import open_results, put
 from fccgrb_cli.io.gait_results import read_cycles, read_gait, write_cycles
-from fccgrb_cli.io.results import FORMAT_VERSION, open_results, versions
+from fccgrb_cli.io.results import FORMAT_VERSION, versions
 from fccgrb_cli.study.pooling import group_cycles, group_parameters, stride_parameters
 from fccgrb_cli.study.spec import Study
 
