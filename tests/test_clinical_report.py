@@ -100,6 +100,8 @@ def test_svg_coordinates_map_back_to_the_data() -> None:
     xy = np.array([[float(v) for v in p[1:].split(",")] for p in path.split()])
     ticks = [(float(y), float(t)) for y, t in re.findall(
         r'<text x="\d+" y="([\d.]+)" class="tick" text-anchor="end">([-\d.]+)</text>', svg)]
+    ys, vs = np.array(ticks).T
+    assert (np.diff(vs) > 0).all() and (np.diff(ys) < 0).all()  # values grow upwards
     (y0, v0), (y1, v1) = ticks[0], ticks[-1]  # label baselines sit 3 units below their line
     values = v0 + (xy[:, 1] - (y0 - 3)) * (v1 - v0) / (y1 - y0)
     np.testing.assert_allclose(values, mean, atol=0.01)
