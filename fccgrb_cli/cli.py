@@ -541,8 +541,8 @@ def report(results: str, fmt: str, table: str | None, html_folder: str | None,
     """Print the tables of a results or sweep file: per method / variant / tracked points /
     tolerance, the ms/frame, iterations, mean ‖Φ‖, max topological Φ, ED (mm), jump (mm) and
     failed frames at P0, P7.5 and P30, the paper's figures in brackets where they match. For a
-    study file, each subject's and group's spatiotemporal table and the failures; with --html,
-    the clinical report."""
+    study file (text), its trials, each subject's and group's spatiotemporal table and the
+    failures; with --html, the clinical report."""
     from fccgrb_cli.report import collect, render
     from fccgrb_cli.study.store import is_study
 
@@ -560,14 +560,15 @@ def report(results: str, fmt: str, table: str | None, html_folder: str | None,
         click.echo(f"wrote {html_folder}: {len(pages)} pages ({pages[0].name} for the study, "
                    f"one per subject)")
         return
-    own, rows = collect(results)
-    click.echo(render(table if table is not None else own, rows, fmt=fmt), nl=False)
     if fmt == "text" and study:
         from fccgrb_cli.study.store import read_study
         from fccgrb_cli.study.tables import study_tables
 
-        click.echo("\n" + study_tables(read_study(results)))
-    elif fmt == "text":
+        click.echo(study_tables(read_study(results)))
+        return
+    own, rows = collect(results)
+    click.echo(render(table if table is not None else own, rows, fmt=fmt), nl=False)
+    if fmt == "text":
         from fccgrb_cli.gait.report import gait_report
         from fccgrb_cli.io.gait_results import read_all_gait
 

@@ -115,6 +115,24 @@ def test_every_trial_is_solved_once_and_the_timings_are_apart(walking_reference:
             assert 0.3 * mass < total < 0.7 * mass  # pelvis and legs: de Leva's shares
 
 
+def test_report_lists_each_trial_with_its_frames_and_flags(walking_reference: Path) -> None:
+    """``fccgrb report study.h5``: a row per trial whose counts are the file's."""
+    result = run_cli("report", walking_reference)
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    header = lines[0].split()
+    assert header[:4] == ["trial", "method", "frames", "trusted"]
+    with h5py.File(walking_reference, "r") as h5:
+        for name, run in h5["runs"].items():
+            row = next(line.split() for line in lines if line.startswith(name + " "))
+            values = run["flags"][()]
+            bits = {k: int(v) for k, v in run["flags"].attrs.items()}
+            assert int(row[2]) == len(values) and int(row[3]) == int(run["converged"][()].sum())
+            for k, b in bits.items():
+                assert int(row[header.index(k)]) == int(((values & b) > 0).sum())
+    assert "group control: 1 subjects (A)" in result.output
+
+
 def _run_cycles(h5: h5py.File, run: str, side: str) -> tuple[np.ndarray, np.ndarray, list]:
     c = h5["runs"][run]["gait/cycles"][side]
     names = [n.decode() if isinstance(n, bytes) else n for n in c["curves"].attrs["names"]]

@@ -134,15 +134,18 @@ def _split(variables: list[tuple[str, str]]) -> tuple[list, list]:
 
 
 def _curves_sections(variables: list[tuple[str, str]], sides: dict, norms: Norms | None,
-                     over: str) -> str:
+                     over: str, level: int = 2) -> str:
+    """The kinematic and the kinetic plots under headings of ``level``; a note instead when no
+    side has a trusted stride."""
+    if not any(p.n > 0 for per in sides.values() for p in per.values()):
+        return (f'<section><h{level}>Cycles</h{level}><p class="note">No trusted strides: no '
+                f"cycle plots.</p></section>")
     kinematics, kinetics = _split(variables)
     out = ""
     for title, chosen in (("Kinematics", kinematics), ("Kinetics", kinetics)):
         if chosen:
-            out += (f'<section class="curves"><h2>{title}</h2><p class="note">{over}</p>'
-                    f"{_plot_grid(chosen, sides, norms)}</section>")
-    if not out:
-        out = '<section><h2>Cycles</h2><p class="note">No strides: no cycle plots.</p></section>'
+            out += (f'<section class="curves"><h{level}>{title}</h{level}><p class="note">'
+                    f"{over}</p>{_plot_grid(chosen, sides, norms)}</section>")
     return out
 
 
@@ -314,7 +317,7 @@ def study_page(study: StudyResults, norms: Norms | None) -> str:
                  f"{escape(', '.join(g.subjects))}</p>")
         body += _curves_sections(_variables(g.names, g.units), _group_sides(g), norms,
                                  "Mean ± between-subject SD of the subjects' mean curves (n: "
-                                 "subjects).")
+                                 "subjects).", level=3)
         body += ("<h3>Spatiotemporal parameters</h3>"
                  + (_parameters_table(g.spatiotemporal, norms, "mean ± SD (subjects)")
                     if g.spatiotemporal else '<p class="note">No strides.</p>') + "</section>")

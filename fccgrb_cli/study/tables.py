@@ -34,9 +34,33 @@ def _any(tables: dict[str, Table]) -> bool:
     return any(int(t.n.max(initial=0)) > 0 for t in tables.values())
 
 
+def trials_table(study: StudyResults) -> str:
+    """One row per solved trial: method, frames, trusted frames, frames carrying each flag the
+    file declares, mean distance of the model points to the markers, strides (trusted)."""
+    trials = [t for s in study.subjects for t in s.solved]
+    flags: dict[str, int] = {}
+    for t in trials:
+        for f in t.flags:
+            flags.setdefault(f.name, f.bit)
+    names = sorted(flags, key=flags.get)
+    head = ["trial", "method", "frames", "trusted", *names, "mean ED mm", "strides L", "R"]
+    rows = [head]
+    for t in trials:
+        counts = {f.name: f.frames for f in t.flags}
+        strides = {side: f"{c.n} ({int(c.trusted.sum())})"
+                   for side, c in (t.gait.cycles.items() if t.gait is not None else ())}
+        rows.append([t.name, t.method, str(t.frames), str(t.trusted),
+                     *(str(counts.get(n, 0)) for n in names), f"{t.mean_ed_mm:.3g}",
+                     strides.get("left", "–"), strides.get("right", "–")])
+    widths = [max(len(r[k]) for r in rows) for k in range(len(head))]
+    return "\n".join("  ".join(c.ljust(w) if k == 0 else c.rjust(w)
+                               for k, (c, w) in enumerate(zip(r, widths, strict=True)))
+                     for r in rows)
+
+
 def study_tables(study: StudyResults) -> str:
-    """Every subject's table, then every group's, then the failures."""
-    parts = []
+    """The trials, every subject's table, then every group's, then the failures."""
+    parts = [trials_table(study)] if any(s.solved for s in study.subjects) else []
     for s in study.subjects:
         strides = ", ".join(f"{side} {c.n} ({int(c.trusted.sum())} trusted)"
                             for side, c in s.cycles.items()) or "none"
