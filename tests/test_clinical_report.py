@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import base64
 import io
+import json
 import math
 import re
 import shutil
@@ -25,6 +26,7 @@ import numpy as np
 import pytest
 from browser import Browser, chromium_binary
 from cli_helpers import one_error_line, run_cli
+from flag_bits import declared
 
 from fccgrb_cli.clinical_report.svg import (
     BOTTOM,
@@ -72,6 +74,19 @@ def _flagged_copy(results: Path, target: Path) -> Path:
             flags[...] = values
             flags.attrs["marker_dropout"] = np.uint8(64)
             flags.attrs["marker_dropout_means"] = "a marker of the model missing for 50 ms"
+        # a per-joint flag dataset describing its bits in JSON, as issue 21's files do
+        run = h5["runs"]["A-walk2"]
+        joints = np.zeros(run["theta"].shape, dtype=np.uint16)
+        joints[50:60, 3] |= 4
+        joints[55:75, 0] |= 1
+        joints[200:203, :] |= 4
+        moment = run.create_dataset("moment_flags", data=joints)
+        moment.attrs.update({"kinematics": np.uint16(1), "contact": np.uint16(4)})
+        moment.attrs["bits"] = json.dumps([
+            {"name": "kinematics", "value": 1, "meaning": "its frame is flagged",
+             "detail": ""},
+            {"name": "contact", "value": 4, "meaning": "a foot off the plates",
+             "detail": "stance off plate 2"}])
     return target
 
 
@@ -130,8 +145,9 @@ def test_pages_are_self_contained(report: tuple[Path, Path, Path]) -> None:
         assert not re.search(r"(src|href)=\"(https?:)?//", text), page.name
         assert "@media print" in text and text.count("<svg") >= (12 if "subject-" in page.name
                                                                 else 24)
-        if "subject-" in page.name:  # the unknown flag's description, as the file states it
+        if "subject-A" in page.name:  # the flags' descriptions, as the file states them
             assert "a marker of the model missing for 50 ms" in text
+            assert "a foot off the plates" in text and "stance off plate 2" in text
 
 
 def test_bad_report_options_are_one_line(report: tuple[Path, Path, Path], tmp_path: Path
@@ -268,18 +284,16 @@ def test_report_in_a_browser(report: tuple[Path, Path, Path]) -> None:
             _check_table(rows, g["spatiotemporal"], sides, norms)
             runs = [r.decode() if isinstance(r, bytes) else r for r in g.attrs["runs"]]
             assert layout["qualityTrials"] == runs
-            declared = {k: int(v) for run in runs for k, v in h5["runs"][run]["flags"].attrs.items()
-                        if isinstance(v, np.integer)}  # every flag any of its trials declares
-            assert layout["flags"] == sorted(declared, key=declared.get)
-            assert {"unconverged", "topology", "jump", "marker_dropout"} <= set(declared)
+            per_run = {run: declared(h5["runs"][run]) for run in runs}
+            union = {label for found in per_run.values() for label in found}
+            assert set(layout["flags"]) == union  # every flag any of its trials declares
+            assert {"unconverged", "topology", "jump", "marker_dropout"} <= union
+            assert subject == "B" or "moment_flags:contact" in union
             for row, run in zip(layout["quality"], runs, strict=True):
-                flags = h5["runs"][run]["flags"]
-                bits = {k: int(v) for k, v in flags.attrs.items() if isinstance(v, np.integer)}
-                values = flags[()]
                 counted = {c["flag"]: int(c["value"]) for c in row if "flag" in c}
-                assert counted == {k: int(((values & b) > 0).sum()) if k in bits else 0
-                                   for k, b in declared.items()}
-                assert int(row[2]["value"]) == len(values)
+                assert counted == {label: per_run[run][label][2] if label in per_run[run] else 0
+                                   for label in union}
+                assert int(row[2]["value"]) == len(h5["runs"][run]["flags"])
                 assert int(row[3]["value"]) == int(h5["runs"][run]["converged"][()].sum())
             events = [(row[0]["text"], float(row[4]["value"])) for row in layout["events"]]
             expected_events = []

@@ -185,21 +185,19 @@ def _events_table(trials: tuple[TrialResults, ...]) -> str:
 
 
 def _quality_table(trials: tuple[TrialResults, ...]) -> str:
-    """Per trial: frames, trusted frames, the frames of every flag any trial's file declares,
-    the fit, the strides per side (trusted) and the warnings."""
-    bits: dict[str, int] = {}
-    for t in trials:
-        for f in t.flags:
-            bits.setdefault(f.name, f.bit)
-    order = sorted(bits, key=bits.get)
-    head = "".join(f'<th data-flag="{escape(name)}">{escape(name)} <span class="note">'
-                   f"(bit {bits[name]})</span></th>" for name in order)
+    """Per trial: frames, trusted frames, the frames carrying every flag any trial's file
+    declares (``study.flags``), the fit, the strides per side (trusted) and the warnings; then
+    what each flag means and why each trial has it, as the files say."""
+    declared = {f.label: f for t in trials for f in t.flags}
+    head = "".join(f'<th data-flag="{escape(label)}">{escape(label)} <span class="note">'
+                   f"(bit {f.bit})</span></th>" for label, f in declared.items())
     rows = []
     for t in trials:
-        counts = {f.name: f.frames for f in t.flags}
+        counts = {f.label: f.frames for f in t.flags}
         flags = "".join(
-            f'<td data-flag="{escape(name)}" data-value="{counts.get(name, 0)}"'
-            f"{BAD if counts.get(name, 0) else ''}>{counts.get(name, 0)}</td>" for name in order)
+            f'<td data-flag="{escape(label)}" data-value="{counts.get(label, 0)}"'
+            f"{BAD if counts.get(label, 0) else ''}>{counts.get(label, 0)}</td>"
+            for label in declared)
         strides = " · ".join(
             f"{side[0].upper()} {c.n} ({int(c.trusted.sum())})"
             for side, c in (t.gait.cycles.items() if t.gait is not None else ()))
@@ -213,17 +211,24 @@ def _quality_table(trials: tuple[TrialResults, ...]) -> str:
             f'<td data-value="{_attr(t.max_ed_mm)}">{_number(t.max_ed_mm)}</td>'
             f'<td class="text">{strides or "–"}</td>'
             f'<td class="text">{f"<ul>{warnings}</ul>" if warnings else "none"}</td></tr>')
+    meanings = "".join(f"<li><code>{escape(label)}</code>: {escape(f.meaning)}</li>"
+                       for label, f in declared.items() if f.meaning)
+    details = "".join(f"<li>{escape(t.name)}, <code>{escape(f.label)}</code>: "
+                      f"{escape(f.detail)}</li>" for t in trials for f in t.flags
+                      if f.detail and f.frames)
     notes = sorted({(key, text) for t in trials for key, text in t.flag_notes})
     described = "".join(f"<li><code>{escape(k)}</code>: {escape(v)}</li>" for k, v in notes)
+    listed = "".join(f'<ul class="note">{items}</ul>' for items in (meanings, details, described)
+                     if items)
     return ('<table class="quality"><thead><tr><th>trial</th><th>method</th><th>frames</th>'
             f"<th>trusted</th>{head}<th>mean ED (mm)</th><th>max ED (mm)</th>"
             "<th>strides (trusted)</th><th>warnings</th></tr></thead>"
             f"<tbody>{''.join(rows)}</tbody></table>"
-            '<p class="note">Frames carrying each flag of the results file (a flag is a bit of '
-            "<code>/runs/&lt;name&gt;/flags</code>; a flagged frame is not trusted and stays "
-            "out of the means); ED: distance of the model points to the markers over the "
-            "trusted frames." + (f"</p><ul class=\"note\">{described}</ul>" if described
-                                 else "</p>"))
+            '<p class="note">Frames carrying each flag of the results file (a bit of a run\'s '
+            "<code>flags</code>, per frame, or of another flag dataset, such as "
+            "<code>moment_flags</code>, in any column; a frame flagged in <code>flags</code> is "
+            "not trusted and stays out of the means); ED: distance of the model points to the "
+            f"markers over the trusted frames.</p>{listed}")
 
 
 def _options_and_versions(trials: tuple[TrialResults, ...], study: StudyResults) -> str:

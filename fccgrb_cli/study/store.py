@@ -42,6 +42,7 @@ from fccgrb_cli.io.atomic import atomic_path
 from fccgrb_cli.io.datasets import open_results, put
 from fccgrb_cli.io.gait_results import read_cycles, read_gait, write_cycles
 from fccgrb_cli.io.results import FORMAT_VERSION, versions
+from fccgrb_cli.study.flags import Flag, run_flags
 from fccgrb_cli.study.pooling import group_cycles, group_parameters, stride_parameters
 from fccgrb_cli.study.spec import Study
 
@@ -175,19 +176,9 @@ class Table:
 
 
 @dataclass(frozen=True)
-class Flag:
-    """One bit of a run's per-frame ``flags``, as the file describes it (each integer attribute
-    of the dataset is a bit), and the frames that carry it."""
-
-    name: str
-    bit: int
-    frames: int
-
-
-@dataclass(frozen=True)
 class TrialResults:
     """A solved trial's quality and trust: frames, trusted frames, every flag of the file with
-    its count, the flags' other attributes (descriptions, thresholds) as the file states them,
+    its count (``study.flags``), the flag datasets' other attributes as the file states them,
     the fit (mean and max distance of the model points to the markers, mm), the warnings, the
     options and the versions it was solved with, and its gait events and strides (or None)."""
 
@@ -278,27 +269,11 @@ def _tables(g) -> dict[str, Table]:
             for side, s in g["spatiotemporal"].items()}
 
 
-def flags_of(dataset) -> tuple[tuple[Flag, ...], tuple[tuple[str, str], ...]]:
-    """Every bit a ``flags`` dataset's attributes declare (integer attributes) with the frames
-    carrying it, and its other attributes as text: what the file says, so that flags added by
-    a later version show without a change here."""
-    values = dataset[()]
-    bits, notes = [], []
-    for key, value in dataset.attrs.items():
-        if isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value > 0:
-            bits.append(Flag(key, int(value), int(((values & int(value)) > 0).sum())))
-        else:
-            text = value.decode() if isinstance(value, bytes) else value
-            notes.append((key, text if isinstance(text, str) else json.dumps(
-                np.asarray(text).tolist())))
-    return tuple(sorted(bits, key=lambda f: f.bit)), tuple(notes)
-
-
 def _trial(name: str, g) -> TrialResults:
     ed = g["ed"][()]
     trusted = g["converged"][()]
     ok = trusted & np.isfinite(ed).all(axis=1)
-    flags, notes = flags_of(g["flags"])
+    flags, notes = run_flags(g)
     return TrialResults(
         name=name, trial=str(g.attrs["trial"]), method=str(g.attrs["method"]),
         frames=len(trusted), trusted=int(trusted.sum()), flags=flags, flag_notes=notes,

@@ -38,15 +38,11 @@ def trials_table(study: StudyResults) -> str:
     """One row per solved trial: method, frames, trusted frames, frames carrying each flag the
     file declares, mean distance of the model points to the markers, strides (trusted)."""
     trials = [t for s in study.subjects for t in s.solved]
-    flags: dict[str, int] = {}
-    for t in trials:
-        for f in t.flags:
-            flags.setdefault(f.name, f.bit)
-    names = sorted(flags, key=flags.get)
+    names = list(dict.fromkeys(f.label for t in trials for f in t.flags))
     head = ["trial", "method", "frames", "trusted", *names, "mean ED mm", "strides L", "R"]
     rows = [head]
     for t in trials:
-        counts = {f.name: f.frames for f in t.flags}
+        counts = {f.label: f.frames for f in t.flags}
         strides = {side: f"{c.n} ({int(c.trusted.sum())})"
                    for side, c in (t.gait.cycles.items() if t.gait is not None else ())}
         rows.append([t.name, t.method, str(t.frames), str(t.trusted),
