@@ -354,6 +354,9 @@ def test_output_may_not_be_an_input_or_another_file(walking_study: Path) -> None
     with h5py.File(other, "w") as h5:
         h5.attrs["format_version"] = 2
     one_error_line(run_cli("batch", walking_study, "-o", other), "is not a study file")
+    missing = walking_study.parent / "no" / "such" / "s.h5"
+    one_error_line(run_cli("batch", walking_study, "-o", missing), "does not exist")
+    assert not (walking_study.parent / "no").exists()
 
 
 # --- 5. the shared walking trials ----------------------------------------------------------

@@ -247,9 +247,13 @@ def is_study(path: str | Path) -> bool:
 
 
 def check_study_output(path: Path) -> None:
-    """An InputError unless ``path`` is absent or a study file (which the batch replaces)."""
+    """An InputError unless ``path`` is absent from an existing folder, or a study file (which
+    the batch replaces)."""
     import h5py
 
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise InputError(f"{path}: the output folder {folder} does not exist")
     if not path.exists():
         return
     try:
