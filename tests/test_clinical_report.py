@@ -145,6 +145,8 @@ def test_pages_are_self_contained(report: tuple[Path, Path, Path]) -> None:
         assert not re.search(r"(src|href)=\"(https?:)?//", text), page.name
         assert "@media print" in text and text.count("<svg") >= (12 if "subject-" in page.name
                                                                 else 24)
+        if "subject-" in page.name:  # what the calibration did, from the model it wrote
+            assert "personalized by `fccgrb calibrate`" in text
         if "subject-A" in page.name:  # the flags' descriptions, as the file states them
             assert "a marker of the model missing for 50 ms" in text
             assert "a foot off the plates" in text and "stance off plate 2" in text

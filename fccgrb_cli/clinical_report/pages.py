@@ -275,6 +275,9 @@ def subject_page(study: StudyResults, s: SubjectResults, norms: Norms | None) ->
     strides = ", ".join(f"{side} {c.n} ({int(c.trusted.sum())} trusted)"
                         for side, c in s.cycles.items())
     facts.append(("strides", strides or "none"))
+    header_lines = [line[1:].strip() for line in s.model.splitlines()[:8] if line.startswith("#")]
+    if header_lines:  # what the calibration says it did (methods, measurements used)
+        facts.append(("calibration", " ".join(header_lines)))
     header = (f"<header><h1>{escape(s.name)}</h1><p>Gait report · subject of study "
               f"{escape(study.name)} · {len(s.runs)} trials</p></header>")
     dl = "".join(f"<dt>{escape(k)}</dt><dd>{escape(str(v))}</dd>" for k, v in facts)
