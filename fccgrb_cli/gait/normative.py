@@ -9,6 +9,7 @@ mean ± sd."""
 from __future__ import annotations
 
 import csv
+import io
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from fccgrb_cli.errors import InputError
+from fccgrb_cli.inputs import read_text
 
 
 @dataclass(frozen=True)
@@ -32,13 +34,10 @@ def read_norms(path: str | Path) -> Norms:
     it."""
     curves: dict[str, list[tuple[float, float, float]]] = {}
     values: dict[str, tuple[float, float]] = {}
-    try:
-        with open(path, newline="", encoding="utf-8") as handle:
-            rows = list(csv.DictReader(handle))
-    except OSError as error:
-        raise InputError(f"{path}: cannot read the normative data ({error.strerror})") from None
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: expected a UTF-8 text file of normative data") from None
+    rows = list(csv.DictReader(io.StringIO(read_text(path, "normative data"), newline="")))
+    if not rows:
+        raise InputError(f"{path}: expected rows of normative data (columns variable, percent, "
+                         "mean, sd)")
     for line, row in enumerate(rows, start=2):
         try:
             name, percent = row["variable"].strip(), (row["percent"] or "").strip()

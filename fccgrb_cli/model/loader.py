@@ -14,6 +14,7 @@ import numpy as np
 import yaml
 
 from fccgrb_cli.errors import InputError
+from fccgrb_cli.inputs import load_yaml, read_text, shown
 from fccgrb_cli.model.elements import (
     GROUND,
     JOINT_EQUATIONS,
@@ -39,6 +40,8 @@ from fccgrb_cli.model.elements import (
 from fccgrb_cli.model.motion import BaseMotion, Motion
 
 UNIT_TOL = 1e-6
+LARGEST = 1e9          # the largest magnitude of any number in a model file
+FREQUENCY_MAX = 1e4    # Hz: a motion term's frequency (its acceleration ∝ frequency²)
 BODY_AXES = {"u": (1.0, 0.0, 0.0), "v": (0.0, 1.0, 0.0), "w": (0.0, 0.0, 1.0)}
 GROUND_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 TOP_KEYS = {"name", "units", "gravity", "form", "ground", "bodies", "joints", "angles",
@@ -78,7 +81,7 @@ class _Reader:
         self.source = source
 
     def fail(self, path: str, expected: str, got: Any = None, *, show_got: bool = True) -> None:
-        tail = f", got {got!r}" if show_got else ""
+        tail = f", got {shown(got)}" if show_got else ""
         raise InputError(f"{self.source}: {path or '(top level)'}: expected {expected}{tail}")
 
     def mapping(self, value: Any, path: str, *, required: frozenset = frozenset(),
@@ -98,6 +101,8 @@ class _Reader:
         return value
 
     def number(self, value: Any, path: str) -> float:
+        """A finite number of magnitude at most ``LARGEST`` (squares and products of model
+        numbers stay finite)."""
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             self.fail(path, "a finite number", value)
         try:
@@ -106,6 +111,8 @@ class _Reader:
             number = math.inf
         if not math.isfinite(number):
             self.fail(path, "a finite number", value if isinstance(value, float) else "too large")
+        if abs(number) > LARGEST:
+            self.fail(path, f"a number of magnitude at most {LARGEST:g}", value)
         return number
 
     def string(self, value: Any, path: str) -> str:
@@ -353,8 +360,9 @@ def _motion(r: _Reader, value: Any, path: str, size: float, scale: float,
         term = r.mapping(term, tpath, required=frozenset({"amplitude", "frequency"}),
                          allowed={"amplitude", "frequency", "phase"})
         frequency = r.number(term["frequency"], f"{tpath}.frequency")
-        if frequency < 0:
-            r.fail(f"{tpath}.frequency", "a non-negative frequency (Hz)", frequency)
+        if not 0 <= frequency <= FREQUENCY_MAX:
+            r.fail(f"{tpath}.frequency", f"a frequency from 0 to {FREQUENCY_MAX:g} Hz",
+                   frequency)
         terms.append((r.number(term["amplitude"], f"{tpath}.amplitude") * size,
                       frequency,
                       r.number(term.get("phase", 0.0), f"{tpath}.phase") * scale))
@@ -556,13 +564,7 @@ def _calibration(r: _Reader, doc: dict) -> FrozenMap:
 
 def parse_model(text: str, source: str = "<model>") -> Model:
     """Validate a model given as YAML text; ``source`` names it in error messages."""
-    try:
-        doc = yaml.load(text, Loader=_UniqueKeyLoader)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
-        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-        raise InputError(f"{source}: {where}invalid YAML ({problem})") from None
+    doc = load_yaml(text, source, _UniqueKeyLoader)
     r = _Reader(source)
     doc = r.mapping(doc, "", required=frozenset({"bodies"}), allowed=TOP_KEYS)
     scale = _angle_scale(r, doc)
@@ -602,13 +604,4 @@ def parse_model(text: str, source: str = "<model>") -> Model:
 
 def load_model(path: str | Path) -> Model:
     """Read and validate a model file (static checks; see ``system.structure`` for rank)."""
-    path = Path(path)
-    if path.is_dir():
-        raise InputError(f"{path}: expected a model file, got a folder")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"{path}: model file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read the model file ({exc.__class__.__name__})") from None
-    return parse_model(text, str(path))
+    return parse_model(read_text(path, "model file"), str(path))

@@ -34,9 +34,8 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from fccgrb_cli.errors import InputError
+from fccgrb_cli.inputs import load_yaml, read_text
 from fccgrb_cli.options import SolveOptions, label_map_file
 
 TOP_KEYS = ("name", "template", "map", "options", "measurements", "subjects")
@@ -192,21 +191,8 @@ class _Reader:
 
 
 def _load_text(path: Path) -> tuple[str, Any]:
-    if path.is_dir():
-        raise InputError(f"{path}: expected a study file, got a folder")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"{path}: study file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read the study file ({exc.__class__.__name__})") \
-            from None
-    try:
-        return text, yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"line {mark.line + 1}: " if mark is not None else ""
-        raise InputError(f"{path}: {where}invalid YAML") from None
+    text = read_text(path, "study file")
+    return text, load_yaml(text, str(path))
 
 
 def load_study(path: str | Path) -> Study:
