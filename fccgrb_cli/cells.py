@@ -8,12 +8,15 @@ on which (the same function runs on the same inputs).
 
 from __future__ import annotations
 
+import os
 import shutil
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+from fccgrb_cli import scratch
 
 Done = Callable[["Job", "BaseException | None"], None]
 
@@ -60,13 +63,15 @@ def pending(jobs: Iterable[Job], readable: Callable[[Path], bool],
 def run_jobs(jobs: Sequence[Job], done: Done, *, workers: int = 1,
              executor: Executor | None = None) -> None:
     """Run ``jobs``: the pooled ones over ``executor``, else over a local pool of ``workers``
-    processes (in this process when ``workers`` is 1), then the ``alone`` ones here. After each,
+    processes (in this process when ``workers`` is 1; they end with it: ``scratch``), then the
+    ``alone`` ones here. After each,
     ``done(job, error)`` (error None when it succeeded; ``done`` re-raises what should stop the
     run: the remaining local jobs are cancelled)."""
     pooled = [job for job in jobs if not job.alone]
     if pooled:
         own = executor is None and workers > 1
-        pool = ProcessPoolExecutor(max_workers=workers) if own else executor
+        pool = ProcessPoolExecutor(max_workers=workers, initializer=scratch.die_with_parent,
+                                   initargs=(os.getpid(),)) if own else executor
         if pool is None:
             for job in pooled:
                 _run_here(job, done)

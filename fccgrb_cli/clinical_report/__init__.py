@@ -10,6 +10,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
+from fccgrb_cli import scratch as registry
 from fccgrb_cli.errors import InputError
 
 MARK = '<meta name="generator" content="fccgrb'
@@ -33,6 +34,7 @@ def write_report(results: str | Path, folder: str | Path, normative: str | Path 
         pages[subject_file(s.name)] = subject_page(study, s, norms)
     parent = folder.parent if str(folder.parent) else Path(".")
     scratch = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=parent))
+    registry.register(scratch)  # a signal removes it (fccgrb_cli.scratch)
     try:
         for name, text in pages.items():
             (scratch / name).write_text(text, encoding="utf-8")
@@ -46,6 +48,7 @@ def write_report(results: str | Path, folder: str | Path, normative: str | Path 
             os.replace(scratch, folder)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
+        registry.release(scratch)
     return [folder / name for name in pages]
 
 

@@ -13,15 +13,20 @@ scratch file is deleted. Reading a StoredArray (``np.asarray``, indexing) loads 
 
 from __future__ import annotations
 
+import glob
 import os
-import tempfile
 import weakref
 from pathlib import Path
 
 import numpy as np
 
+from fccgrb_cli import scratch
 from fccgrb_cli.errors import InputError
+from fccgrb_cli.io.atomic import FULL, alive, reason
 from fccgrb_cli.io.datasets import put
+from fccgrb_cli.io.hdf5_writer import writing
+
+PREFIX = ".fccgrb-spill-"
 
 
 class Spill:
@@ -29,25 +34,30 @@ class Spill:
     arrays are in the results file, when the Spill is collected, or when the process ends."""
 
     def __init__(self, folder: str | Path) -> None:
+        remove_stale(folder)
         try:
-            handle, name = tempfile.mkstemp(prefix=".fccgrb-spill-", suffix=".h5", dir=folder)
+            self.path = scratch.create(folder, f"{PREFIX}{os.getpid()}-", ".h5")
         except OSError as error:
             raise InputError(f"{folder}: expected a folder the results can be written to "
                              f"({error.strerror})") from None
-        os.close(handle)
-        self.path = Path(name)
         self.group = "/"  # where the stored arrays are: the scratch file's root, then the run's
+        self._written = False
         self._remove = weakref.finalize(self, _unlink, self.path)
 
     def keep(self, key: str, values: np.ndarray) -> StoredArray:
         """Store ``values`` under ``key`` (the dataset's path in a run's group, e.g. 'qd' or
-        'classical/q'); the placeholder that reads it back."""
-        import h5py
-
+        'classical/q'); the placeholder that reads it back. A full disk is an InputError."""
         values = np.asarray(values)
-        with h5py.File(self.path, "a") as h5:
-            folder, _, name = key.rpartition("/")
-            put(h5.require_group(folder) if folder else h5, name, values)
+        try:
+            with writing(self.path, "r+" if self._written else "w") as h5:
+                folder, _, name = key.rpartition("/")
+                put(h5.require_group(folder) if folder else h5, name, values)
+        except OSError as error:
+            if error.errno not in FULL:
+                raise
+            raise InputError(f"{self.path.parent}: cannot keep the solve's arrays there "
+                             f"({reason(error)}); nothing was written") from None
+        self._written = True
         return StoredArray(self, key, values.shape, values.dtype)
 
     def discard(self) -> None:
@@ -63,6 +73,15 @@ class Spill:
 
 def _unlink(path: Path) -> None:
     path.unlink(missing_ok=True)
+    scratch.release(path)
+
+
+def remove_stale(folder: str | Path) -> None:
+    """Delete the scratch files in ``folder`` of solves that no longer run (a kill -9)."""
+    for name in glob.glob(os.path.join(glob.escape(str(folder)), f"{PREFIX}*-*.h5")):
+        pid = Path(name).name[len(PREFIX):].split("-")[0]
+        if pid.isdigit() and int(pid) != os.getpid() and not alive(int(pid)):
+            Path(name).unlink(missing_ok=True)
 
 
 class StoredArray:

@@ -19,7 +19,9 @@ import numpy as np
 
 from fccgrb_cli import __version__
 from fccgrb_cli.errors import InputError
+from fccgrb_cli.inputs import regular_file
 from fccgrb_cli.io.atomic import atomic_path
+from fccgrb_cli.io.hdf5_writer import writing
 
 
 @dataclass(frozen=True)
@@ -44,9 +46,7 @@ def truth_path(trial: str | Path) -> Path:
 
 
 def write_truth(path: str | Path, truth: Truth) -> None:
-    import h5py
-
-    with atomic_path(path) as tmp, h5py.File(tmp, "w") as h5:
+    with atomic_path(path) as tmp, writing(tmp) as h5:
         h5.attrs["rate"] = truth.rate
         h5.attrs["model"] = truth.model_text
         h5.attrs["fccgrb_version"] = __version__
@@ -65,6 +65,7 @@ def read_truth(path: str | Path) -> Truth:
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: truth file not found (made by 'fccgrb synth' beside the trial)")
+    regular_file(path, "truth file")
     try:
         with h5py.File(path, "r") as h5:
             return Truth(
@@ -74,5 +75,6 @@ def read_truth(path: str | Path) -> Truth:
                 q=h5["q"][()], form=str(h5["q"].attrs["form"]), markers=h5["markers"][()],
                 labels=tuple(str(n) for n in h5["markers"].attrs["labels"]),
                 rate=float(h5.attrs["rate"]), model_text=str(h5.attrs["model"]))
-    except (OSError, KeyError) as exc:
-        raise InputError(f"{path}: not a readable truth file ({exc})") from None
+    except (OSError, KeyError, ValueError, TypeError, IndexError) as exc:
+        reason = str(exc).splitlines()[0] if str(exc) else exc.__class__.__name__
+        raise InputError(f"{path}: not a readable truth file ({reason})") from None

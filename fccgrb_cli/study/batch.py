@@ -17,6 +17,8 @@ from pathlib import Path
 
 from fccgrb_cli.cells import Job, cells_folder, pending, run_jobs
 from fccgrb_cli.errors import InputError
+from fccgrb_cli.io.atomic import remove_stale
+from fccgrb_cli.io.lock import exclusive
 from fccgrb_cli.study.jobs import (
     Calibration,
     TrialSolve,
@@ -76,9 +78,20 @@ def _readable_run(path: Path) -> bool:
 
 def run_study(study: Study, output: Path, where: Executors = Executors(), *,
               accept_truncated: bool = False, progress: Progress | None = None) -> Outcome:
-    """Calibrate and solve what the cells folder lacks, then write ``output``."""
+    """Calibrate and solve what the cells folder lacks, then write ``output``, holding its lock
+    throughout (another batch into it is refused at once) after removing the scratch files a
+    killed run left in its cells."""
+    with exclusive(output, wait=0):
+        store = cells_folder(output)
+        store.mkdir(exist_ok=True)
+        for folder in (store, *(p for p in store.rglob("*") if p.is_dir())):
+            remove_stale(folder)
+        return _run_study(study, output, where, accept_truncated, progress)
+
+
+def _run_study(study: Study, output: Path, where: Executors, accept_truncated: bool,
+               progress: Progress | None) -> Outcome:
     store = cells_folder(output)
-    store.mkdir(parents=True, exist_ok=True)
     failures: dict[str, str] = {}
 
     def collect(job: Job, error: BaseException | None) -> None:

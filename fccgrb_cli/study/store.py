@@ -38,9 +38,11 @@ import numpy as np
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.gait.analysis import GaitResults
 from fccgrb_cli.gait.cycles import PARAMETERS, SideCycles, pooled
+from fccgrb_cli.inputs import regular_file
 from fccgrb_cli.io.atomic import atomic_path
 from fccgrb_cli.io.datasets import open_results, put
 from fccgrb_cli.io.gait_results import read_cycles, read_gait, write_cycles
+from fccgrb_cli.io.hdf5_writer import writing
 from fccgrb_cli.io.results import FORMAT_VERSION, versions
 from fccgrb_cli.study.flags import Flag, run_flags
 from fccgrb_cli.study.pooling import group_cycles, group_parameters, stride_parameters
@@ -68,7 +70,7 @@ def write_study(study: Study, output: Path, solved: Solved, command: str) -> Non
     """The study file from the cells, atomically (nothing is written when a step fails)."""
     import h5py
 
-    with atomic_path(output) as tmp, h5py.File(tmp, "w") as h5:
+    with atomic_path(output) as tmp, writing(tmp) as h5:
         h5.attrs.update({"format_version": FORMAT_VERSION, "kind": KIND, "study": study.name,
                          "study_text": study.text, "command": command,
                          "versions": json.dumps(versions())})
@@ -256,6 +258,7 @@ def check_study_output(path: Path) -> None:
         raise InputError(f"{path}: the output folder {folder} does not exist")
     if not path.exists():
         return
+    regular_file(path, "study file")  # a FIFO would block h5py
     try:
         with h5py.File(path, "r") as h5:
             kind = h5.attrs.get("kind")
