@@ -31,7 +31,7 @@ _PUBLIC = {**dict.fromkeys(("load_model", "read_trial", "solve", "calibrate", "r
 
 def __getattr__(name: str):
     if name == "RESULTS_FORMAT":
-        from fccgrb_cli.io.results import FORMAT_VERSION
+        from fccgrb_cli.io.results_format import FORMAT_VERSION
 
         return FORMAT_VERSION
     if name in _PUBLIC:

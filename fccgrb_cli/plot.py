@@ -68,19 +68,26 @@ def _series(h5, name: str, run, top) -> Series:
 def load_series(path: Path, wanted: tuple[str, ...]) -> list[Series]:
     """Runs of a results file (by run name) or cells of a sweep file (by key prefix)."""
     from fccgrb_cli.io.datasets import open_results
+    from fccgrb_cli.io.results_format import cells_group, check_run, reading, runs_group
 
     h5 = open_results(path)
     out = []
     with h5:
         if "cells" in h5:
-            items = [(key, cell["runs/run"], cell) for key, cell in h5["cells"].items()]
+            items = []
+            for key, cell in cells_group(h5, path).items():
+                with reading(path, f"/cells/{key}"):
+                    items.append((key, cell["runs/run"], cell))
         elif "runs" in h5:
-            items = [(key, run, h5) for key, run in h5["runs"].items()]
+            items = [(key, run, h5) for key, run in runs_group(h5, path).items()]
         else:
             raise InputError(f"{path}: expected /runs or /cells in a results file")
         for key, run, top in items:
             if not wanted or any(key == w or key.startswith(w) for w in wanted):
-                out.append(_series(h5, key, run, top))
+                where = f"/runs/{key}" if top is h5 else f"/cells/{key}"
+                with reading(path, where):
+                    check_run(run, path, where)
+                    out.append(_series(h5, key, run, top))
     if not out:
         names = ", ".join(key for key, _, _ in items)
         raise InputError(f"{path}: --runs: expected names among {names}")

@@ -115,20 +115,25 @@ def collect(path: str | Path) -> tuple[str, list[Row]]:
     """The table name (a sweep's 'table', else '') and one Row per run in a results or sweep
     file."""
     from fccgrb_cli.io.datasets import open_results
+    from fccgrb_cli.io.results_format import cells_group, check_run, reading, runs_group
 
     h5 = open_results(path)
     rows: list[Row] = []
     with h5:
         table = str(h5.attrs.get("table", ""))
         if "cells" in h5:
-            for cell in h5["cells"].values():
-                params = json.loads(cell.attrs.get("cell", "{}"))
-                points = "" if params.get("points") is None else str(params["points"])
-                for run in cell["runs"].values():
-                    rows.append(_row(run, points, _extra(params)))
+            for key, cell in cells_group(h5, path).items():
+                with reading(path, f"/cells/{key}"):
+                    params = json.loads(cell.attrs.get("cell", "{}"))
+                    points = "" if params.get("points") is None else str(params["points"])
+                    for name, run in cell["runs"].items():
+                        check_run(run, path, f"/cells/{key}/runs/{name}")
+                        rows.append(_row(run, points, _extra(params)))
         elif "runs" in h5:
-            for run in h5["runs"].values():
-                rows.append(_row(run, ""))
+            for name, run in runs_group(h5, path).items():
+                with reading(path, f"/runs/{name}"):
+                    check_run(run, path, f"/runs/{name}")
+                    rows.append(_row(run, ""))
         else:
             raise InputError(f"{path}: expected /runs or /cells in a results file")
     return table, rows

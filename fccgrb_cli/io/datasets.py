@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from fccgrb_cli.errors import InputError
+from fccgrb_cli.inputs import regular_file
 
 LARGE = 1 << 16  # bytes: an array at least this large is stored chunked and compressed
 
@@ -30,9 +31,7 @@ def open_results(path: str | Path):
     """An existing results or sweep file, read-only (h5py.File); one-line errors otherwise."""
     import h5py
 
-    path = Path(path)
-    if not path.exists():
-        raise InputError(f"{path}: results file not found")
+    path = regular_file(path, "results file")  # a FIFO would block h5py
     try:
         return h5py.File(path, "r")
     except OSError:

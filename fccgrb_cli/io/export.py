@@ -114,11 +114,15 @@ def write_c3d(run: Run, path: str | Path, trial: str | Path | None = None) -> No
     import ezc3d
 
     from fccgrb_cli.io.c3d import save
+    from fccgrb_cli.io.c3d_header import read_layout
 
     source = Path(trial if trial is not None else run.trial_path)
     if source.suffix.lower() != ".c3d" or not source.is_file():
         raise InputError(f"{source}: expected the run's C3D trial to add the outputs to "
                          "(--trial FILE.c3d when it has moved)")
+    if read_layout(source).truncated:  # ezc3d reads past the end of a cut file
+        raise InputError(f"{source}: the file is truncated: expected the trial the run was "
+                         "solved from")
     try:
         c3d = ezc3d.c3d(str(source))
     except Exception as error:  # ezc3d raises bare RuntimeErrors for unreadable files

@@ -13,14 +13,13 @@ cycles with every trial's strides pooled (attribute ``runs``: the runs they come
 
 from __future__ import annotations
 
-import shutil
-
 import numpy as np
 
 from fccgrb_cli.gait.analysis import GaitResults
 from fccgrb_cli.gait.cycles import PARAMETERS, SideCycles
 from fccgrb_cli.gait.events import Events
 from fccgrb_cli.io.datasets import open_results, put
+from fccgrb_cli.io.results_format import reading, runs_group
 
 
 def _strings(values) -> tuple[str, ...]:
@@ -50,21 +49,17 @@ def read_cycles(group) -> dict[str, SideCycles]:
                              s["parameters"][()]) for side, s in group["cycles"].items()}
 
 
-def write_subject(path, runs: list[str], cycles: dict[str, SideCycles]) -> None:
-    """``/subject/``: the strides of several trials' runs (attribute ``runs``) pooled per side,
-    under ``cycles/<side>/`` as for one run (``start``/``stop`` are each trial's own times)."""
+def write_subject(h5, runs: list[str], cycles: dict[str, SideCycles]) -> None:
+    """``/subject/`` of an open results file: the strides of several trials' runs (attribute
+    ``runs``) pooled per side, under ``cycles/<side>/`` as for one run (``start``/``stop`` are
+    each trial's own times)."""
     import h5py
 
-    from fccgrb_cli.io.atomic import atomic_path
-
-    with atomic_path(path) as tmp:
-        shutil.copyfile(path, tmp)
-        with h5py.File(tmp, "a") as h5:
-            if "subject" in h5:
-                del h5["subject"]
-            group = h5.create_group("subject")
-            group.attrs.create("runs", runs, dtype=h5py.string_dtype(encoding="utf-8"))
-            write_cycles(group, cycles)
+    if "subject" in h5:
+        del h5["subject"]
+    group = h5.create_group("subject")
+    group.attrs.create("runs", runs, dtype=h5py.string_dtype(encoding="utf-8"))
+    write_cycles(group, cycles)
 
 
 def write_gait(g, gait: GaitResults) -> None:
@@ -94,5 +89,11 @@ def read_gait(g) -> GaitResults:
 def read_all_gait(path) -> dict[str, GaitResults]:
     """The gait analysis of every run of a results file that has one, by run name."""
     with open_results(path) as h5:
-        runs = h5.get("runs", {})
-        return {name: read_gait(g["gait"]) for name, g in runs.items() if "gait" in g}
+        if "runs" not in h5:
+            return {}
+        out = {}
+        for name, g in runs_group(h5, path).items():
+            if "gait" in g:
+                with reading(path, f"/runs/{name}/gait"):
+                    out[name] = read_gait(g["gait"])
+        return out

@@ -51,12 +51,18 @@ Contract (SI units: m, rad, s):
       clinical/stance/<body>     per frame, True while a force plate loads that body
 Arrays of 64 KiB or more are stored chunked and gzip-compressed (``fccgrb_cli.io.datasets``):
 a long trial is written and read a chunk at a time; any HDF5 reader decodes them.
+
+Writing: the runs of one command go into the file together, under the file's lock
+(``io.lock``: two solves into one file never drop a run), into a copy renamed into place
+(``io.atomic``: all of them or none, the old file intact on any error), through
+``io.hdf5_writer`` (a full disk is an error, not HDF5's crash).
 """
 
 from __future__ import annotations
 
 import json
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -64,17 +70,18 @@ import numpy as np
 
 from fccgrb_cli.clinical import ClinicalResults
 from fccgrb_cli.errors import InputError
-from fccgrb_cli.io.atomic import atomic_path
+from fccgrb_cli.inputs import check_name, regular_file
+from fccgrb_cli.io.atomic import atomic_path, check_target
 from fccgrb_cli.io.datasets import put as put_array
-from fccgrb_cli.io.gait_results import write_gait
+from fccgrb_cli.io.gait_results import write_gait, write_subject
+from fccgrb_cli.io.hdf5_writer import writing
+from fccgrb_cli.io.lock import exclusive
+from fccgrb_cli.io.results_format import FORMAT_VERSION, check_run, reading, runs_group
 from fccgrb_cli.io.spill import StoredArray
 from fccgrb_cli.solvers.quality import BITS
 
 if TYPE_CHECKING:
     from fccgrb_cli.run import Run  # the Run writes itself here (Run.to_hdf5)
-
-FORMAT_VERSION = 2
-
 
 PACKAGES = {"fccgrb-cli": "fccgrb_cli", "numpy": "numpy", "scipy": "scipy", "h5py": "h5py",
             "ezc3d": "ezc3d", "click": "click", "pyyaml": "yaml"}
@@ -116,102 +123,130 @@ def _installed_version(name: str, module: str) -> str:
 
 
 def check_output(path: str | Path) -> None:
-    """An InputError unless ``path`` is absent or a results file of this format (``fccgrb solve``
-    asks before solving, so that a long solve is not lost to an output it cannot write)."""
+    """An InputError unless ``path`` is absent or a results file of this format whose every run
+    reads back (``fccgrb solve`` asks before solving, so that a long solve is not lost to an
+    output it cannot write, and a damaged file is not extended into one ``report`` refuses)."""
     import h5py
 
     path = Path(path)
-    if not path.exists():
+    if not path.exists() and not path.is_symlink():
         return
+    regular_file(path, "results file")
     try:
         with h5py.File(path, "r") as h5:
-            version = h5.attrs.get("format_version", FORMAT_VERSION)
+            version = h5.attrs.get("format_version")
+            if version is None and "runs" not in h5:
+                raise InputError(f"{path}: exists and is not an fccgrb results file; choose "
+                                 "another output")
+            if version != FORMAT_VERSION:
+                raise InputError(f"{path}: written in results format {version or 1}, this "
+                                 f"fccgrb writes format {FORMAT_VERSION}; choose another output")
+            for name, run in runs_group(h5, path).items():  # every run readable
+                with reading(path, f"/runs/{name}"):
+                    check_run(run, path, f"/runs/{name}")
     except OSError:
         raise InputError(f"{path}: exists and is not an HDF5 results file; "
                          "choose another output") from None
-    if version != FORMAT_VERSION:
-        raise InputError(f"{path}: written in results format {version}, this fccgrb writes "
-                         f"format {FORMAT_VERSION}; choose another output")
 
 
 def write_run(path: str | Path, run: Run, command: str, cell: dict | None = None) -> None:
     """Add (or replace) one run in the results file, creating it when absent; ``cell`` (a sweep
     cell's parameters) is kept as the root attribute ``cell`` (JSON). Arrays the run holds in a
     Spill (``io.spill``) are copied from it as stored, and read from the results file after."""
-    import h5py
+    write_runs(path, [run], command, cell=cell)
 
-    path = Path(path)
-    with atomic_path(path) as tmp:
+
+def write_runs(path: str | Path, runs: list[Run], command: str, *, cell: dict | None = None,
+               subject: tuple[list[str], dict] | None = None,
+               waiting: Callable[[str], None] | None = None) -> None:
+    """Add (or replace) ``runs`` in the results file, and ``subject`` (the run names and their
+    pooled cycles: ``/subject``), all in one write: every run lands or none does. Waits for
+    another writer of the same file (``waiting`` is told)."""
+    path = check_target(path)
+    for run in runs:
+        check_name(run.name, "run name")
+    with exclusive(path, waiting=waiting), atomic_path(path) as tmp:
+        mode = "w"
         if path.exists():
             check_output(path)
             shutil.copyfile(path, tmp)
-        with h5py.File(tmp, "a") as h5:
-            h5.attrs["format_version"] = FORMAT_VERSION
-            h5.attrs["model"] = run.model_text
-            h5.attrs["command"] = command
-            h5.attrs["versions"] = json.dumps(versions())
-            h5.attrs["trial"] = run.trial_path
-            if cell is not None:
-                h5.attrs["cell"] = json.dumps(cell, sort_keys=True, default=str)
-            if "reference" in h5:
-                del h5["reference"]
-            ref = h5.create_group("reference")
-            put(ref, "markers", run.reference)
-            ref["markers"].attrs["labels"] = list(run.labels)
-            ref["markers"].attrs["rate"] = run.rate
-            if run.truth_theta is not None:
-                if "truth" in h5:
-                    del h5["truth"]
-                put(h5.create_group("truth"), "theta", run.truth_theta)
-                h5["truth/theta"].attrs["names"] = list(run.result.angle_names)
-            runs = h5.require_group("runs")
-            if run.name in runs:
-                del runs[run.name]
-            g = runs.create_group(run.name)
-            r = run.result
-            g.attrs.update({
-                "method": r.method, "tol": r.tol, "perturb_level_m": run.perturb_level_m,
-                "perturb_markers": list(run.perturb_markers), "perturb_seed": run.perturb_seed,
-                "tracking_weight": np.nan if run.tracking_weight is None else run.tracking_weight,
-                "warm_start": run.warm_start, "hessian": run.hessian, "form": run.form,
-                "ad_drivers": run.ad_drivers, "command": command, "wall_s": r.wall_s,
-                "filter_cutoff_hz": np.nan if run.filter_cutoff is None else run.filter_cutoff,
-            })
-            text = h5py.string_dtype(encoding="utf-8")
-            g.attrs.create("warnings", [*r.messages, *run.warnings], dtype=text)
-            g.attrs.create("messages", list(r.messages), dtype=text)
-            g.attrs.create("notes", list(run.notes), dtype=text)
-            g.attrs.update({"options": run.options.to_json(), "model": run.model_text,
-                            "trial": run.trial_path, "rate": run.rate,
-                            "labels": list(run.labels)})
-            put(g, "time", r.time)
-            put(g, "reference", run.reference)
-            if run.truth_theta is not None:
-                put(g, "truth_theta", run.truth_theta)
-            for key in ("q", "qd", "qdd", "iterations", "time_s", "phi_norm", "phi_top_max"):
-                put(g, key, getattr(r, key))
-            put(g, "converged", r.trusted)
-            put(g, "solver_converged", r.converged)
-            put(g, "flags", r.flags if r.flags is not None else np.zeros(r.n_frames, np.uint8))
-            g["flags"].attrs.update(BITS)
-            for key, per in (("theta", ""), ("theta_d", "/s"), ("theta_dd", "/s²")):
-                put(g, key, getattr(r, key))
-                g[key].attrs["names"] = list(r.angle_names)
-                g[key].attrs.create("units", [u + per for u in run._angle_units], dtype=text)
-            for key in ("model_points", "markers_input", "ed", "ed_input"):
-                put(g, key, getattr(run, key))
-            if r.status:
-                g.create_dataset("status", data=list(r.status),
-                                 dtype=h5py.string_dtype(encoding="utf-8"))
-            if run.dynamics is not None:
-                _write_dynamics(g, run)
-            if run.clinical is not None:
-                _write_clinical(g, run.clinical)
-            if run.gait is not None:
-                write_gait(g, run.gait)
-    for spill in {stored.spill for stored in _stored(run)}:
-        spill.settled(path, f"/runs/{run.name}")
+            mode = "r+"
+        with writing(tmp, mode) as h5:
+            for run in runs:
+                _write_run(h5, run, command, cell)
+            if subject is not None:
+                write_subject(h5, *subject)
+    for run in runs:
+        for spill in {stored.spill for stored in _stored(run)}:
+            spill.settled(path, f"/runs/{run.name}")
 
+
+def _write_run(h5, run: Run, command: str, cell: dict | None) -> None:
+    import h5py
+
+    h5.attrs["format_version"] = FORMAT_VERSION
+    h5.attrs["model"] = run.model_text
+    h5.attrs["command"] = command
+    h5.attrs["versions"] = json.dumps(versions())
+    h5.attrs["trial"] = run.trial_path
+    if cell is not None:
+        h5.attrs["cell"] = json.dumps(cell, sort_keys=True, default=str)
+    if "reference" in h5:
+        del h5["reference"]
+    ref = h5.create_group("reference")
+    put(ref, "markers", run.reference)
+    ref["markers"].attrs["labels"] = list(run.labels)
+    ref["markers"].attrs["rate"] = run.rate
+    if run.truth_theta is not None:
+        if "truth" in h5:
+            del h5["truth"]
+        put(h5.create_group("truth"), "theta", run.truth_theta)
+        h5["truth/theta"].attrs["names"] = list(run.result.angle_names)
+    runs = h5.require_group("runs")
+    if run.name in runs:
+        del runs[run.name]
+    g = runs.create_group(run.name)
+    r = run.result
+    g.attrs.update({
+        "method": r.method, "tol": r.tol, "perturb_level_m": run.perturb_level_m,
+        "perturb_markers": list(run.perturb_markers), "perturb_seed": run.perturb_seed,
+        "tracking_weight": np.nan if run.tracking_weight is None else run.tracking_weight,
+        "warm_start": run.warm_start, "hessian": run.hessian, "form": run.form,
+        "ad_drivers": run.ad_drivers, "command": command, "wall_s": r.wall_s,
+        "filter_cutoff_hz": np.nan if run.filter_cutoff is None else run.filter_cutoff,
+    })
+    text = h5py.string_dtype(encoding="utf-8")
+    g.attrs.create("warnings", [*r.messages, *run.warnings], dtype=text)
+    g.attrs.create("messages", list(r.messages), dtype=text)
+    g.attrs.create("notes", list(run.notes), dtype=text)
+    g.attrs.update({"options": run.options.to_json(), "model": run.model_text,
+                    "trial": run.trial_path, "rate": run.rate,
+                    "labels": list(run.labels)})
+    put(g, "time", r.time)
+    put(g, "reference", run.reference)
+    if run.truth_theta is not None:
+        put(g, "truth_theta", run.truth_theta)
+    for key in ("q", "qd", "qdd", "iterations", "time_s", "phi_norm", "phi_top_max"):
+        put(g, key, getattr(r, key))
+    put(g, "converged", r.trusted)
+    put(g, "solver_converged", r.converged)
+    put(g, "flags", r.flags if r.flags is not None else np.zeros(r.n_frames, np.uint8))
+    g["flags"].attrs.update(BITS)
+    for key, per in (("theta", ""), ("theta_d", "/s"), ("theta_dd", "/s²")):
+        put(g, key, getattr(r, key))
+        g[key].attrs["names"] = list(r.angle_names)
+        g[key].attrs.create("units", [u + per for u in run._angle_units], dtype=text)
+    for key in ("model_points", "markers_input", "ed", "ed_input"):
+        put(g, key, getattr(run, key))
+    if r.status:
+        g.create_dataset("status", data=list(r.status),
+                         dtype=h5py.string_dtype(encoding="utf-8"))
+    if run.dynamics is not None:
+        _write_dynamics(g, run)
+    if run.clinical is not None:
+        _write_clinical(g, run.clinical)
+    if run.gait is not None:
+        write_gait(g, run.gait)
 
 def put(group, key: str, values) -> None:
     """``io.datasets.put``, or for an array held in a Spill its stored dataset as it is."""

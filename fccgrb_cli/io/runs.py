@@ -14,7 +14,7 @@ from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.datasets import open_results
 from fccgrb_cli.io.gait_results import read_gait
-from fccgrb_cli.io.results import FORMAT_VERSION
+from fccgrb_cli.io.results_format import check_run, reading, runs_group
 from fccgrb_cli.options import SolveOptions
 from fccgrb_cli.run import Run
 from fccgrb_cli.solvers.result import KinematicResult
@@ -24,15 +24,15 @@ def read_runs(path: str | Path) -> dict[str, Run]:
     """Every run of a results file as the Run that wrote it (see ``fccgrb_cli.read_results``);
     a file of another format version, or a sweep file, is a one-line error."""
     with open_results(path) as h5:
-        version = h5.attrs.get("format_version")
-        if version != FORMAT_VERSION:
-            raise InputError(f"{path}: results format {version or 1} (written by an older "
-                             f"fccgrb); this one reads format {FORMAT_VERSION}: solve the "
-                             "trial again to read it here")
-        if "runs" not in h5:
+        if "runs" not in h5 and "cells" in h5:
             raise InputError(f"{path}: expected /runs in a results file (a sweep file's cells "
                              "are read by 'fccgrb report')")
-        return {name: _read_run(name, g) for name, g in h5["runs"].items()}
+        out = {}
+        for name, g in runs_group(h5, path).items():
+            with reading(path, f"/runs/{name}"):
+                check_run(g, path, f"/runs/{name}")
+                out[name] = _read_run(name, g)
+        return out
 
 
 def _strings(values) -> tuple[str, ...]:
