@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from fccgrb_cli.errors import InputError
+from fccgrb_cli.inputs import regular_file
 
 BLOCK = 512
 KEY = 0x50
@@ -115,7 +116,7 @@ def read_layout(path: str | Path) -> C3DLayout:
     """Read a C3D file's header and parameter section; InputError (one line naming the file)
     when the file is not C3D, ends inside its header or parameter section, or counts 65535
     frames (a 16-bit word's limit) with more data after them and nothing giving the count."""
-    path = Path(path)
+    path = regular_file(path, "C3D file")  # a FIFO would block the read
     try:
         with path.open("rb") as f:
             size = path.stat().st_size
@@ -161,6 +162,7 @@ def read_layout(path: str | Path) -> C3DLayout:
         count = f"{last - first + 1} frames ({first}–{last})" if last >= first else "frames"
         raise InputError(f"{path}: the file ends at byte {size}, {where}, with none of the "
                          f"{count} its header announces: {TRUNCATED}")
+    _check_records(section, processor, path)
     params = _parameters(section, processor)
 
     def number(key: str, default: float) -> float:
@@ -168,15 +170,23 @@ def read_layout(path: str | Path) -> C3DLayout:
         return float(p.values[0]) if p is not None and p.values.size else default
 
     points = int(number("POINT:USED", words[1]))
-    float_data = number("POINT:SCALE", scale) < 0
+    point_scale = number("POINT:SCALE", scale)
     rate = number("POINT:RATE", 0.0)
+    _check_values(path, points, point_scale, rate, params)
     analog = int(words[2])
     if "ANALOG:USED" in params and rate > 0:
         analog = int(number("ANALOG:USED", 0)) * round(number("ANALOG:RATE", 0.0) / rate)
     frames, first, last, source = _frame_count(params, first, last)
-    layout = C3DLayout(size, processor, float_data, points, analog, data_start,
-                       frames, first, last, source, number("POINT:SCALE", scale))
+    layout = C3DLayout(size, processor, point_scale < 0, points, analog, data_start,
+                       frames, first, last, source, point_scale)
     beyond = size - data_offset - frames * layout.frame_bytes  # bytes after the last frame
+    # writers pad the data to a whole block, ezc3d with up to one block more: past that, the
+    # data hold frames the count leaves out
+    if frames != WORD_LIMIT and layout.frame_bytes and beyond > max(BLOCK, layout.frame_bytes):
+        raise InputError(f"{path}: {layout.announced()}, but the data section goes on "
+                         f"{beyond} bytes after them ({beyond // layout.frame_bytes} frames; "
+                         f"expected at most a {BLOCK}-byte block's padding): the count is "
+                         "wrong or the file damaged")
     if frames == WORD_LIMIT and source in ("header", "POINT:FRAMES") and beyond >= BLOCK:
         raise InputError(f"{path}: POINT:FRAMES is {WORD_LIMIT}, the most a 16-bit word counts, "
                          "and neither POINT:LONG_FRAMES nor TRIAL:ACTUAL_START_FIELD/"
@@ -184,6 +194,73 @@ def read_layout(path: str | Path) -> C3DLayout:
                          f"bytes past frame {WORD_LIMIT}: those frames would be lost; split the "
                          f"trial into files of at most {WORD_LIMIT} frames")
     return layout
+
+
+MAX_DIMS = 7  # the C3D User Guide: a parameter has at most 7 dimensions
+
+
+def _check_records(section: bytes, processor: str, path: Path) -> None:
+    """Every group and parameter record of the parameter section lies inside it and inside its
+    own record (the next record's offset), a parameter of type -1, 1, 2 or 4 with at most 7
+    dimensions; else an InputError. ezc3d trusts these sizes: a parameter claiming 161
+    dimensions makes it read (and segfault) far past the section."""
+    endian = ">" if processor == "MIPS" else "<"
+    pos, end = 4, len(section)
+
+    def fail(what: str) -> None:
+        raise InputError(f"{path}: not a readable C3D file (the parameter record at byte "
+                         f"{pos} of the parameter section {what})")
+
+    while pos + 2 <= end:
+        length, group = struct.unpack_from("bb", section, pos)
+        length = abs(length)
+        if length == 0:
+            return  # the end of the records
+        if group == 0:
+            fail("belongs to group 0")
+        if pos + 4 + length > end:
+            fail("runs past the section")
+        (offset,) = struct.unpack_from(endian + "h", section, pos + 2 + length)
+        limit = end if offset == 0 else pos + 2 + length + offset
+        if offset != 0 and not pos < limit <= end:
+            fail(f"points to the next record at {limit}, outside the section or backwards")
+        at = pos + 4 + length  # a parameter's type and dimensions; a group's description
+        if group > 0:
+            if at + 2 > limit:
+                fail("ends before its type and dimensions")
+            kind, n_dims = struct.unpack_from("bB", section, at)
+            if kind not in (-1, 1, 2, 4) or n_dims > MAX_DIMS:
+                fail(f"has type {kind} and {n_dims} dimensions, expected a type of -1, 1, 2 "
+                     f"or 4 and at most {MAX_DIMS} dimensions")
+            dims = section[at + 2:at + 2 + n_dims]
+            at += 2 + n_dims + abs(kind) * math.prod(dims)
+        if at >= limit or at + 1 + section[at] > limit:
+            fail("holds more data than its size")
+        if offset == 0:
+            return
+        pos = limit
+
+
+def _check_values(path: Path, points: int, point_scale: float, rate: float,
+                  params: dict[str, Parameter]) -> None:
+    """The parameters the layout rests on: finite, and in range (a NaN POINT:SCALE would
+    read float data as integers, an infinite rate divide by zero)."""
+    def fail(key: str, expected: str, value: float) -> None:
+        raise InputError(f"{path}: {key}: expected {expected}, got {value:g}")
+
+    if points < 0:
+        fail("POINT:USED", "a number of points ≥ 0", points)
+    if not (math.isfinite(point_scale) and point_scale != 0):
+        fail("POINT:SCALE", "a finite, non-zero scale (negative: float data)", point_scale)
+    if not math.isfinite(rate) or rate < 0 or (points > 0 and rate == 0):
+        fail("POINT:RATE", "a positive, finite frame rate (Hz)", rate)
+    analog = params.get("ANALOG:RATE")
+    used = params.get("ANALOG:USED")
+    if analog is not None and analog.values.size:
+        value = float(analog.values[0])
+        in_use = used is not None and used.values.size and used.values[0] > 0
+        if not math.isfinite(value) or value < 0 or (in_use and value == 0):
+            fail("ANALOG:RATE", "a positive, finite sampling rate (Hz)", value)
 
 
 def _frame_count(params: dict[str, Parameter], first: int,

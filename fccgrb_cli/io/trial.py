@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from fccgrb_cli.errors import InputError
+from fccgrb_cli.inputs import decode, read_bytes, regular_file
 from fccgrb_cli.io.atomic import atomic_path
 from fccgrb_cli.io.c3d import UNIT_SCALE, write_markers
 from fccgrb_cli.io.c3d_header import (
@@ -26,6 +27,9 @@ from fccgrb_cli.io.c3d_header import (
     read_parameters,
     read_points,
 )
+
+TRIAL_ENDINGS = (".c3d", ".trc")
+TRC_MAX = 4 << 30  # bytes: a TRC is read whole (a 10-minute trial of 55 markers is ~0.3 GB)
 
 
 @dataclass(frozen=True)
@@ -108,12 +112,25 @@ def read_c3d(path: Path, accept_truncated: bool = False) -> Trial:
     if xyz.shape[0] != frames:
         raise InputError(f"{path}: ezc3d read {xyz.shape[0]} frames where the file holds "
                          f"{frames} ({layout.announced()})")
-    return Trial(str(path), labels[: xyz.shape[1]], xyz, rate, warnings)
+    labels = labels[: xyz.shape[1]]
+    _finite(xyz, labels, path)
+    return Trial(str(path), labels, xyz, rate, warnings)
 
 
-def _rate(rate: float, path: Path) -> float:
-    if not rate > 0:
-        raise InputError(f"{path}: POINT:RATE: expected a positive rate, got {rate}")
+def _finite(xyz: np.ndarray, labels: tuple[str, ...], path: Path) -> None:
+    """Coordinates are numbers or gaps (NaN): an infinite one (a float32 overflow, a damaged
+    file) is an InputError naming the first frame and label."""
+    bad = np.isinf(xyz)
+    if bad.any():
+        frame, marker, _ = np.argwhere(bad)[0]
+        label = labels[marker] if marker < len(labels) else f"point {marker + 1}"
+        raise InputError(f"{path}: frame index {frame}, {label}: expected finite coordinates "
+                         "or a gap, got an infinite one")
+
+
+def _rate(rate: float, path: Path, key: str = "POINT:RATE") -> float:
+    if not (np.isfinite(rate) and rate > 0):
+        raise InputError(f"{path}: {key}: expected a positive, finite rate (Hz), got {rate}")
     return rate
 
 
@@ -132,32 +149,29 @@ def _read_long_c3d(path: Path, layout: C3DLayout, frames: int,
     xyz = read_points(path, layout, frames)
     xyz *= scale
     labels = tuple(str(label).strip() for label in params["POINT:LABELS"].values)
-    return Trial(str(path), labels[: xyz.shape[1]], xyz, rate, warnings)
+    labels = labels[: xyz.shape[1]]
+    _finite(xyz, labels, path)
+    return Trial(str(path), labels, xyz, rate, warnings)
 
 
 def read_trc(path: Path, accept_truncated: bool = False) -> Trial:
     """OpenSim TRC: header line 3 holds DataRate … NumFrames … Units; line 4 the labels; data
     from line 6. A last line without its newline is a cut row when rows are missing."""
-    try:
-        text = path.read_text(encoding="utf-8", errors="strict")
-        lines = text.splitlines()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read the TRC file ({exc.__class__.__name__})") from None
+    text = decode(read_bytes(path, "TRC file", limit=TRC_MAX), path, "TRC file")
+    lines = text.splitlines()
     if len(lines) < 5 or not lines[0].startswith("PathFileType"):
         raise InputError(f"{path}: line 1: expected a TRC header starting with 'PathFileType'")
     keys, values = lines[1].split("\t"), lines[2].split("\t")
     header = dict(zip((k.strip() for k in keys), (v.strip() for v in values), strict=False))
-    try:
-        rate = float(header["DataRate"])
-        n_markers = int(header["NumMarkers"])
-    except (KeyError, ValueError):
-        raise InputError(f"{path}: lines 2-3: expected DataRate and NumMarkers values") from None
-    try:
-        announced = int(header["NumFrames"]) if header.get("NumFrames") else None
-    except ValueError:
-        raise InputError(f"{path}: line 3: NumFrames: expected a whole number, got "
-                         f"{header['NumFrames']!r}") from None
-    scale = _unit_scale(header.get("Units", "mm"), path, "Units")
+    rate = _rate(_header_number(header, "DataRate", float, path), path, "line 3: DataRate")
+    n_markers = _header_number(header, "NumMarkers", int, path)
+    if n_markers < 1:
+        raise InputError(f"{path}: line 3: NumMarkers: expected at least 1, got {n_markers}")
+    announced = _header_number(header, "NumFrames", int, path) if header.get("NumFrames") \
+        else None
+    if announced is not None and announced < 0:
+        raise InputError(f"{path}: line 3: NumFrames: expected a count ≥ 0, got {announced}")
+    scale = _unit_scale(header.get("Units", "mm"), path, "line 3: Units")
     names = [n.strip() for n in lines[3].split("\t")[2:]]
     labels = tuple(n for n in names if n)
     if len(labels) != n_markers:
@@ -180,29 +194,45 @@ def read_trc(path: Path, accept_truncated: bool = False) -> Trial:
                              f"(x y z for {n_markers} markers) after frame and time, "
                              f"got {len(coords)}")
         try:
-            rows.append([float(c) if c.strip() else np.nan for c in coords])
+            row = [float(c) if c.strip() else np.nan for c in coords]
         except ValueError:
             raise InputError(f"{path}: line {number}: expected numbers in every marker column") \
                 from None
+        if any(np.isinf(row)):
+            raise InputError(f"{path}: line {number}: expected finite coordinates or a blank "
+                             "(a gap), got an infinite one")
+        rows.append(row)
     warnings: tuple[str, ...] = ()
     if announced is not None and len(rows) < announced:
         warnings = _complete(path, f"the header announces {announced} frames (NumFrames, line 3)",
                              len(rows), accept_truncated)
+    if announced is not None and len(rows) > announced:
+        raise InputError(f"{path}: line 3: NumFrames: the header announces {announced} frames, "
+                         f"the file holds {len(rows)} rows of data")
     if not rows:
         raise InputError(f"{path}: expected at least one frame of data after the header")
     xyz = np.array(rows).reshape(len(rows), n_markers, 3) * scale
     return Trial(str(path), labels, xyz, rate, warnings)
 
 
+def _header_number(header: dict[str, str], key: str, kind: type, path: Path):
+    """A number of the TRC header's line 3 (an int: written as a whole number)."""
+    if key not in header:
+        raise InputError(f"{path}: lines 2-3: expected a {key} value")
+    text = header[key]
+    try:
+        value = kind(text)
+    except ValueError:
+        what = "a whole number" if kind is int else "a number"
+        raise InputError(f"{path}: line 3: {key}: expected {what}, got {text!r}") from None
+    return value
+
+
 def read_trial(path: str | Path, accept_truncated: bool = False) -> Trial:
     """Read a C3D or TRC marker file (by its ending). A file whose data end before the last
     frame its header announces is an InputError, or with ``accept_truncated`` is read with the
     frames it holds, the trial's ``warnings`` saying so."""
-    path = Path(path)
-    if not path.exists():
-        raise InputError(f"{path}: trial file not found")
-    if path.is_dir():
-        raise InputError(f"{path}: expected a trial file, got a folder")
+    path = regular_file(path, "trial file")
     suffix = path.suffix.lower()
     if suffix == ".trc":
         return read_trc(path, accept_truncated)
@@ -235,12 +265,13 @@ def write_trc(path: str | Path, trial_labels: list[str], markers_m: np.ndarray, 
 
 
 def write_trial(path: str | Path, labels: list[str], markers_m: np.ndarray, rate: float,
-                units: str = "mm") -> None:
-    """Write a C3D or TRC file, chosen by the ending of ``path``."""
+                units: str = "mm", description: str = "") -> None:
+    """Write a C3D or TRC file, chosen by the ending of ``path`` (``description``: C3D's
+    FCCGRB:SOURCE)."""
     suffix = Path(path).suffix.lower()
     if suffix == ".trc":
         write_trc(path, labels, markers_m, rate, units)
     elif suffix == ".c3d":
-        write_markers(path, labels, markers_m, rate, units)
+        write_markers(path, labels, markers_m, rate, units, description)
     else:
         raise InputError(f"{path}: expected an output ending in .c3d or .trc")
