@@ -14,12 +14,14 @@ from typing import TYPE_CHECKING, Any
 import click
 import numpy as np
 
-from fccgrb_cli import __version__
+from fccgrb_cli import __version__, scratch
 from fccgrb_cli.errors import InputError
+from fccgrb_cli.inputs import refuse_inputs
 from fccgrb_cli.model import Model, load_model
-from fccgrb_cli.options import SolveOptions, click_options, from_cli
+from fccgrb_cli.options import SEED_MAX, WORKERS_MAX, SolveOptions, click_options, from_cli
+from fccgrb_cli.params import Bounded
 from fccgrb_cli.progress import Progress
-from fccgrb_cli.system.structure import analyse
+from fccgrb_cli.system.structure import analyse, check_tracking
 
 if TYPE_CHECKING:
     from fccgrb_cli.run import Run
@@ -59,7 +61,55 @@ def load_checked(path: str, form: str = "model") -> Model:
     return model
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+def _one_line(error: click.ClickException) -> str:
+    """A click error as one line: '--tol: expected …', or the usage error and where to look."""
+    param = getattr(error, "param", None)
+    missing = isinstance(error, click.MissingParameter)
+    if isinstance(error, click.BadParameter) and param is not None and not missing:
+        name = max(param.opts, key=len) if param.param_type_name == "option" and param.opts \
+            else param.human_readable_name
+        text = f"{name}: {error.message}"
+    else:
+        text = error.format_message()
+        ctx = getattr(error, "ctx", None)
+        if isinstance(error, click.UsageError) and ctx is not None:
+            text += f" (see '{ctx.command_path} --help')"
+    return " ".join(text.split())
+
+
+class Main(click.Group):
+    """The command group. While a command runs, SIGINT, SIGTERM and SIGHUP remove the files
+    being written and end the process (``fccgrb_cli.scratch``); every error a user can cause,
+    click's own included, is one line ``fccgrb: error: …`` and exit status 2 (130 for an
+    interrupt)."""
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True,
+             **extra: Any) -> None:
+        previous = scratch.install()
+        try:
+            code = self._invoke(args, prog_name, extra)
+        finally:
+            scratch.restore(previous)
+        sys.exit(code)
+
+    def _invoke(self, args, prog_name, extra: dict) -> int:
+        try:
+            value = super().main(args, prog_name or "fccgrb", standalone_mode=False, **extra)
+        except InputError as error:
+            click.echo(f"fccgrb: error: {error}", err=True)
+            return 2
+        except click.ClickException as error:
+            click.echo(f"fccgrb: error: {_one_line(error)}", err=True)
+            return 2
+        except (click.exceptions.Abort, KeyboardInterrupt):
+            scratch.remove_all()
+            click.echo("fccgrb: error: interrupted; the files being written were removed",
+                       err=True)
+            return 130
+        return value if isinstance(value, int) else 0
+
+
+@click.group(cls=Main, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="fccgrb")
 def main() -> None:
     """Kinematic and inverse dynamic analysis of spatial multibody systems with fully Cartesian
@@ -77,9 +127,11 @@ def main() -> None:
                    "the model file says.")
 @reports_input_errors
 def check(model: str, form: str) -> None:
-    """Validate MODEL and report its coordinates, rank and redundant constraints."""
+    """Validate MODEL and report its coordinates, rank and redundant constraints; a model that
+    tracks markers must track enough to determine it (a floating base: 3 not on one line)."""
     loaded = load_with_form(model, form)
     report = analyse(loaded)
+    check_tracking(loaded, report)
     click.echo(f"{model}: model {loaded.name!r} is valid")
     for line in report.lines():
         click.echo(f"  {line}")
@@ -88,39 +140,50 @@ def check(model: str, form: str) -> None:
 @main.command()
 @click.argument("model")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
-              help="Trial to write (C3D). The true angles go to OUTPUT's stem + '.truth.h5'.")
-@click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=3.0,
-              show_default=True, help="Length of the trial in seconds.")
-@click.option("--rate", type=click.FloatRange(min=0, min_open=True), default=100.0,
+              help="Trial to write (.c3d or .trc, by its ending). The true angles go to "
+                   "OUTPUT's stem + '.truth.h5'.")
+@click.option("--duration", type=Bounded(float, 0, True, None, "s"), default=3.0,
+              show_default=True, help="Length of the trial in seconds (duration × rate at most "
+                                      "1,000,000 frames).")
+@click.option("--rate", type=Bounded(float, 0, True, 1e5, "Hz"), default=100.0,
               show_default=True, help="Marker sampling rate in Hz.")
 @click.option("--units", type=click.Choice(["mm", "m"]), default="mm", show_default=True,
-              help="Length unit of the C3D points (POINT:UNITS).")
+              help="Length unit of the points (C3D POINT:UNITS, TRC Units).")
 @click.option("--form", type=FORM, default="model", show_default=True,
               help="Body form used for the analysis (the points do not depend on it).")
-@click.option("--tol", type=click.FloatRange(min=0, min_open=True), default=1e-10,
+@click.option("--tol", type=Bounded(float, 0, True, 1.0, "m and unitless"), default=1e-10,
               show_default=True, help="Newton–Raphson tolerance on ‖Δq‖∞ (m and unitless).")
 @reports_input_errors
 def synth(model: str, output: str, duration: float, rate: float, units: str, form: str,
           tol: float) -> None:
     """Synthesize a trial: drive MODEL with its prescribed angles (kinematic analysis with
-    angular drivers) and write its tracked points to a C3D file, with the exact angles, rates
-    and points in a truth file beside it."""
-    from fccgrb_cli.io.c3d import write_markers
+    angular drivers) and write its tracked points to a C3D or TRC file, with the exact angles,
+    rates and points in a truth file beside it (both files, or neither)."""
+    from fccgrb_cli.io.atomic import check_target, transaction
+    from fccgrb_cli.io.trial import TRIAL_ENDINGS, write_trial
     from fccgrb_cli.io.truth import Truth, truth_path, write_truth
-    from fccgrb_cli.synth import synthesize
+    from fccgrb_cli.synth import frame_count, synthesize
 
+    frame_count(duration, rate, "--duration × --rate")
+    sidecar = truth_path(output)
+    for path in (output, sidecar):
+        refuse_inputs(path, [model])
+    if Path(output).suffix.lower() not in TRIAL_ENDINGS:
+        raise InputError(f"{output}: expected an output ending in .c3d or .trc")
+    for path in (output, sidecar):
+        check_target(path)
     loaded = load_checked(model, form)
     if not loaded.tracked_points:
         raise InputError(f"{model}: tracking.points: expected at least one tracked point to write")
     s = synthesize(loaded, duration, rate, tol, progress=Progress("synth"))
     r = s.result
-    write_markers(output, list(s.labels), s.markers, rate, units,
-                  description=f"fccgrb {__version__} synth {Path(model).name}")
-    sidecar = truth_path(output)
-    write_truth(sidecar, Truth(
-        time=r.time, theta=r.theta, theta_d=r.theta_d, theta_dd=r.theta_dd,
-        angle_names=r.angle_names, q=r.q, form=",".join(sorted(set(s.system.layout.forms))),
-        markers=s.markers, labels=s.labels, rate=rate, model_text=loaded.text))
+    with transaction():
+        write_trial(output, list(s.labels), s.markers, rate, units,
+                    description=f"fccgrb {__version__} synth {Path(model).name}")
+        write_truth(sidecar, Truth(
+            time=r.time, theta=r.theta, theta_d=r.theta_d, theta_dd=r.theta_dd,
+            angle_names=r.angle_names, q=r.q, form=",".join(sorted(set(s.system.layout.forms))),
+            markers=s.markers, labels=s.labels, rate=rate, model_text=loaded.text))
     click.echo(f"wrote {output}: {r.n_frames} frames at {rate:g} Hz, {len(s.labels)} markers "
                f"({units}); truth in {sidecar}")
     click.echo(f"AD analysis: {r.iterations.mean():.2f} iterations/frame, "
@@ -204,35 +267,47 @@ def solve(model: str, trials: tuple[str, ...], output: str, accept_truncated: bo
     <trial file stem>-<run name>, and, for a lower-limb model, the subject's cycles over every
     trial's strides in /subject of the results file.
     """
+    from fccgrb_cli.inputs import check_name
+    from fccgrb_cli.io.atomic import check_target
+    from fccgrb_cli.io.results import check_output, write_runs
     from fccgrb_cli.io.truth import truth_path
 
     chosen = from_cli(options)
     paths = _trial_paths(trials)
-    inputs = {Path(p).resolve() for p in (model, *paths, *map(truth_path, paths))}
-    if Path(output).resolve() in inputs:
-        raise InputError(f"{output}: expected a results file other than the model, the trials "
-                         "or their truth files (inputs are never modified)")
-    loaded = load_checked(model, chosen.form)
-    from fccgrb_cli.io.results import check_output
-
+    refuse_inputs(output, [model, *paths, *map(truth_path, paths), *_map_files(options)])
+    check_target(output)
     check_output(output)
+    loaded = load_checked(model, chosen.form)
     runs = []
     for path in paths:
         run = _solve_one(loaded, path, chosen, accept_truncated, output)
+        if np.isnan(run.result.theta).all():
+            raise InputError(f"{path}: no frame could be solved (in every frame the markers "
+                             "present cannot determine the model); nothing was written")
         if len(paths) > 1:
-            run = dataclasses.replace(run, name=f"{Path(path).stem}-{run.name}")
-        _write_and_show(run, output)
+            name = check_name(f"{Path(path).stem}-{run.name}", f"{path}: run name")
+            run = dataclasses.replace(run, name=name)
         runs.append(run)
     with_gait = [r for r in runs if r.gait is not None]
+    subject = None
     if len(with_gait) > 1:
         from fccgrb_cli.gait.cycles import pooled
-        from fccgrb_cli.gait.report import subject_report
-        from fccgrb_cli.io.gait_results import write_subject
 
-        names = [r.name for r in with_gait]
-        cycles = pooled([r.gait.cycles for r in with_gait])
-        write_subject(output, names, cycles)
-        click.echo(subject_report(names, cycles))
+        subject = ([r.name for r in with_gait], pooled([r.gait.cycles for r in with_gait]))
+    write_runs(output, runs, " ".join(["fccgrb", *sys.argv[1:]]), subject=subject,
+               waiting=lambda line: click.echo(f"fccgrb: warning: {line}", err=True))
+    for run in runs:
+        _show(run, output)
+    if subject is not None:
+        from fccgrb_cli.gait.report import subject_report
+
+        click.echo(subject_report(*subject))
+
+
+def _map_files(options: dict[str, Any]) -> list[str]:
+    """The label-map files a --map names (inputs too)."""
+    return [item.strip() for item in options.get("mapping") or ()
+            if item.strip().lower().endswith((".yaml", ".yml")) and "=" not in item]
 
 
 def _solve_one(model: Model, path: str, options: SolveOptions, accept_truncated: bool,
@@ -246,12 +321,10 @@ def _solve_one(model: Model, path: str, options: SolveOptions, accept_truncated:
                        spill=Path(output).resolve().parent)
 
 
-def _write_and_show(run: Run, output: str) -> None:
+def _show(run: Run, output: str) -> None:
     from fccgrb_cli.clinical import clinical_table
-    from fccgrb_cli.io.results import write_run
     from fccgrb_cli.run import summary
 
-    write_run(output, run, " ".join(["fccgrb", *sys.argv[1:]]))
     for message in (*run.result.messages, *run.warnings):
         click.echo(f"fccgrb: warning: {message}", err=True)
     for message in run.notes:
@@ -264,6 +337,19 @@ def _write_and_show(run: Run, output: str) -> None:
 
         click.echo(gait_report(run.gait))
     click.echo(f"wrote run {run.name!r} ({run.result.n_frames} frames) to {output}")
+
+
+def _template_labels(template: Model, mapping: dict[str, str]) -> None:
+    """``calibrate --map``: every name is a label the template uses (a marker or a landmark),
+    and no two of its labels end on one trial label."""
+    from fccgrb_cli.options import one_label_each
+
+    known = dict.fromkeys([*template.marker_labels, *template.landmarks.values()])
+    unknown = [name for name in mapping if name not in known]
+    if unknown:
+        raise InputError(f"--map: expected labels the template {template.source} uses (its "
+                         f"markers and calibration.landmarks), got {', '.join(unknown)}")
+    one_label_each({name: mapping.get(name, name) for name in known}, "template label")
 
 
 def _frame_range(text: str | None) -> tuple[int, int] | None:
@@ -284,16 +370,19 @@ def _frame_range(text: str | None) -> tuple[int, int] | None:
 @click.option("--frames", default=None, metavar="A:B",
               help="Frame indices used (from 0, B excluded), e.g. a static trial's quiet "
                    "part or a stretch of a walking trial.  [default: every frame]")
-@click.option("--mass", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--mass", type=Bounded(float, 0, True, 500, "kg"), default=None,
               help="Body mass in kg: scales segment inertia (de Leva 1996) and gives moments "
                    "in N·m/kg. Without it the model has no inertia (kinematics only).")
-@click.option("--knee-width", type=float, default=None, metavar="MM",
+@click.option("--knee-width", type=Bounded(float, 0, True, 500, "mm"), default=None,
+              metavar="MM",
               help="Helen Hayes/Davis templates: the knee's width across the epicondyles, mm "
                    "(Davis et al. 1991).  [default: 100]")
-@click.option("--ankle-width", type=float, default=None, metavar="MM",
+@click.option("--ankle-width", type=Bounded(float, 0, True, 500, "mm"), default=None,
+              metavar="MM",
               help="Helen Hayes/Davis templates: the ankle's width across the malleoli, mm.  "
                    "[default: 70]")
-@click.option("--marker-diameter", type=float, default=None, metavar="MM",
+@click.option("--marker-diameter", type=Bounded(float, 0, True, 500, "mm"), default=None,
+              metavar="MM",
               help="Helen Hayes/Davis templates: the markers' diameter, mm.  [default: 14]")
 @click.option("--map", "mapping", multiple=True, metavar="NAME=LABEL|FILE",
               help="The template's label → the trial's, where a lab spells them otherwise "
@@ -314,15 +403,18 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
     `fccgrb solve`."""
     from fccgrb_cli.anatomy.calibrate import Measurements
     from fccgrb_cli.anatomy.calibrate import calibrate as personalize
-    from fccgrb_cli.io.atomic import atomic_path
+    from fccgrb_cli.io.atomic import atomic_path, check_target
     from fccgrb_cli.io.trial import read_trial
     from fccgrb_cli.model import parse_model
     from fccgrb_cli.options import from_cli
 
+    refuse_inputs(output, [model, trial, *_map_files({"mapping": mapping})])
+    check_target(output)
     template = load_model(model)
     widths = (knee_width, ankle_width, marker_diameter)
     measured = None if all(w is None for w in widths) else Measurements.from_mm(*widths)
     labels = dict(from_cli({"mapping": mapping}).mapping)
+    _template_labels(template, labels)
     data = read_trial(trial, accept_truncated)
     for message in data.warnings:
         click.echo(f"fccgrb: warning: {message}", err=True)
@@ -350,11 +442,11 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
 @main.command("perturb")
 @click.argument("source")
 @click.argument("target")
-@click.option("--level", "level_mm", type=click.FloatRange(min=0), required=True,
+@click.option("--level", "level_mm", type=Bounded(float, 0, False, 1000, "mm"), required=True,
               help="Soft-tissue-artefact level in mm: the largest deviation per axis.")
 @click.option("--markers", default=None, metavar="LABELS",
               help="Comma-separated file labels to perturb [default: every marker].")
-@click.option("--seed", type=int, default=0, show_default=True,
+@click.option("--seed", type=Bounded(int, 0, False, SEED_MAX), default=0, show_default=True,
               help="Seed of the perturbation (same seed, same artefact).")
 @click.option("--units", type=click.Choice(["mm", "m"]), default="mm", show_default=True,
               help="Length unit written to TARGET.")
@@ -370,10 +462,20 @@ def perturb_command(source: str, target: str, level_mm: float, markers: str | No
     """
     import shutil
 
-    from fccgrb_cli.io.trial import read_trial, write_trial
+    from fccgrb_cli.io.atomic import atomic_path, check_target, transaction
+    from fccgrb_cli.io.trial import TRIAL_ENDINGS, read_trial, write_trial
     from fccgrb_cli.io.truth import truth_path
     from fccgrb_cli.perturb import perturb
 
+    sidecar = truth_path(source)
+    copy_truth = sidecar.exists() and sidecar.resolve() != truth_path(target).resolve()
+    outputs = (target, *([truth_path(target)] if copy_truth else []))
+    for path in outputs:
+        refuse_inputs(path, [source, sidecar])
+    if Path(target).suffix.lower() not in TRIAL_ENDINGS:
+        raise InputError(f"{target}: expected an output ending in .c3d or .trc")
+    for path in outputs:
+        check_target(path)
     data = read_trial(source, accept_truncated)
     for message in data.warnings:
         click.echo(f"fccgrb: warning: {message}", err=True)
@@ -381,14 +483,12 @@ def perturb_command(source: str, target: str, level_mm: float, markers: str | No
     unknown = sorted(set(only) - set(data.labels))
     if unknown:
         raise InputError(f"--markers: expected labels of {source}, got {', '.join(unknown)}")
-    if Path(target).resolve() == Path(source).resolve():
-        raise InputError(f"{target}: expected an output other than the input (inputs are never "
-                         "modified)")
     out = perturb(data.markers, data.labels, data.rate, level_mm * 1e-3, seed, only or None)
-    write_trial(target, list(data.labels), out, data.rate, units)
-    sidecar = truth_path(source)
-    if sidecar.exists() and sidecar.resolve() != truth_path(target).resolve():
-        shutil.copyfile(sidecar, truth_path(target))
+    with transaction():
+        write_trial(target, list(data.labels), out, data.rate, units)
+        if copy_truth:
+            with atomic_path(truth_path(target)) as tmp:
+                shutil.copyfile(sidecar, tmp)
     click.echo(f"wrote {target}: {len(only) or len(data.labels)} of {len(data.labels)} markers "
                f"perturbed at {level_mm:g} mm (seed {seed})")
 
@@ -399,8 +499,10 @@ def perturb_command(source: str, target: str, level_mm: float, markers: str | No
               help="Sweep results (HDF5) [default: the config's name + .h5 in the current "
                    "folder]. Finished cells are kept in OUTPUT.cells/ so a rerun does only "
                    "the missing ones.")
-@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
-              help="Processes running cells at once (cells in parallel mode run alone).")
+@click.option("--workers", type=Bounded(int, 1, False, WORKERS_MAX), default=1,
+              show_default=True,
+              help="Processes running cells at once (cells in parallel mode run alone; at most "
+                   "4 per CPU).")
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Run the cells on an existing Dask cluster (e.g. tcp://host:8786) through "
                    "dask.distributed's executor; needs the 'cluster' extra.")
@@ -416,17 +518,23 @@ def sweep(config: str, output: str | None, workers: int, scheduler: str | None, 
     print tables laid out like the paper's Tables 1 and 2 with the paper's figures beside ours."""
     import time
 
-    from fccgrb_cli.cells import remove_cells
+    from fccgrb_cli.cells import cells_folder, remove_cells
+    from fccgrb_cli.io.atomic import check_target
     from fccgrb_cli.io.trial import read_trial
     from fccgrb_cli.report import collect, render
     from fccgrb_cli.sweep import load_sweep, run_sweep
 
     spec = load_sweep(config)
+    out = Path(output or f"{spec.name}.h5")
+    refuse_inputs(out, [config, spec.model, spec.trial.get("file")])
+    check_target(out)
+    if cells_folder(out).exists() and not cells_folder(out).is_dir():
+        raise InputError(f"{cells_folder(out)}: expected the folder of finished cells, got a "
+                         "file")
     if "file" in spec.trial:  # read once here: a bad trial stops before any cell runs
         for message in read_trial(spec.trial["file"], accept_truncated).warnings:
             click.echo(f"fccgrb: warning: {message}", err=True)
         spec = dataclasses.replace(spec, trial=spec.trial | {"accept_truncated": accept_truncated})
-    out = Path(output or f"{spec.name}.h5")
     if fresh:
         remove_cells(out)
     started = time.perf_counter()
@@ -466,8 +574,9 @@ def cluster_executor(scheduler: str | None) -> Iterator[Executor | None]:
               help="Study results (HDF5) [default: the study's name + .h5 in the current "
                    "folder]. Finished calibrations and trials are kept in OUTPUT.cells/ so a "
                    "rerun does only the missing ones.")
-@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
-              help="Local processes solving trials at once.")
+@click.option("--workers", type=Bounded(int, 1, False, WORKERS_MAX), default=1,
+              show_default=True, help="Local processes solving trials at once (at most 4 per "
+                                      "CPU).")
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Run the calibrations and trials on an existing Dask cluster (e.g. "
                    "tcp://host:8786) whose workers see the same files; needs the 'cluster' "
@@ -488,6 +597,7 @@ def batch(study: str, output: str | None, workers: int, scheduler: str | None, f
     import time
 
     from fccgrb_cli.cells import remove_cells
+    from fccgrb_cli.io.atomic import check_target
     from fccgrb_cli.study.batch import Executors, run_study
     from fccgrb_cli.study.spec import load_study
     from fccgrb_cli.study.store import check_study_output, read_study
@@ -495,9 +605,8 @@ def batch(study: str, output: str | None, workers: int, scheduler: str | None, f
 
     spec = load_study(study)
     out = Path(output or f"{spec.name}.h5")
-    if out.resolve() in {p.resolve() for p in spec.inputs}:
-        raise InputError(f"{out}: expected an output other than the study file, a template or "
-                         "a trial (inputs are never modified)")
+    refuse_inputs(out, list(spec.inputs))
+    check_target(out)
     check_study_output(out)
     if fresh:
         remove_cells(out)
@@ -521,9 +630,9 @@ def batch(study: str, output: str | None, workers: int, scheduler: str | None, f
 @click.option("--format", "fmt", type=click.Choice(["text", "csv", "markdown"]), default="text",
               show_default=True, help="text (aligned columns), csv (one value per line) or "
                                       "markdown (pipe tables).")
-@click.option("--table", default=None,
-              help="Compare with this table of the paper (table1, table2) [default: the "
-                   "sweep's own, none for a solve's results].")
+@click.option("--table", type=click.Choice(["table1", "table2"]), default=None,
+              help="Compare with this table of the paper [default: the sweep's own, none for a "
+                   "solve's results].")
 @click.option("--html", "html_folder", default=None, type=click.Path(file_okay=False),
               metavar="FOLDER",
               help="For a study file (fccgrb batch): write the clinical report into FOLDER, "
@@ -614,8 +723,11 @@ def plot(results: str, kind: str, marker: str | None, angle: str | None,
     except ImportError:
         raise InputError("plot: expected matplotlib; install the 'plots' extra "
                          "(pip install 'fccgrb-cli[plots]')") from None
+    from fccgrb_cli.io.atomic import check_target
     from fccgrb_cli.plot import draw, load_series, save
 
+    refuse_inputs(output, [results, normative])
+    check_target(output)
     if kind == "cycles":
         from fccgrb_cli.gait.normative import read_norms
         from fccgrb_cli.gait.plot import draw_cycles
@@ -657,6 +769,7 @@ def export(results: str, fmt: str, run_name: str | None, trial: str | None,
     """Export a run of a results file for OpenSim, pandas, spreadsheets, Mokka, Nexus or
     Visual3D. Frames the quality checks do not trust keep their values and are counted (the
     CSV's trusted column, the header's untrustedFrames, the C3D's FCCGRB:UNTRUSTED)."""
+    from fccgrb_cli.io.atomic import check_target
     from fccgrb_cli.io.export import choose_run, default_output
     from fccgrb_cli.io.export import export as write
     from fccgrb_cli.io.runs import read_runs
@@ -664,9 +777,8 @@ def export(results: str, fmt: str, run_name: str | None, trial: str | None,
     runs = read_runs(results)
     run = choose_run(runs, run_name, results)
     target = Path(output) if output is not None else default_output(results, run, fmt, list(runs))
-    if target.resolve() in {Path(results).resolve(), Path(trial or run.trial_path).resolve()}:
-        raise InputError(f"{target}: expected an output other than the results file or the "
-                         "trial (inputs are never modified)")
+    refuse_inputs(target, [results, trial or run.trial_path])
+    check_target(target)
     write(run, fmt, target, trial)
     untrusted = int((~run.trusted).sum())
     if untrusted:

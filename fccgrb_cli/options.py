@@ -10,16 +10,22 @@ options that change the model (its bodies' form, the tracked markers).
 
 from __future__ import annotations
 
+import math
+import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any
 
 from fccgrb_cli.errors import InputError
+from fccgrb_cli.inputs import check_name, load_yaml, read_text, shown
 
 if TYPE_CHECKING:
     from fccgrb_cli.model import Model
 
 METHODS = ("ad", "nrm-ls", "nrm-wls", "cno-sqp", "cno-ip", "mo-tc", "mo-ed")
+# Processes beyond the CPUs gain nothing; a pool of 100,000 forks until the machine stops.
+WORKERS_MAX = max(8, 4 * (os.cpu_count() or 1))
+SEED_MAX = 2**32 - 1  # numpy's seeds
 
 
 _META = {"flag": None, "unit": "", "choices": (), "low": None, "low_open": False, "high": None,
@@ -65,13 +71,13 @@ class SolveOptions:
         "tc", choices=("tc", "ed"),
         help="CNO objective: weighted sum of squared tracking residuals (tc, m²) or of "
              "Euclidean distances (ed, m).")
-    tol: float = _option(1e-10, unit="m and rad", low=0.0, low_open=True,
+    tol: float = _option(1e-10, unit="m and rad", low=0.0, low_open=True, high=1.0,
                          help="Newton–Raphson tolerance on ‖Δq‖∞; the optimizers' tolerance.")
     max_iter: int | None = _option(
-        None, low=1, help="Iteration cap per frame [default: 50 for NRM, 500 for the "
+        None, low=1, high=10_000, help="Iteration cap per frame [default: 50 for NRM, 500 for the "
                           "optimizers].")
     tracking_weight: float = _option(
-        1e-3, low=0.0, low_open=True,
+        1e-3, low=0.0, low_open=True, high=1e6,
         help="WLS weight of the tracking equations (topological equations weigh 1); a tracked "
              "point's own 'weight' in the model overrides it.")
     warm_start: str = _option(
@@ -95,7 +101,7 @@ class SolveOptions:
     parallel: bool = _option(
         False, help="Optimizers only: solve frames independently over a process pool (the "
                     "paper's parallel mode; see {parallel_init}).")
-    workers: int | None = _option(None, low=1,
+    workers: int | None = _option(None, low=1, high=WORKERS_MAX,
                                   help="Processes for {parallel} [default: the number of CPUs].")
     parallel_init: str = _option(
         "nrm", choices=("same", "chunks", "nrm"),
@@ -121,15 +127,16 @@ class SolveOptions:
              "comma-separated pairs, or a YAML file of NAME: LABEL lines).")
     # --- perturbation ----------------------------------------------------------------------
     perturb_mm: float = _option(
-        0.0, flag="perturb", unit="mm", low=0.0, sweep="level",
+        0.0, flag="perturb", unit="mm", low=0.0, high=1000.0, sweep="level",
         help="Soft-tissue-artefact level: the largest deviation per axis (0: none).")
     perturb_markers: tuple[str, ...] = _option(
         (), names=True, metavar="NAMES",
         help="Model marker names to perturb [default: all tracked].")
-    seed: int = _option(0, help="Seed of the perturbation (same seed, same artefact).")
+    seed: int = _option(0, low=0, high=SEED_MAX,
+                        help="Seed of the perturbation (same seed, same artefact).")
     # --- filtering -------------------------------------------------------------------------
     filter_cutoff: float | None = _option(
-        None, unit="Hz", low=0.0, low_open=True, metavar="HZ",
+        None, unit="Hz", low=0.0, low_open=True, high=1e5, metavar="HZ",
         help="Low-pass the angles (zero-lag Butterworth, forward and backward) before they "
              "drive the classical model: the AD baseline's drivers, and the solved angles "
              "converted for inverse dynamics. Off by default; 6 Hz is the gait standard.")
@@ -223,31 +230,54 @@ def _check(name: str, value: Any, meta: Mapping[str, Any]) -> None:
     if meta["choices"]:
         if value not in meta["choices"]:
             raise InputError(f"{name}: expected one of {', '.join(meta['choices'])}, "
-                             f"got {value!r}")
+                             f"got {shown(value)}")
         return
     kind = _kind(name)
     if kind is tuple:
         if not isinstance(value, tuple):
-            raise InputError(f"{name}: expected a list, got {value!r}")
+            raise InputError(f"{name}: expected a list, got {shown(value)}")
         return
     if kind is bool:
         if not isinstance(value, bool):
-            raise InputError(f"{name}: expected true or false, got {value!r}")
+            raise InputError(f"{name}: expected true or false, got {shown(value)}")
         return
     if kind is str:
         if not isinstance(value, str):
-            raise InputError(f"{name}: expected a text, got {value!r}")
+            raise InputError(f"{name}: expected a text, got {shown(value)}")
+        if name == "name":
+            check_name(value, name)
         return
-    number = (int,) if kind is int else (int, float)
-    if isinstance(value, bool) or not isinstance(value, number):
-        raise InputError(f"{name}: expected {'an integer' if kind is int else 'a number'}, "
-                         f"got {value!r}")
-    low, high = meta["low"], meta["high"]
-    if low is not None and (value < low or (meta["low_open"] and value == low)):
-        raise InputError(f"{name}: expected a value {'>' if meta['low_open'] else '≥'} {low:g}"
-                         f"{' ' + meta['unit'] if meta['unit'] else ''}, got {value!r}")
-    if high is not None and value > high:
-        raise InputError(f"{name}: expected a value ≤ {high:g}, got {value!r}")
+    bounds = (meta["low"], meta["low_open"], meta["high"])
+    if not in_range(value, kind, *bounds):
+        expected = describe_range(kind, *bounds, meta["unit"])
+        raise InputError(f"{name}: expected {expected}, got {shown(value)}")
+
+
+def describe_range(kind: type, low: float | None, low_open: bool, high: float | None,
+                   unit: str = "") -> str:
+    """'a finite number > 0 and ≤ 1 (m and rad)', 'an integer ≥ 1'."""
+    def show(v: float) -> str:
+        return str(int(v)) if float(v).is_integer() and abs(v) <= 2**32 else f"{v:g}"
+
+    text = "an integer" if kind is int else "a finite number"
+    bounds = ([f"{'>' if low_open else '≥'} {show(low)}"] if low is not None else []) + \
+        ([f"≤ {show(high)}"] if high is not None else [])
+    if bounds:
+        text += " " + " and ".join(bounds)
+    return text + (f" ({unit})" if unit else "")
+
+
+def in_range(value: Any, kind: type, low: float | None, low_open: bool,
+             high: float | None) -> bool:
+    """Whether ``value`` is a ``kind`` (an int for int, not a bool; an int or a finite float for
+    float) inside the range; NaN and infinity never are."""
+    if isinstance(value, bool) or (kind is int and not isinstance(value, int)):
+        return False
+    if not isinstance(value, (int, float)) or not math.isfinite(value):
+        return False
+    if low is not None and (value < low or (low_open and value == low)):
+        return False
+    return high is None or value <= high
 
 
 def _help(meta: Mapping[str, Any], spell: Callable[[str], str]) -> str:
@@ -277,6 +307,8 @@ def click_options(command: Callable) -> Callable:
     :func:`from_cli` turns into a SolveOptions."""
     import click
 
+    from fccgrb_cli.params import Bounded
+
     for f in reversed(fields(SolveOptions)):
         meta = f.metadata
         if not meta["cli"]:
@@ -296,13 +328,9 @@ def click_options(command: Callable) -> Callable:
             kwargs |= {"multiple": True}
         elif _kind(f.name) in (tuple, str):
             kwargs["default"] = None
-        elif _kind(f.name) is int:
-            low = meta["low"]
-            kwargs |= {"type": click.IntRange(min=low, max=meta["high"]) if low is not None
-                       else int, "default": f.default,
-                       "show_default": f.default is not None}
         else:
-            kwargs |= {"type": click.FloatRange(min=meta["low"], min_open=meta["low_open"]),
+            kwargs |= {"type": Bounded(_kind(f.name), meta["low"], meta["low_open"],
+                                       meta["high"], meta["unit"]),
                        "default": f.default, "show_default": f.default is not None}
         command = click.option(*decls, **kwargs)(command)
     return command
@@ -320,43 +348,54 @@ def from_cli(values: Mapping[str, Any]) -> SolveOptions:
         elif isinstance(f.default, tuple):
             value = _coerce(f.name, value or "", f.metadata)
         out[f.name] = value
-    return SolveOptions(**out)
+    try:
+        return SolveOptions(**out)
+    except InputError as error:  # named as the command line spells it: --name, not name
+        field_name, _, rest = str(error).partition(":")
+        flags = {f.name: _flag(f) for f in fields(SolveOptions)}
+        raise InputError(f"{flags.get(field_name, field_name)}:{rest}") from None
 
 
 def _pairs(items: tuple[str, ...]) -> tuple[tuple[str, str], ...]:
-    """``--map`` values: NAME=LABEL pairs (repeatable, comma-separated) or a YAML file of them."""
+    """``--map`` values: NAME=LABEL pairs (repeatable, comma-separated) or a YAML file of them;
+    a name given twice is an error (which label would it follow?)."""
     out: list[tuple[str, str]] = []
     for item in items:
         if item.strip().lower().endswith((".yaml", ".yml")) and "=" not in item:
             out += label_map_file(item.strip())
             continue
         for pair in (p.strip() for p in item.split(",") if p.strip()):
-            if pair.count("=") != 1:
+            if pair.count("=") != 1 or not all(p.strip() for p in pair.split("=")):
                 raise InputError(f"--map: expected MODEL_NAME=FILE_LABEL or a FILE.yaml, got "
                                  f"{pair!r}")
             name, label = (p.strip() for p in pair.split("="))
             out.append((name, label))
+    names = [name for name, _ in out]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise InputError(f"--map: expected each name mapped once, got {', '.join(twice)} more "
+                         "than once")
     return tuple(out)
+
+
+def one_label_each(labels: Mapping[str, str], what: str) -> None:
+    """An InputError when two names follow one label (``labels``: name → the label it follows
+    once mapped): two markers, or two landmarks, would read the same data."""
+    by_label: dict[str, list[str]] = {}
+    for name, label in labels.items():
+        by_label.setdefault(label, []).append(name)
+    shared = {label: names for label, names in by_label.items() if len(names) > 1}
+    if shared:
+        label, names = next(iter(sorted(shared.items())))
+        raise InputError(f"--map: expected one {what} per trial label, got {' and '.join(names)} "
+                         f"on the label {label}")
 
 
 def label_map_file(path: str) -> list[tuple[str, str]]:
     """A lab's naming written once: a YAML mapping ``model marker name: trial label``."""
-    from pathlib import Path
-
-    import yaml
-
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except OSError as error:
-        raise InputError(f"{path}: cannot read the label map ({error.strerror})") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as error:
-        mark = getattr(error, "problem_mark", None)
-        where = f"line {mark.line + 1}: " if mark is not None else ""
-        raise InputError(f"{path}: {where}invalid YAML") from None
-    if not isinstance(data, dict) or not all(
-            isinstance(k, str) and isinstance(v, str) for k, v in data.items()):
+    data = load_yaml(read_text(path, "label map"), path)
+    if not isinstance(data, dict) or not data or not all(
+            isinstance(k, str) and isinstance(v, str) and k and v for k, v in data.items()):
         raise InputError(f"{path}: expected a mapping of model marker names to trial labels "
                          "(NAME: LABEL per line)")
     return list(data.items())

@@ -20,12 +20,15 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from fccgrb_cli.cells import Job, cells_folder, pending, run_jobs
 from fccgrb_cli.errors import InputError
-from fccgrb_cli.io.atomic import atomic_path
-from fccgrb_cli.options import SWEEP_KEYS, SolveOptions
+from fccgrb_cli.inputs import check_name, load_yaml, read_text, shown
+from fccgrb_cli.io.atomic import atomic_path, remove_stale
+from fccgrb_cli.io.hdf5_writer import writing
+from fccgrb_cli.io.lock import exclusive
+from fccgrb_cli.options import SEED_MAX, SWEEP_KEYS, SolveOptions, describe_range, in_range
+
+TABLES = ("table1", "table2")  # the paper's tables (fccgrb_cli/data/paper_tables.csv)
 
 # every solve option by its sweep key (``level``: the perturbation in mm), and ``points``
 CELL_KEYS = set(SWEEP_KEYS) - {"name", "map", "track"} | {"points"}
@@ -66,7 +69,7 @@ class Sweep:
 
 def _fail(source: Path, path: str, expected: str, got: Any = None) -> None:
     raise InputError(f"{source}: {path}: expected {expected}" +
-                     ("" if got is None else f", got {got!r}"))
+                     ("" if got is None else f", got {shown(got)}"))
 
 
 def _axis(key: str, value: Any) -> list:
@@ -91,17 +94,7 @@ def load_sweep(path: str | Path) -> Sweep:
     from fccgrb_cli.options import METHODS
 
     path = Path(path)
-    if path.is_dir():
-        raise InputError(f"{path}: expected a sweep config file, got a folder")
-    try:
-        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(f"{path}: sweep config not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read the sweep config ({exc.__class__.__name__})") \
-            from None
-    except yaml.YAMLError as exc:
-        raise InputError(f"{path}: invalid YAML ({str(exc).splitlines()[0]})") from None
+    doc = load_yaml(read_text(path, "sweep config"), str(path))
     if not isinstance(doc, dict):
         _fail(path, "(top level)", "a mapping", doc)
     unknown = set(doc) - TOP_KEYS
@@ -110,14 +103,27 @@ def load_sweep(path: str | Path) -> Sweep:
     for key in ("model", "cells"):
         if key not in doc:
             _fail(path, key, "this key to be present")
-    model = (path.parent / str(doc["model"])).resolve()
+    name = check_name(doc.get("name", path.stem), f"{path}: name")
+    table = doc.get("table", "")
+    if table not in ("", None, *TABLES):
+        _fail(path, "table", f"one of the paper's tables {', '.join(TABLES)}", table)
+    if not isinstance(doc["model"], str):
+        _fail(path, "model", "the path of a model file", doc["model"])
+    model = (path.parent / doc["model"]).resolve()
     if not model.is_file():
         _fail(path, "model", "an existing model file", str(doc["model"]))
     trial = doc.get("trial", {"synth": {"duration": 3.0, "rate": 100.0}})
     if not isinstance(trial, dict) or not ({"synth"} == set(trial) or {"file"} == set(trial)):
         _fail(path, "trial", "{synth: {duration, rate}} or {file: PATH}", trial)
     if "file" in trial:
-        trial = {"file": str((path.parent / str(trial["file"])).resolve())}
+        if not isinstance(trial["file"], str):
+            _fail(path, "trial.file", "the path of a trial file", trial["file"])
+        trial = {"file": str((path.parent / trial["file"]).resolve())}
+    else:
+        _check_synth(path, trial["synth"])
+    seed = doc.get("seed", 0)
+    if not in_range(seed, int, 0, False, SEED_MAX):
+        _fail(path, "seed", f"an integer from 0 to {SEED_MAX}", seed)
     variants = doc.get("variants") or {}
     if not isinstance(variants, dict) or not isinstance(variants.get("points", {}), dict):
         _fail(path, "variants", "{points: {NAME: [marker names]}}", variants)
@@ -148,14 +154,28 @@ def load_sweep(path: str | Path) -> Sweep:
                     _fail(path, f"{where}.points", "a variant named under variants.points "
                           f"({', '.join(variants['points']) or 'none'})", combo["points"])
             for key in ("tol", "level"):
-                try:
-                    combo[key] = float(combo[key])
-                except (TypeError, ValueError):
+                if isinstance(combo[key], bool) or not isinstance(combo[key], (int, float)):
                     _fail(path, f"{where}.{key}", "a number", combo[key])
+                combo[key] = float(combo[key])
             cells.append(Cell(tuple(sorted(combo.items()))))
     unique = list(dict.fromkeys(cells))
-    return Sweep(str(doc.get("name", path.stem)), str(doc.get("table", "")), path, model, trial,
-                 variants, tuple(unique))
+    sweep = Sweep(str(name), str(table or ""), path, model, trial, variants, tuple(unique))
+    for cell in sweep.cells:  # every cell's options checked before any cell runs
+        cell_options(sweep, cell)
+    return sweep
+
+
+def _check_synth(path: Path, spec: Any) -> None:
+    """trial.synth: {duration: s, rate: Hz}, finite and of a bounded number of frames."""
+    from fccgrb_cli.synth import frame_count
+
+    if not isinstance(spec, dict) or set(spec) - {"duration", "rate"}:
+        _fail(path, "trial.synth", "{duration: SECONDS, rate: HZ}", spec)
+    duration, rate = spec.get("duration", 3.0), spec.get("rate", 100.0)
+    for key, value, high in (("duration", duration, None), ("rate", rate, 1e5)):
+        if not in_range(value, float, 0.0, True, high):
+            _fail(path, f"trial.synth.{key}", describe_range(float, 0.0, True, high), value)
+    frame_count(duration, rate, f"{path}: trial.synth: duration × rate")
 
 
 @lru_cache(maxsize=4)
@@ -203,7 +223,7 @@ def cell_options(sweep: Sweep, cell: Cell) -> SolveOptions:
     values = {k: v for k, v in p.items() if k != "points" and v is not None}
     if p.get("points") is not None:
         values["track"] = tuple(sweep.variants["points"][p["points"]])
-    values["dynamics"] = bool(p.get("dynamics", False))
+    values.setdefault("dynamics", False)
     return SolveOptions.from_mapping(values | {"name": "run"}, where=f"{sweep.source}: cell")
 
 
@@ -211,9 +231,10 @@ def run_sweep(sweep: Sweep, output: Path, *, workers: int = 1, executor: Executo
               progress: Callable[[str], None] | None = None) -> tuple[int, int]:
     """Run the missing cells (sequential-mode cells over the executor or a local process pool,
     then the parallel-mode ones alone, one at a time, so that their timing is not shared), and
-    merge every cell into ``output``. Returns (cells run now, cells already done)."""
+    merge every cell into ``output``. Returns (cells run now, cells already done). The sweep
+    holds ``output``'s lock throughout (another sweep into it is refused at once), removes the
+    scratch files of cells a killed run left, and its local workers end with it."""
     store = cells_folder(output)
-    store.mkdir(parents=True, exist_ok=True)
     jobs = [Job(cell.key, store / f"{cell.key}.h5", run_cell, (sweep, cell, store),
                 alone=bool(cell.get("parallel"))) for cell in sweep.cells]
 
@@ -221,7 +242,6 @@ def run_sweep(sweep: Sweep, output: Path, *, workers: int = 1, executor: Executo
         if progress is not None:
             progress(f"{path.name} is unreadable; running that cell again")
 
-    todo = pending(jobs, _readable, forget)
     finished = 0
     started = clock.perf_counter()
 
@@ -234,8 +254,12 @@ def run_sweep(sweep: Sweep, output: Path, *, workers: int = 1, executor: Executo
             progress(f"{finished}/{len(todo)} cells ({clock.perf_counter() - started:.0f} s): "
                      f"{job.name}")
 
-    run_jobs(todo, done, workers=workers, executor=executor)
-    merge(sweep, store, output)
+    with exclusive(output, wait=0):
+        store.mkdir(exist_ok=True)
+        remove_stale(store)
+        todo = pending(jobs, _readable, forget)
+        run_jobs(todo, done, workers=workers, executor=executor)
+        merge(sweep, store, output)
     return len(todo), len(jobs) - len(todo)
 
 
@@ -255,7 +279,7 @@ def merge(sweep: Sweep, store: Path, output: Path) -> None:
     """Copy every cell's file into one HDF5 (``/cells/<key>/``), atomically."""
     import h5py
 
-    with atomic_path(output) as tmp, h5py.File(tmp, "w") as out:
+    with atomic_path(output) as tmp, writing(tmp) as out:
         out.attrs["sweep"] = sweep.name
         out.attrs["table"] = sweep.table
         out.attrs["config"] = sweep.source.read_text(encoding="utf-8")

@@ -8,6 +8,7 @@ axes), its drivers r*, u*, v*, w* given with their exact first and second time d
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -19,6 +20,19 @@ from fccgrb_cli.solvers import KinematicResult, solve_ad
 from fccgrb_cli.solvers.ad.solve import stacked_drives
 from fccgrb_cli.system import System, compile_system
 from fccgrb_cli.system.constraints import joint_neighbours, reachable
+
+FRAMES_MAX = 1_000_000  # ~2.5 h at 100 Hz; the five-bar's arrays then take ~3 GB
+
+
+def frame_count(duration: float, rate: float, what: str = "duration × rate") -> int:
+    """The frames of a synthesized trial, round(duration × rate): at least one, at most
+    ``FRAMES_MAX`` (a duration of 1e7 s would ask for every array of a billion frames)."""
+    product = duration * rate
+    frames = round(product) if math.isfinite(product) else -1
+    if not 1 <= frames <= FRAMES_MAX:
+        raise InputError(f"{what}: expected 1 to {FRAMES_MAX:,} frames, got {duration:g} s × "
+                         f"{rate:g} Hz = {product:g} frames")
+    return frames
 
 
 @dataclass(frozen=True)
@@ -83,9 +97,7 @@ def synthesize(model: Model, duration: float = 3.0, rate: float = 100.0, tol: fl
                progress: Callable[[int, int], None] | None = None) -> Synthesis:
     """Run the prescribed motion for ``duration`` s at ``rate`` Hz and read the tracked points.
     A floating base follows its prescribed motion (held at its stated pose without one)."""
-    n_frames = round(duration * rate)
-    if n_frames < 1:
-        raise InputError(f"duration {duration} s at {rate} Hz gives no frame")
+    n_frames = frame_count(duration, rate)
     time = np.arange(n_frames) / rate
     theta, theta_d, theta_dd = prescribed(model, time)
     system = compile_system(model, angles="driver")

@@ -7,6 +7,7 @@ import numpy as np
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.model import Model
+from fccgrb_cli.options import one_label_each
 
 
 def match_labels(model: Model, trial: Trial, mapping: dict[str, str]) -> list[str]:
@@ -32,6 +33,7 @@ def match_labels(model: Model, trial: Trial, mapping: dict[str, str]) -> list[st
                          f"found: {_with_closest(missing, free)}; the file's labels no marker "
                          f"follows: {shown or 'none'} (map names with --map NAME=LABEL or "
                          "--map FILE.yaml)")
+    one_label_each(dict(zip(model.marker_labels, out, strict=True)), "marker")
     return out
 
 

@@ -12,9 +12,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from fccgrb_cli.errors import InputError
-from fccgrb_cli.model import Model
+from fccgrb_cli.model import GROUND, Model
 from fccgrb_cli.system.compiled import compile_system
-from fccgrb_cli.system.constraints import floating_bases
+from fccgrb_cli.system.constraints import floating_bases, joint_neighbours, reachable
 from fccgrb_cli.system.rank import dependent_rows, rank_of
 
 
@@ -56,6 +56,36 @@ class StructureReport:
         else:
             out.append("redundant equations: none")
         return out
+
+
+def check_tracking(model: Model, report: StructureReport) -> None:
+    """For ``fccgrb check``: a model that tracks markers must track enough of them to determine
+    its mixed coordinates at the initial pose (MC Jacobian of full column rank), or no trial can
+    be solved with it. The InputError names a floating base (a body, or a group of bodies, that
+    no joint ties to the ground: only its own markers fix its 6 degrees of freedom) that lacks
+    the 3 markers it needs, else the rank. A model that tracks nothing can still be synthesized
+    (``fccgrb synth`` drives it by its angles); ``solve`` then asks for markers."""
+    if report.mc_rank == report.nq_mixed or not (model.tracked_points or
+                                                 model.tracked_vectors):
+        return
+    rank, nq = report.mc_rank, report.nq_mixed
+    neighbours = joint_neighbours(model)
+    tracked: dict[str, int] = {}
+    for tp in model.tracked_points:
+        tracked[tp.body] = tracked.get(tp.body, 0) + 1
+    seen: set[str] = {GROUND}
+    for base in floating_bases(model):
+        group = reachable(neighbours, base, seen)
+        count = sum(tracked.get(b, 0) for b in group)
+        if count < 3:
+            members = f" (with {', '.join(sorted(group - {base}))})" if len(group) > 1 else ""
+            raise InputError(
+                f"{model.source}: bodies.{base}: a floating base{members}: no joint ties it to "
+                f"the ground, so its tracked points alone fix its 6 degrees of freedom; "
+                f"expected at least 3 not on one line, got {count}")
+    raise InputError(f"{model.source}: tracking: expected tracked points and vectors that "
+                     f"determine every coordinate at the initial pose, got MC Jacobian rank "
+                     f"{rank} of {nq}")
 
 
 def analyse(model: Model) -> StructureReport:
