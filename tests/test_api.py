@@ -141,12 +141,12 @@ def test_every_option_is_a_cli_flag_and_a_sweep_key():
 
 @pytest.mark.parametrize(("changes", "message"), [
     ({"method": "newton"}, "method: expected one of"),
-    ({"tol": 0.0}, "tol: expected a value > 0"),
-    ({"perturb_mm": -1.0}, "perturb_mm: expected a value ≥ 0 mm"),
+    ({"tol": 0.0}, "tol: expected a finite number > 0"),
+    ({"perturb_mm": -1.0}, "perturb_mm: expected a finite number ≥ 0 and ≤ 1000 (mm)"),
     ({"max_iter": 2.5}, "max_iter: expected an integer"),
     ({"name": 3}, "name: expected a text"),
     ({"dynamics": 1}, "dynamics: expected true or false"),
-    ({"filter_order": 9}, "filter_order: expected a value ≤ 8"),
+    ({"filter_order": 9}, "filter_order: expected an integer ≥ 1 and ≤ 8"),
     ({"parallel_init": "all"}, "parallel_init: expected one of same, chunks, nrm"),
 ])
 def test_options_refuse_values_they_cannot_mean(changes: dict, message: str):

@@ -72,4 +72,4 @@ def test_a_malformed_map_file_is_one_line(renamed: Path, tmp_path: Path, text: s
 
 def test_a_missing_map_file_is_one_line(renamed: Path, tmp_path: Path):
     one_error_line(run_cli("solve", MODEL, renamed, "--map", tmp_path / "none.yaml", "-o",
-                           tmp_path / "x.h5"), "none.yaml", "cannot read the label map")
+                           tmp_path / "x.h5"), "none.yaml", "label map not found")

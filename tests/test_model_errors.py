@@ -22,7 +22,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from cli_helpers import runner
+from cli_helpers import one_error_line, runner
 
 from fccgrb_cli.cli import main
 
@@ -505,6 +505,8 @@ def test_distance_motions_are_not_held_to_angle_ranges(tmp_path: Path) -> None:
     make = floating_pendulum(setter("bodies", "link1", "motion", value={"rotation": [
         {"mean": 200}, {"mean": -300}, spin]}))
     model.write_text(make(), encoding="utf-8")
-    for command in ("check", "synth"):
-        result = runner().invoke(main, arguments(command, model, tmp_path))
-        assert result.exit_code == 0, result.output
+    result = runner().invoke(main, arguments("synth", model, tmp_path))
+    assert result.exit_code == 0, result.output
+    # its markers lie on the links' axes: they cannot fix the floating chain's roll, which
+    # ``check`` reports (issue 22) while ``synth``, driving the base, needs no markers
+    one_error_line(runner().invoke(main, ["check", str(model)]), "tracking", "rank")

@@ -136,7 +136,7 @@ def test_a_spill_is_deleted_with_its_last_reference(tmp_path: Path) -> None:
 def test_a_missing_results_folder_is_one_line_before_the_solve(tmp_path: Path) -> None:
     missing = tmp_path / "nowhere"
     result = run_cli("solve", FIVE_BAR, FIVE_BAR_TRIAL, "-o", missing / "results.h5")
-    one_error_line(result, str(missing), "expected a folder the results can be written to")
+    one_error_line(result, str(missing), "does not exist")
 
 
 def test_points_and_distances_by_blocks_equal_all_frames_at_once() -> None:
