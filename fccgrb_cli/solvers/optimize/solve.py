@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fccgrb_cli.blas import limit_this_process, single_threaded
+from fccgrb_cli.scratch import die_with_parent
 from fccgrb_cli.solvers.engine import use_kernels
 from fccgrb_cli.solvers.initial import initial_guess
 from fccgrb_cli.solvers.mixed import mixed_result
@@ -67,7 +68,8 @@ def _run_frames(system: System, settings: Settings, targets: np.ndarray, frames:
 _WORKER: dict = {}
 
 
-def _install(system: System, targets: np.ndarray, settings: Settings) -> None:
+def _install(system: System, targets: np.ndarray, settings: Settings, parent: int) -> None:
+    die_with_parent(parent)
     limit_this_process()
     _WORKER.update(system=system, targets=targets, settings=settings)
 
@@ -168,7 +170,7 @@ def _parallel(system: System, time: np.ndarray, targets: np.ndarray, settings: S
     records: list[FrameRecord | None] = [None] * n
     done = 0
     with ProcessPoolExecutor(max_workers=workers, initializer=_install,
-                             initargs=(system, targets, settings)) as pool:
+                             initargs=(system, targets, settings, os.getpid())) as pool:
         futures = [(task[0], pool.submit(_work, *task)) for task in tasks]
         for frames, future in futures:
             for f, record in zip(frames, future.result(), strict=True):
