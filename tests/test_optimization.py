@@ -45,6 +45,7 @@ What is checked, each against quantities recomputed here rather than read from t
 from __future__ import annotations
 
 import multiprocessing
+import os
 import pickle
 import re
 import sys
@@ -505,7 +506,8 @@ def test_workers_receive_the_compiled_system(monkeypatch):
     assert len(calls) == 1
     kwargs = calls[0]
     assert kwargs["initializer"] is optimize._install
-    installed_system, installed_targets, settings = kwargs["initargs"]
+    installed_system, installed_targets, settings, parent = kwargs["initargs"]
+    assert parent == os.getpid()  # the workers end with this process (fccgrb_cli.scratch)
     assert installed_system is system()
     assert installed_targets is targets
     assert settings == Settings("cno-sqp", parallel=True, workers=2, init="chunks")

@@ -29,7 +29,7 @@ def command() -> list[str]:
     if script.exists():
         return [str(script)]
     return [sys.executable, "-c", "import sys; sys.argv[0] = 'fccgrb'; "
-            "from fccgrb_cli.cli import main; main()"]
+            "from fccgrb_cli.entry import run; run()"]
 
 
 def _run(args: list[str], cwd: Path) -> None:
