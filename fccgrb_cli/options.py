@@ -10,7 +10,6 @@ options that change the model (its bodies' form, the tracked markers).
 
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields, replace
@@ -18,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.inputs import check_name, load_yaml, read_text, shown
+from fccgrb_cli.ranges import describe_range, in_range
 
 if TYPE_CHECKING:
     from fccgrb_cli.model import Model
@@ -251,33 +251,6 @@ def _check(name: str, value: Any, meta: Mapping[str, Any]) -> None:
     if not in_range(value, kind, *bounds):
         expected = describe_range(kind, *bounds, meta["unit"])
         raise InputError(f"{name}: expected {expected}, got {shown(value)}")
-
-
-def describe_range(kind: type, low: float | None, low_open: bool, high: float | None,
-                   unit: str = "") -> str:
-    """'a finite number > 0 and ≤ 1 (m and rad)', 'an integer ≥ 1'."""
-    def show(v: float) -> str:
-        return str(int(v)) if float(v).is_integer() and abs(v) <= 2**32 else f"{v:g}"
-
-    text = "an integer" if kind is int else "a finite number"
-    bounds = ([f"{'>' if low_open else '≥'} {show(low)}"] if low is not None else []) + \
-        ([f"≤ {show(high)}"] if high is not None else [])
-    if bounds:
-        text += " " + " and ".join(bounds)
-    return text + (f" ({unit})" if unit else "")
-
-
-def in_range(value: Any, kind: type, low: float | None, low_open: bool,
-             high: float | None) -> bool:
-    """Whether ``value`` is a ``kind`` (an int for int, not a bool; an int or a finite float for
-    float) inside the range; NaN and infinity never are."""
-    if isinstance(value, bool) or (kind is int and not isinstance(value, int)):
-        return False
-    if not isinstance(value, (int, float)) or not math.isfinite(value):
-        return False
-    if low is not None and (value < low or (low_open and value == low)):
-        return False
-    return high is None or value <= high
 
 
 def _help(meta: Mapping[str, Any], spell: Callable[[str], str]) -> str:

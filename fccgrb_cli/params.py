@@ -12,7 +12,7 @@ from typing import Any
 
 import click
 
-from fccgrb_cli.options import describe_range, in_range
+from fccgrb_cli.ranges import describe_range, in_range
 
 
 class Bounded(click.ParamType):

@@ -26,7 +26,8 @@ from fccgrb_cli.inputs import check_name, load_yaml, read_text, shown
 from fccgrb_cli.io.atomic import atomic_path, remove_stale
 from fccgrb_cli.io.hdf5_writer import writing
 from fccgrb_cli.io.lock import exclusive
-from fccgrb_cli.options import SEED_MAX, SWEEP_KEYS, SolveOptions, describe_range, in_range
+from fccgrb_cli.options import SEED_MAX, SWEEP_KEYS, SolveOptions
+from fccgrb_cli.ranges import describe_range, in_range
 
 TABLES = ("table1", "table2")  # the paper's tables (fccgrb_cli/data/paper_tables.csv)
 
