@@ -161,6 +161,7 @@ class AngularCoordinate:
     motion: Motion | None = None
     clinical_sign: int | None = None
     axis: tuple[str, str] | None = None
+    clinical_range: tuple[float, float] | None = None
 
     @property
     def full(self) -> bool:
@@ -194,6 +195,7 @@ class DistanceCoordinate:
     axis: str
     motion: Motion | None = None
     clinical_sign: None = None
+    clinical_range: None = None
 
     @property
     def kind(self) -> str:
@@ -242,6 +244,19 @@ class PlateAssignment:
 
 
 @dataclass(frozen=True)
+class CalibrationRecord:
+    """What ``fccgrb calibrate`` wrote of a personalized model (its ``calibrated`` key): the
+    trial and frame indices [A, B) it came from, how closely the segment frames carried the
+    tracked markers over those frames (mean and largest distance of a marker from its mean
+    place in its segment, mm) and the implausibilities it warned of (empty when none)."""
+
+    trial: str
+    frames: tuple[int, int]
+    fit_mm: tuple[float, float]
+    warnings: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
 class Model:
     """A validated multibody model. Build it with :func:`fccgrb_cli.model.load_model`."""
 
@@ -260,6 +275,15 @@ class Model:
     landmarks: FrozenMap = field(default_factory=FrozenMap)
     source: str = "<model>"
     text: str = ""
+    calibrated: CalibrationRecord | None = None
+
+    @property
+    def template(self) -> bool:
+        """A model that names calibration landmarks but was not personalized by ``fccgrb
+        calibrate`` (no ``calibrated`` record, nor the header calibrate wrote before there was
+        one): its segments are a generic adult's."""
+        return bool(self.landmarks) and self.calibrated is None and \
+            "personalized by `fccgrb calibrate`" not in self.text
 
     @property
     def has_inertia(self) -> bool:

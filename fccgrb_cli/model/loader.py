@@ -22,6 +22,7 @@ from fccgrb_cli.model.elements import (
     JOINTS_WITH_POINTS,
     AngularCoordinate,
     Body,
+    CalibrationRecord,
     DistanceCoordinate,
     FrozenMap,
     Ground,
@@ -38,6 +39,7 @@ from fccgrb_cli.model.elements import (
     floating_bases,
 )
 from fccgrb_cli.model.motion import BaseMotion, Motion
+from fccgrb_cli.model.ranges import physiological_range
 
 UNIT_TOL = 1e-6
 LARGEST = 1e9          # the largest magnitude of any number in a model file
@@ -45,7 +47,7 @@ FREQUENCY_MAX = 1e4    # Hz: a motion term's frequency (its acceleration ∝ fre
 BODY_AXES = {"u": (1.0, 0.0, 0.0), "v": (0.0, 1.0, 0.0), "w": (0.0, 0.0, 1.0)}
 GROUND_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 TOP_KEYS = {"name", "units", "gravity", "form", "ground", "bodies", "joints", "angles",
-            "distances", "tracking", "loads", "subject", "calibration"}
+            "distances", "tracking", "loads", "subject", "calibration", "calibrated"}
 
 
 class _UniqueKeyLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):  # type: ignore[misc]
@@ -397,8 +399,9 @@ def _angles(r: _Reader, doc: dict, names: _Names, scale: float, seen: set[str]
         motion = (_motion(r, spec["motion"], f"{path}.motion", scale, scale,
                           "full angle" if axis else "angle")
                   if "motion" in spec else None)
-        angles.append(AngularCoordinate(name, body1, vec1, body2, vec2, motion,
-                                        _clinical_sign(r, spec, path), axis))
+        sign, extent = _clinical(r, spec, path, name)
+        angles.append(AngularCoordinate(name, body1, vec1, body2, vec2, motion, sign, axis,
+                                        extent))
     return tuple(angles)
 
 
@@ -465,15 +468,27 @@ def _angle_axis(r: _Reader, spec: dict, path: str, names: _Names,
     return body, vector
 
 
-def _clinical_sign(r: _Reader, spec: dict, path: str) -> int | None:
+def _clinical(r: _Reader, spec: dict, path: str, name: str
+              ) -> tuple[int | None, tuple[float, float] | None]:
+    """The clinical sign and the physiological range (deg): ``range_deg: [min, max]`` where
+    given, else the table's for the angle's name (model/ranges.py)."""
     if "clinical" not in spec:
-        return None
+        return None, None
     clinical = r.mapping(spec["clinical"], f"{path}.clinical", required=frozenset({"sign"}),
-                         allowed={"sign"})
+                         allowed={"sign", "range_deg"})
     sign = clinical["sign"]
     if isinstance(sign, bool) or sign not in (1, -1):
         r.fail(f"{path}.clinical.sign", "1 or -1 (clinical angle = sign·(θ − 90 deg))", sign)
-    return int(sign)
+    if "range_deg" not in clinical:
+        return int(sign), physiological_range(name)
+    key = f"{path}.clinical.range_deg"
+    extent = clinical["range_deg"]
+    if not isinstance(extent, list) or len(extent) != 2:
+        r.fail(key, "[min, max] in degrees of the clinical angle", extent)
+    low, high = (r.number(v, f"{key}[{k}]") for k, v in enumerate(extent))
+    if not low < high:
+        r.fail(key, "min < max", extent)
+    return int(sign), (low, high)
 
 
 def _weight(r: _Reader, spec: dict, path: str) -> float | None:
@@ -562,6 +577,28 @@ def _calibration(r: _Reader, doc: dict) -> FrozenMap:
                     r.string(v, f"calibration.landmarks.{k}") for k, v in landmarks.items()})
 
 
+def _calibrated(r: _Reader, doc: dict) -> CalibrationRecord | None:
+    """The record ``fccgrb calibrate`` writes (``calibrated: {trial, frames, fit_mm,
+    warnings}``), or None."""
+    if "calibrated" not in doc:
+        return None
+    spec = r.mapping(doc["calibrated"], "calibrated",
+                     required=frozenset({"trial", "frames", "fit_mm"}),
+                     allowed={"trial", "frames", "fit_mm", "warnings"})
+    frames = spec["frames"]
+    if not isinstance(frames, list) or len(frames) != 2 or \
+            not all(isinstance(f, int) and not isinstance(f, bool) for f in frames):
+        r.fail("calibrated.frames", "[A, B], frame indices", frames)
+    fit = spec["fit_mm"]
+    if not isinstance(fit, list) or len(fit) != 2:
+        r.fail("calibrated.fit_mm", "[mean, max] in mm", fit)
+    mean, largest = (r.number(v, f"calibrated.fit_mm[{k}]") for k, v in enumerate(fit))
+    warnings = tuple(r.string(w, f"calibrated.warnings[{k}]")
+                     for k, w in enumerate(r.items(spec.get("warnings"), "calibrated.warnings")))
+    return CalibrationRecord(r.string(str(spec["trial"]), "calibrated.trial"),
+                             (int(frames[0]), int(frames[1])), (mean, largest), warnings)
+
+
 def parse_model(text: str, source: str = "<model>") -> Model:
     """Validate a model given as YAML text; ``source`` names it in error messages."""
     doc = load_yaml(text, source, _UniqueKeyLoader)
@@ -599,6 +636,7 @@ def parse_model(text: str, source: str = "<model>") -> Model:
         landmarks=_calibration(r, doc),
         source=source,
         text=text,
+        calibrated=_calibrated(r, doc),
     )
 
 

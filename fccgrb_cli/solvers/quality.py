@@ -2,8 +2,9 @@
 
 A solver's own verdict (converged or not) says nothing of a frame that landed on the other
 assembly branch, of a method whose per-frame optimum is not unique (goal attainment's minimax on
-noisy markers) and so jumps from frame to frame, or of a topology left broken. Every run is
-checked after its solve, and each frame gets a bit mask:
+noisy markers) and so jumps from frame to frame, of a topology left broken, of markers that
+cannot determine the model, of a model that does not fit its markers, or of angles no person
+takes. Every run is checked after its solve, and each frame gets a bit mask (``FRAME_BITS``):
 
 * ``UNCONVERGED``: the solver did not converge (or the frame was left unsolved);
 * ``TOPOLOGY``: a method that keeps the model rigid (AD, CNO, MO) left max |Φ_top| above
@@ -25,24 +26,94 @@ checked after its solve, and each frame gets a bit mask:
   frames between are found by re-solving from a trusted neighbour (the parallel modes' repair,
   ``solvers/optimize/``). A frame whose neighbour jumps is flagged too: its central
   differences include the jump.
+* ``NO_DATA``: the markers present cannot determine the model (left unsolved, by every method);
+* ``SINGULAR``: the classical model's Φ_q is near a singular position (solvers/conditioning.py),
+  or a paper-style angle (s1·s2 = cos θ) is within ``FLAT_DEG`` of 0° or 180°, where the
+  relation loses θ's sign and the mixed Jacobian its rank;
+* ``BRANCH``: a paper-style angle left (0°, 180°) — sin θ < 0, the mirror image whose moments
+  have the opposite sign — or the classical model could not be solved from the mixed solution's
+  configuration and may sit on another assembly branch (dynamics/convert.py);
+* ``ANGLE_RANGE``: a clinical angle outside its physiological or declared range
+  (model/ranges.py);
+* ``POOR_FIT``: the model's points are far from the markers they follow: the frame's mean
+  distance above ``FIT_MEAN_MM`` or one marker's above ``FIT_MARKER_MM`` (plus the largest
+  artefact the run added itself, √3 times ``--perturb``); methods that fit the markers only
+  (the AD baseline's pre-analysis is its own);
+* ``CALIBRATION``: the model's calibration is implausible (``fccgrb calibrate`` warned) or the
+  model is an uncalibrated template solved on a real trial (every frame).
 
-A trusted frame has mask 0. ``converged`` in the results file means trusted.
+A trusted frame has mask 0. ``converged`` in the results file means trusted. Joint moments carry
+their own mask per frame and joint (``MOMENT_BITS``, dynamics/trust.py): where the kinematics
+are trusted but the moment is not.
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
+import json
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from fccgrb_cli.solvers.result import KinematicResult
 
-UNCONVERGED, TOPOLOGY, JUMP = 1, 2, 4
-BITS = {"unconverged": UNCONVERGED, "topology": TOPOLOGY, "jump": JUMP}
+FLAG_DTYPE = np.uint16
+(UNCONVERGED, TOPOLOGY, JUMP, NO_DATA, SINGULAR, BRANCH, ANGLE_RANGE, POOR_FIT,
+ CALIBRATION) = (1 << k for k in range(9))
 TOPOLOGY_PROMISE = 1e-6
 JUMP_RATIO = 10.0
 JUMP_FLOOR = 1e-5
 EXACT_TOPOLOGY = ("ad", "cno", "mo")
+FIT_MEAN_MM = 20.0
+FIT_MARKER_MM = 50.0
+FLAT_DEG = 5.0
+
+
+@dataclass(frozen=True)
+class Bit:
+    """One reason a frame (or a frame's moment) is not trusted: its name in the results file,
+    its value in the mask, and what it means, thresholds included."""
+
+    name: str
+    value: int
+    meaning: str
+
+
+FRAME_BITS = (
+    Bit("unconverged", UNCONVERGED, "the solver did not converge, or the frame was left "
+        "unsolved"),
+    Bit("topology", TOPOLOGY, f"max |Φ_top| above {TOPOLOGY_PROMISE:g} m for a method that holds "
+        "the topology (AD, CNO, MO)"),
+    Bit("jump", JUMP, f"the model points' fourth difference more than {JUMP_RATIO:g}× the "
+        "markers' (another assembly branch, or a per-frame optimum that is not unique), or a "
+        "neighbour's"),
+    Bit("no_data", NO_DATA, "the markers present cannot determine the model"),
+    Bit("singular", SINGULAR, "near a singular position: the classical model's σ_min/σ_max "
+        "under 1/10 of its well-conditioned value, or an angle (s1·s2 = cos θ) within "
+        f"{FLAT_DEG:g}° of 0° or 180°"),
+    Bit("branch", BRANCH, "an angle (s1·s2 = cos θ) outside (0°, 180°), or the classical model "
+        "not solved from the mixed solution's assembly branch"),
+    Bit("angle_range", ANGLE_RANGE, "a clinical angle outside its physiological or declared "
+        "range (range_deg)"),
+    Bit("poor_fit", POOR_FIT, f"mean model–marker distance above {FIT_MEAN_MM:g} mm or one "
+        f"marker's above {FIT_MARKER_MM:g} mm (plus the run's own added artefact)"),
+    Bit("calibration", CALIBRATION, "an implausible calibration, or an uncalibrated template "
+        "on a real trial"),
+)
+BITS = {bit.name: bit.value for bit in FRAME_BITS}
+
+
+def bit_summary(bits: tuple[Bit, ...], flags: np.ndarray, details: dict[str, str] | None = None
+                ) -> str:
+    """The bits as JSON for the results file (``flags`` attribute ``bits``): per bit its name,
+    value, meaning, how many entries of ``flags`` carry it (frames, or frame × joint entries),
+    the first frame and this run's explanation (``details`` by name, else '')."""
+    out = []
+    for bit in bits:
+        hit = np.flatnonzero((np.asarray(flags) & bit.value).reshape(len(flags), -1).any(axis=1))
+        out.append({"name": bit.name, "value": bit.value, "meaning": bit.meaning,
+                    "frames": len(hit), "first": int(hit[0]) if len(hit) else -1,
+                    "detail": (details or {}).get(bit.name, "")})
+    return json.dumps(out, ensure_ascii=False)
 
 
 def roughness(points: np.ndarray) -> np.ndarray:
@@ -79,10 +150,10 @@ def jump_ratio(points: np.ndarray, markers: np.ndarray) -> np.ndarray:
 
 def flags_of(method: str, converged: np.ndarray, phi_top_max: np.ndarray, points: np.ndarray,
              markers: np.ndarray) -> np.ndarray:
-    """The bit mask of every frame (see the module's docstring) of a run by ``method``, from
-    the solver's verdict, max |Φ_top|, the model points and the input markers (frames × k × 3)
-    they follow."""
-    flags = np.where(converged, 0, UNCONVERGED).astype(np.uint8)
+    """The solver's bits (unconverged, topology, jump; see the module's docstring) of every
+    frame of a run by ``method``, from the solver's verdict, max |Φ_top|, the model points and
+    the input markers (frames × k × 3) they follow."""
+    flags = np.where(converged, 0, UNCONVERGED).astype(FLAG_DTYPE)
     if method.startswith(EXACT_TOPOLOGY):
         flags[~(phi_top_max <= TOPOLOGY_PROMISE) & converged] |= TOPOLOGY
     if method != "ad":
@@ -94,14 +165,107 @@ def flags_of(method: str, converged: np.ndarray, phi_top_max: np.ndarray, points
     return flags
 
 
-def frame_flags(result: KinematicResult, points: np.ndarray,
-                markers: np.ndarray) -> np.ndarray:
-    """The bit mask of every frame of a solved run."""
-    return flags_of(result.method, result.converged, result.phi_top_max, points, markers)
+@dataclass(frozen=True)
+class Finding:
+    """Frames one check flags, and this run's explanation of them (empty when none)."""
+
+    frames: np.ndarray
+    detail: str = ""
 
 
-def describe(flags: np.ndarray, time: np.ndarray, method: str) -> list[str]:
-    """One warning per kind of flag, naming how many frames and the first one."""
+def poor_fit(distances: np.ndarray, labels: tuple[str, ...], added_m: float = 0.0,
+             static_mm: tuple[float, float] | None = None) -> Finding:
+    """Frames whose model points are far from their markers (``distances``: frames × markers,
+    m, NaN where a marker is missing): the frame's mean above ``FIT_MEAN_MM`` or a marker's
+    above ``FIT_MARKER_MM``, each plus √3·``added_m`` (the largest artefact a run added itself:
+    its markers are that far from any model). The explanation names the markers furthest from
+    the model over the flagged frames, and the calibration's own fit (``static_mm``: mean and
+    largest, mm) when the model records it."""
+    mm = 1e3 * np.asarray(distances, dtype=float)
+    n = len(mm)
+    if not mm.size:
+        return Finding(np.zeros(n, dtype=bool))
+    allowance = 1e3 * np.sqrt(3.0) * added_m
+    seen = np.isfinite(mm).any(axis=1)
+    mean = np.where(seen, np.nanmean(np.where(np.isfinite(mm), mm, 0.0), axis=1)
+                    * mm.shape[1] / np.maximum(np.isfinite(mm).sum(axis=1), 1), np.nan)
+    largest = _nanmax(mm, axis=1)
+    bad = seen & ((mean > FIT_MEAN_MM + allowance) | (largest > FIT_MARKER_MM + allowance))
+    if not bad.any():
+        return Finding(bad)
+    per_marker = np.array([np.nanmean(col) if np.isfinite(col).any() else -np.inf
+                           for col in mm[bad].T])
+    worst = np.argsort(-per_marker)[:3]
+    names = ", ".join(f"{labels[k]} {per_marker[k]:.0f} mm" for k in worst
+                      if np.isfinite(per_marker[k]))
+    static = (f"; the calibration's own markers were {static_mm[0]:.1f} mm (mean) from their "
+              f"places" if static_mm is not None else "")
+    return Finding(bad, f"mean distance up to {np.nanmax(mean[bad]):.0f} mm, largest "
+                        f"{np.nanmax(largest[bad]):.0f} mm; furthest markers (mean over these "
+                        f"frames): {names}{static}")
+
+
+def out_of_range(clinical: np.ndarray, names: tuple[str, ...],
+                 ranges: tuple[tuple[float, float] | None, ...]) -> Finding:
+    """Frames where a clinical angle (frames × angles, deg) leaves its range (deg; None: not
+    checked); the explanation names the angle furthest outside and its values."""
+    bad = np.zeros(len(clinical), dtype=bool)
+    worst, detail = 0.0, ""
+    for k, extent in enumerate(ranges):
+        if extent is None:
+            continue
+        low, high = extent
+        values = clinical[:, k]
+        outside = np.isfinite(values) & ((values < low) | (values > high))
+        if not outside.any():
+            continue
+        bad |= outside
+        excess = float(np.max(np.maximum(low - values[outside], values[outside] - high)))
+        if excess > worst:
+            worst = excess
+            detail = (f"{names[k]} reaches {np.nanmin(values[outside]):.4g}…"
+                      f"{np.nanmax(values[outside]):.4g}° on {int(outside.sum())} frames, "
+                      f"outside its range {low:g}…{high:g}°")
+    return Finding(bad, detail)
+
+
+def flat_or_mirrored(theta: np.ndarray, names: tuple[str, ...], half: np.ndarray
+                     ) -> tuple[Finding, Finding]:
+    """Paper-style angles (``half``: s1·s2 = cos θ, no sign of their own) within ``FLAT_DEG`` of
+    0° or 180° (singular) and outside (0°, 180°) (mirrored: sin θ < 0, the other branch of the
+    cosine, where the conjugate moment changes sign)."""
+    n = len(theta)
+    if not half.any():
+        return Finding(np.zeros(n, dtype=bool)), Finding(np.zeros(n, dtype=bool))
+    s = np.sin(theta[:, half])
+    known = np.isfinite(s)
+    flat = known & (np.abs(s) < np.sin(np.radians(FLAT_DEG)))
+    mirrored = known & (s < 0) & ~flat
+    half_names = [name for name, h in zip(names, half, strict=True) if h]
+
+    def finding(mask: np.ndarray, what: str) -> Finding:
+        frames = mask.any(axis=1)
+        if not frames.any():
+            return Finding(frames)
+        k = int(np.argmax(mask.sum(axis=0)))
+        return Finding(frames, f"{half_names[k]} {what} on {int(mask[:, k].sum())} frames")
+
+    return (finding(flat, f"within {FLAT_DEG:g}° of 0° or 180°"),
+            finding(mirrored, "outside (0°, 180°): sin θ < 0"))
+
+
+def combined(flags: np.ndarray, found: dict[int, Finding]) -> np.ndarray:
+    """``flags`` with each finding's bit set on its frames."""
+    out = np.asarray(flags, dtype=FLAG_DTYPE).copy()
+    for bit, finding in found.items():
+        out[np.asarray(finding.frames, dtype=bool)] |= bit
+    return out
+
+
+def describe(flags: np.ndarray, time: np.ndarray, method: str,
+             details: dict[int, str] | None = None) -> list[str]:
+    """One warning per kind of flag (the solver's own failures are reported by the solver),
+    naming how many frames, the first one and, where a check gave one, its explanation."""
     out = []
     reasons = {
         TOPOLOGY: f"the topology is violated by more than {TOPOLOGY_PROMISE:g} m, which "
@@ -109,20 +273,41 @@ def describe(flags: np.ndarray, time: np.ndarray, method: str) -> list[str]:
         JUMP: "the model moves more roughly than its markers (fourth differences more than "
               f"{JUMP_RATIO:g}× the markers'): a frame on another assembly branch, or a "
               "per-frame optimum that is not unique",
+        NO_DATA: "the markers present cannot determine the model; left unsolved",
+        SINGULAR: "the mechanism is near a singular position, where the classical model "
+                  "driven by the angles loses rank and joint moments blow up",
+        BRANCH: "another assembly branch: the moments conjugate to the angles change sign "
+                "there",
+        ANGLE_RANGE: "a clinical angle leaves its physiological range: not a posture a "
+                     "person takes (mislabelled or missing markers, a wrong calibration)",
+        POOR_FIT: "the model fits its markers far worse than a calibrated model does "
+                  "(mislabelled or moved markers, a wrong or uncalibrated model)",
+        CALIBRATION: "the model's calibration is implausible or missing",
     }
     for bit, reason in reasons.items():
         hit = np.flatnonzero(flags & bit)
         if len(hit):
             f = int(hit[0])
+            extra = (details or {}).get(bit, "")
             out.append(f"{len(hit)} frames flagged (first: frame index {f}, t = {time[f]:.3f} s):"
-                       f" {reason}; they are not counted as converged, and velocities, "
-                       "accelerations and joint moments there are not to be trusted")
+                       f" {reason}{'; ' + extra if extra else ''}; they are not counted as "
+                       "converged, and velocities, accelerations and joint moments there are "
+                       "not to be trusted")
     return out
 
 
-def assessed(result: KinematicResult, points: np.ndarray,
-             markers: np.ndarray) -> KinematicResult:
-    """``result`` with its frames' flags and a warning for each kind found."""
-    flags = frame_flags(result, points, markers)
-    return replace(result, flags=flags,
-                   messages=result.messages + tuple(describe(flags, result.time, result.method)))
+def frame_flags(result: KinematicResult, points: np.ndarray,
+                markers: np.ndarray) -> np.ndarray:
+    """The solver's bits of every frame of a solved run."""
+    return flags_of(result.method, result.converged, result.phi_top_max, points, markers)
+
+
+def assessed(result: KinematicResult, points: np.ndarray, markers: np.ndarray,
+             found: dict[int, Finding] | None = None) -> KinematicResult:
+    """``result`` with its frames' flags (the solver's bits and the ``found`` ones, by bit)
+    and a warning for each kind found."""
+    found = found or {}
+    flags = combined(frame_flags(result, points, markers), found)
+    details = {bit: f.detail for bit, f in found.items() if f.detail}
+    return replace(result, flags=flags, messages=result.messages + tuple(
+        describe(flags, result.time, result.method, details)))
