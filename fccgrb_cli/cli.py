@@ -437,6 +437,9 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
     if mass is None:
         click.echo("fccgrb: warning: no --mass: the model has no inertia (inverse dynamics "
                    "skipped)", err=True)
+    for warning in result.warnings:
+        click.echo(f"fccgrb: warning: {output}: implausible calibration: {warning}; every "
+                   "frame solved with this model is flagged", err=True)
 
 
 @main.command("perturb")

@@ -39,6 +39,7 @@ from fccgrb_cli.anatomy.frames import (
     shank_frames,
     thigh_frames,
 )
+from fccgrb_cli.anatomy.plausibility import implausibilities
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.model import Model
@@ -53,6 +54,15 @@ DAVIS_LANDMARKS = ("right_asis", "left_asis", "sacrum", *(
         "thigh_wand", "lateral_epicondyle", "shank_wand", "lateral_malleolus", "heel",
         "second_metatarsal")))
 METHODS = {"anatomical": LANDMARKS, "davis": DAVIS_LANDMARKS}
+# the landmarks each segment's frame is built from, by method (named by calibrate's warnings)
+BUILDERS = {
+    "anatomical": {"thigh": ("lateral_epicondyle", "medial_epicondyle"),
+                   "shank": ("lateral_malleolus", "medial_malleolus"),
+                   "foot": ("heel", "first_metatarsal", "fifth_metatarsal")},
+    "davis": {"thigh": ("thigh_wand", "lateral_epicondyle"),
+              "shank": ("shank_wand", "lateral_malleolus"),
+              "foot": ("heel", "second_metatarsal")},
+}
 BODIES = ("pelvis", *(f"{seg}_{s}" for s in SIDES for seg in ("thigh", "shank", "foot")))
 PELVIS_LENGTH_PER_WIDTH = 0.6  # de Leva's lower-trunk length (145.7 mm) over a typical ASIS width
 
@@ -94,7 +104,10 @@ class Measurements:
 @dataclass(frozen=True)
 class Calibration:
     """The personalized model text and what was measured (metres, kg); ``method`` is
-    'anatomical' or 'davis', ``measurements`` the ones Davis' method used (else None)."""
+    'anatomical' or 'davis', ``measurements`` the ones Davis' method used (else None);
+    ``fit_mm``: how far the tracked markers strayed from their mean place in their segment over
+    the frames (mean, largest; mm); ``warnings``: what is implausible (anatomy/plausibility.py),
+    each naming the markers to check."""
 
     text: str
     frames: tuple[int, int]
@@ -104,6 +117,8 @@ class Calibration:
     mass: float | None
     method: str = "anatomical"
     measurements: Measurements | None = None
+    fit_mm: tuple[float, float] = (float("nan"), float("nan"))
+    warnings: tuple[str, ...] = ()
 
 
 def calibration_method(model: Model) -> str:
@@ -317,10 +332,20 @@ def calibrate(model: Model, trial: Trial, frames: tuple[int, int] | None = None,
         com = 0.5 * (points["pelvis"]["HJC_r"] + points["pelvis"]["HJC_l"])
         inertia["pelvis"] = {"mass": _significant(m), "com": _round(com, 5),
                              "inertia": _round(moments, 7)}
+    strayed = []
     for tp in model.tracked_points:
         if tp.body in seg:
-            points[tp.body][tp.point] = seg[tp.body].mean_local(
+            local = seg[tp.body].local(
                 _marker(trial, tp.marker, window, f"{model.source} tracking.points", mapping))
+            points[tp.body][tp.point] = np.nanmean(local, axis=0)
+            strayed.append(np.linalg.norm(local - points[tp.body][tp.point], axis=1))
+    fit = (1e3 * float(np.mean(strayed)), 1e3 * float(np.max(strayed))) if strayed else \
+        (float("nan"), float("nan"))
+    builders = {f"{segment}_{s}": ", ".join(
+        mapping.get(model.landmarks[f"{side}_{name}"], model.landmarks[f"{side}_{name}"])
+        for name in names) for s, side in SIDES.items()
+        for segment, names in BUILDERS[method].items()}
+    warnings = implausibilities(seg, lengths, builders)
     for body in BODIES:
         spec = doc["bodies"][body]
         spec["points"] = {**spec.get("points", {}),
@@ -335,6 +360,8 @@ def calibrate(model: Model, trial: Trial, frames: tuple[int, int] | None = None,
     doc.pop("subject", None)
     if mass is not None:
         doc["subject"] = {"mass": mass}
+    doc["calibrated"] = {"trial": str(trial.path), "frames": [start, stop],
+                         "fit_mm": [round(fit[0], 3), round(fit[1], 3)], "warnings": warnings}
     header = (f"# {doc.get('name', 'model')} personalized by `fccgrb calibrate` from {trial.path}, "
               f"frame indices {start}:{stop}\n# from the template {model.source}. Hip centres: "
               "Harrington et al. (2007); "
@@ -343,4 +370,5 @@ def calibrate(model: Model, trial: Trial, frames: tuple[int, int] | None = None,
               + "inertia: de Leva (1996)"
               f"{'' if mass is not None else ' (not computed: no --mass)'}.\n")
     text = header + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=100)
-    return Calibration(text, (start, stop), lengths, width, depth, mass, method, measurements)
+    return Calibration(text, (start, stop), lengths, width, depth, mass, method, measurements,
+                       fit, tuple(warnings))
