@@ -189,6 +189,8 @@ def synth(model: str, output: str, duration: float, rate: float, units: str, for
     click.echo(f"AD analysis: {r.iterations.mean():.2f} iterations/frame, "
                f"{1e3 * r.time_s.mean():.3f} ms/frame, max ‖Φ‖ {r.phi_norm.max():.2e}, "
                + _coordinate_ranges(loaded, r.theta))
+    for warning in s.warnings:
+        click.echo(f"fccgrb: warning: {warning}", err=True)
 
 
 def _coordinate_ranges(model: Model, theta: np.ndarray) -> str:

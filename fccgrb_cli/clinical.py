@@ -51,16 +51,18 @@ def clinical_results(model: Model, theta: np.ndarray, joint_moments: np.ndarray 
     signs = np.array([model.angles[k].clinical_sign for k in index], dtype=float)
     angles = np.column_stack([model.angles[k].clinical(theta[:, k]) for k in index])
     moments = None if joint_moments is None else joint_moments[:, index] * signs
-    contact = tuple(_distal_contact(model, model.angles[k]) for k in index)
+    contact = tuple(distal_contact(model, model.angles[k]) for k in index)
     return ClinicalResults(tuple(model.angles[k].name for k in index), angles, moments,
                            model.subject_mass, dict(stance or {}), contact)
 
 
-def _distal_contact(model: Model, angle) -> str | None:
+def distal_contact(model: Model, angle) -> str | None:
     """The contact body on the far side of an angle's joint (reached from its second body
-    without crossing its first), or None."""
+    without crossing its first), or None: a listed contact body (``loads.contact``) or a body
+    a force plate is assigned to."""
     beyond = reachable(joint_neighbours(model), angle.body2, {angle.body1})
-    return next((body for body in model.contact_bodies if body in beyond), None)
+    bodies = (*model.contact_bodies, *(p.body for p in model.force_plates))
+    return next((body for body in bodies if body in beyond), None)
 
 
 def clinical_table(c: ClinicalResults) -> str:

@@ -21,3 +21,30 @@ def lowpass(signal: np.ndarray, rate: float, cutoff: float, order: int = 2) -> n
         raise InputError(f"--filter-cutoff: the trial has {len(signal)} frames; the filter needs "
                          f"more than {pad}")
     return filtfilt(b, a, signal, axis=0)
+
+
+
+NOISE_BAND_HZ = 15.0
+NOISE_FLOOR = 1e-6  # rad (m) per frame²: second differences this small are rounding, not noise
+
+
+def noise_share(signal: np.ndarray, rate: float, above: float = NOISE_BAND_HZ) -> np.ndarray:
+    """Per column of ``signal`` (frames × columns, NaN rows where unknown), the share of its
+    second differences' RMS (∝ the acceleration) above ``above`` Hz (at most 0.3 × the sampling
+    rate), over every stretch of known rows long enough for the filter: movement has next to
+    nothing there (gait: under 10 Hz), differentiated marker noise most of its power. Zero where
+    the high part's RMS is under ``NOISE_FLOOR`` (a crank at constant speed: its second
+    differences are rounding); NaN when no stretch is long enough."""
+    from fccgrb_cli.stretches import runs
+
+    high = np.zeros(signal.shape[1])
+    total = np.zeros(signal.shape[1])
+    for a, b in runs(np.isfinite(signal).all(axis=1), 16):
+        second = np.diff(signal[a:b], n=2, axis=0)
+        rest = second - lowpass(second, rate, min(above, 0.3 * rate), 2)
+        high += np.sum(rest**2, axis=0)
+        total += np.sum(second**2, axis=0)
+    count = max(sum(b - a - 2 for a, b in runs(np.isfinite(signal).all(axis=1), 16)), 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share = np.where(total > 0, np.sqrt(high / total), np.nan)
+    return np.where(np.sqrt(high / count) < NOISE_FLOOR, 0.0, share)

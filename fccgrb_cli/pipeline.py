@@ -13,10 +13,17 @@ from pathlib import Path
 
 import numpy as np
 
+from fccgrb_cli.assessment import (
+    curve_trust,
+    describe_moments,
+    dynamic_findings,
+    kinematic_findings,
+    moment_flags,
+)
 from fccgrb_cli.clinical import clinical_results
 from fccgrb_cli.dynamics.convert import Dynamics, classical_dynamics
 from fccgrb_cli.errors import InputError
-from fccgrb_cli.gait.analysis import analyse_gait, landmark_labels
+from fccgrb_cli.gait.analysis import analyse_gait, find_events, landmark_labels
 from fccgrb_cli.io.labels import match_labels, vector_targets
 from fccgrb_cli.io.plate_loads import plate_loads
 from fccgrb_cli.io.trial import Trial
@@ -28,8 +35,11 @@ from fccgrb_cli.run import Run
 from fccgrb_cli.solvers import KinematicResult, solve_ad
 from fccgrb_cli.solvers.ad.baseline import solve_baseline
 from fccgrb_cli.solvers.ad.solve import stacked_drives
+from fccgrb_cli.solvers.determined import determined
+from fccgrb_cli.solvers.nrm.problem import unsolvable_text
 from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
-from fccgrb_cli.solvers.quality import JUMP, assessed
+from fccgrb_cli.solvers.quality import JUMP, NO_DATA, Finding, assessed, with_findings
+from fccgrb_cli.stretches import merged, runs, shifted, shortest, spans, take
 from fccgrb_cli.system import System, compile_system
 
 __all__ = ["solve_trial"]
@@ -62,13 +72,16 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
     del measured  # the reference itself, or no longer needed
     with _Store(spill) as store:  # a failing stage leaves no scratch file
         trial = store.trial(trial, model)
-        system, result = _kinematics(model, trial, inputs, options, truth, progress)
+        system, result, known = _kinematics(model, trial, inputs, options, truth, progress)
         result = store.rates(result)
         which = [(tp.body, tp.point) for tp in model.tracked_points]
         points = points_along(system, result.q, which)
-        result = assessed(result, points, inputs)
-        ed, ed_input = (store.keep(key, distances(points, markers)) for key, markers in
-                        (("ed", reference), ("ed_input", inputs)))
+        fit = distances(points, inputs)
+        found = kinematic_findings(model, result, fit, options, truth is not None)
+        found[NO_DATA] = Finding(~known)
+        result = assessed(result, points, inputs, found)
+        ed, ed_input = (store.keep(key, values) for key, values in
+                        (("ed", distances(points, reference)), ("ed_input", fit)))
         reference, inputs, points = (store.keep(key, values) for key, values in
                                      (("reference", reference), ("markers_input", inputs),
                                       ("model_points", points)))
@@ -76,13 +89,24 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
         notes: list[str] = []
         stance: dict[str, np.ndarray] = {}
         solved_dynamics = _dynamics(model, trial, system, result, options, warnings, notes, stance)
+        if solved_dynamics is not None:
+            result = with_findings(result, dynamic_findings(model, solved_dynamics))
         result = store.coordinates(result)
         solved_dynamics = store.dynamics(solved_dynamics)
         clinical = clinical_results(
             model, result.theta,
             None if solved_dynamics is None else solved_dynamics.inverse.joint_moments, stance)
-        gait = None if options.events == "none" else \
-            analyse_gait(model, trial, clinical, result.trusted, options.events)
+        events = None if options.events == "none" else \
+            find_events(model, trial, clinical, options.events, result.converged)
+        moments = None
+        if solved_dynamics is not None:
+            moments, details = moment_flags(model, result, solved_dynamics, stance,
+                                            None if events is None else events.chosen,
+                                            trial.rate)
+            warnings += describe_moments(moments, details, result.time)
+        gait = None if events is None else analyse_gait(
+            model, trial, clinical, result.trusted, options.events, events=events,
+            trusted_curves=curve_trust(model, result.trusted, moments))
         return Run(
             name=options.name or run_name(result.method, options.ad_drivers,
                                           options.filter_cutoff, options.perturb_level_m,
@@ -93,7 +117,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
             form=",".join(sorted({b.form for b in model.bodies})),
             model_text=model.text, trial_path=trial.path,
             dynamics=solved_dynamics, warnings=tuple(warnings), notes=tuple(notes),
-            clinical=clinical, gait=gait)
+            clinical=clinical, gait=gait, moment_flags=moments)
 
 
 class _Store:
@@ -176,52 +200,119 @@ def _reference(measured: np.ndarray, labels: list[str], trial: Trial,
 
 
 def _kinematics(model: Model, trial: Trial, inputs: np.ndarray, options: SolveOptions,
-                truth: Truth | None, progress: Progress) -> tuple[System, KinematicResult]:
-    """The kinematic solve by the chosen method (FORMULATION §3)."""
+                truth: Truth | None, progress: Progress
+                ) -> tuple[System, KinematicResult, np.ndarray]:
+    """The kinematic solve by the chosen method (FORMULATION §3), on every stretch of frames
+    the markers determine (``solvers.determined``); the others are left unsolved (no data, no
+    answer), or are an error naming the first without ``--skip-unsolvable``. Also which frames
+    the markers determine."""
     o, time = options, trial.time
-    if o.method == "ad":
+    if o.method == "ad" and o.ad_drivers == "truth":
         system = compile_system(model, angles="driver")
-        if o.ad_drivers == "truth":
-            return system, _solve_with_true_angles(system, trial, truth, o.tol, progress)
-        return system, solve_baseline(model, time, inputs, cutoff=o.filter_cutoff,
-                                      order=o.filter_order, tol=o.tol, progress=progress)
-    system = compile_system(model, angles="coordinate", track=True)
+        return (system, _solve_with_true_angles(system, trial, truth, o.tol, progress),
+                np.ones(len(time), dtype=bool))
+    mixed = compile_system(model, angles="coordinate", track=True)
     by_label = dict(zip(model.marker_labels, np.moveaxis(inputs, 1, 0), strict=True))
     vectors = vector_targets(model, trial, by_label)
     targets = np.concatenate([inputs, vectors], axis=1) if vectors.shape[1] else inputs
+    known = determined(mixed, targets, every_marker=o.method == "ad")
+    labels = model.marker_labels + tuple(tv.marker for tv in model.tracked_vectors)
+    if not known.all() and not o.skip_unsolvable:
+        f = int(np.flatnonzero(~known)[0])
+        text = unsolvable_text(f, time, ~np.isfinite(targets[f]).all(axis=1), labels,
+                               trial.path)
+        why = "; the angular-driver pre-analysis needs every marker" if o.method == "ad" else ""
+        raise InputError(f"{text}{why} (--skip-unsolvable leaves such frames unsolved)")
+    system = compile_system(model, angles="driver") if o.method == "ad" else mixed
+    parts = runs(known)
+    if len(parts) == 1 and parts[0] == (0, len(time)):
+        return system, _solve(model, system, time, targets, options, trial.path,
+                              progress), known
+    done = 0
+
+    def step(k: int, _: int) -> None:
+        if progress is not None:
+            progress(done + k, len(time))
+
+    solved = []
+    for a, b in parts:
+        part = _solve(model, system, time[a:b], targets[a:b], options, trial.path, step)
+        solved.append((slice(a, b), part))
+        done += b - a
+    unknown = np.flatnonzero(~known)
+    messages = [shifted(m, a) for (a, _), (_, part) in zip(parts, solved, strict=True)
+                for m in part.messages]
+    gone = ~np.isfinite(targets[unknown]).all(axis=2).any(axis=0)
+    messages.insert(0, f"{trial.path}: {len(unknown)} frames (frame indices {spans(unknown)}): "
+                       "the markers present cannot determine the model (never seen there: "
+                       f"{', '.join(np.array(labels)[gone]) or 'none'}); left unsolved")
+    result = merged(solved, len(time), time) if solved else _unsolved(system, time, o)
+    return system, replace(result, messages=tuple(messages)), known
+
+
+def _solve(model: Model, system: System, time: np.ndarray, targets: np.ndarray,
+           options: SolveOptions, source: str, progress: Progress) -> KinematicResult:
+    """One stretch by the chosen method (every frame's markers determine the model)."""
+    o = options
+    if o.method == "ad":
+        markers = targets[:, :len(model.tracked_points)]
+        return solve_baseline(model, time, markers, cutoff=o.filter_cutoff,
+                              order=o.filter_order, tol=o.tol, progress=progress)
     if o.method.startswith("nrm"):
         labels = model.marker_labels + tuple(tv.marker for tv in model.tracked_vectors)
-        return system, solve_nrm(system, time, targets, NrmSettings.from_options(o),
-                                 labels=labels, source=trial.path, progress=progress)
+        return solve_nrm(system, time, targets, NrmSettings.from_options(o), labels=labels,
+                         source=source, progress=progress)
     from fccgrb_cli.solvers.optimize.solve import (  # scipy.optimize: 0.1 s
         Settings,
         solve_optimization,
     )
 
-    return system, solve_optimization(system, time, targets, Settings.from_options(o),
-                                      progress)
+    return solve_optimization(system, time, targets, Settings.from_options(o), progress)
+
+
+def _unsolved(system: System, time: np.ndarray, options: SolveOptions) -> KinematicResult:
+    """A run none of whose frames the markers determine."""
+    n, nq = len(time), system.nq
+    nan = np.full((n, nq), np.nan)
+    angles = np.full((n, len(system.model.angles)), np.nan)
+    return KinematicResult(
+        method=options.method, tol=options.tol, time=time, q=nan, qd=nan, qdd=nan,
+        theta=angles, theta_d=angles, theta_dd=angles,
+        angle_names=tuple(a.name for a in system.model.angles),
+        iterations=np.zeros(n, dtype=int), time_s=np.zeros(n), phi_norm=np.full(n, np.nan),
+        phi_top_max=np.full(n, np.nan), converged=np.zeros(n, dtype=bool))
 
 
 def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResult,
               options: SolveOptions, warnings: list[str], notes: list[str],
               stance: dict[str, np.ndarray]) -> Dynamics | None:
     """The inverse dynamics of the classical model driven by the run's angles (FORMULATION §4),
-    with the trial's force plates; None, with a warning, when it cannot or need not run."""
-    failed = len(result.failed_frames)
+    with the trial's force plates, on every stretch of solved frames long enough for its rates
+    (``stretches.shortest``): θ̇, θ̈ and the filter within each stretch, never across a gap;
+    None, with a warning, when it cannot or need not run, or no stretch is long enough."""
     if options.dynamics is None and not model.has_inertia:
         warnings.append(f"{model.source}: no mass and inertia on every body; inverse dynamics "
                         "skipped")
         return None
-    if options.dynamics is None and failed:
-        warnings.append(f"{trial.path}: {failed} frames not solved (first: frame index "
-                        f"{int(result.failed_frames[0])}); inverse dynamics skipped")
-        return None
     if options.dynamics is False:
         return None
-    if failed:
-        raise InputError(f"{trial.path}: {failed} frames were not solved (first: frame "
-                         f"index {int(result.failed_frames[0])}); inverse dynamics needs "
-                         "every frame")
+    n = result.n_frames
+    solved = result.converged & np.isfinite(result.q).all(axis=1)
+    least = shortest(options.filter_order if options.filter_cutoff is not None else None)
+    parts = runs(solved, least)
+    covered = np.zeros(n, dtype=bool)
+    for a, b in parts:
+        covered[a:b] = True
+    if not covered.all():
+        left = np.flatnonzero(~covered)
+        short = np.flatnonzero(~covered & solved)
+        warnings.append(
+            f"{trial.path}: inverse dynamics on {int(covered.sum())} of {n} frames; left out "
+            f"{len(left)} frames (frame indices {spans(left)}): not solved"
+            + (f", or in stretches of solved frames shorter than {least} "
+               f"(frame indices {spans(short)})" if len(short) else ""))
+    if not parts:
+        return None
     baseline = options.method == "ad" and options.ad_drivers == "markers"
     contact_points = {body: _body_points(system, result.q, body)
                       for body in model.contact_bodies}
@@ -231,11 +322,18 @@ def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResul
         on = np.abs(load.force).any(axis=1)
         stance[load.body] = stance.get(load.body, np.zeros_like(on)) | on
     cutoff = options.filter_cutoff
-    if cutoff is not None:
-        loads = [load.lowpassed(trial.rate, cutoff, options.filter_order) for load in loads]
-    return classical_dynamics(model, result, cutoff=None if baseline else cutoff,
-                              order=options.filter_order, loads=loads, tol=options.tol,
-                              engine=options.engine)
+    pieces = []
+    for a, b in parts:
+        part = slice(a, b)
+        some = [take(load, part, n) for load in loads]
+        if cutoff is not None:
+            some = [load.lowpassed(trial.rate, cutoff, options.filter_order) for load in some]
+        pieces.append((part, classical_dynamics(
+            model, take(result, part, n), cutoff=None if baseline else cutoff,
+            order=options.filter_order, loads=some, tol=options.tol, engine=options.engine)))
+    if len(pieces) == 1 and parts[0] == (0, n):
+        return pieces[0][1]
+    return merged(pieces, n, result.time)
 
 
 def _quality_advice(result: KinematicResult) -> list[str]:

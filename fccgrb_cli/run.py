@@ -45,6 +45,7 @@ class Run:
     notes: tuple[str, ...] = ()
     clinical: ClinicalResults | None = None
     gait: GaitResults | None = None
+    moment_flags: np.ndarray | None = None
 
     def __repr__(self) -> str:
         r = self.result
@@ -178,6 +179,19 @@ class Run:
         """Per frame: converged and not flagged by the quality checks."""
         return self.result.trusted
 
+    @property
+    def moments_trusted(self) -> np.ndarray | None:
+        """Per frame and joint (frames × angles): the moment is trusted — the frame's
+        kinematics and the moment's own checks (``solvers.quality.MOMENT_BITS``: the dynamics
+        ran there, every contact load measured, accelerations not noise); None without the
+        dynamics."""
+        if self.dynamics is None:
+            return None
+        if self.moment_flags is None:  # a run read from a file written without them
+            return np.broadcast_to(self.trusted[:, None],
+                                   self.dynamics.inverse.joint_moments.shape).copy()
+        return self.moment_flags == 0
+
     def summary(self) -> dict[str, float | str | int]:
         """The one-row summary the command line prints."""
         return summary(self)
@@ -233,11 +247,13 @@ def summary(run: Run) -> dict[str, float | str | int]:
         row["max |dθ| deg"] = float(np.degrees(angle_err.max())) if angle_err.size else float("nan")
         if distance.any():
             row["max |dd| mm"] = 1e3 * float(err[:, distance].max()) if err.size else float("nan")
-    if run.dynamics is not None:
-        loads = np.abs(run.dynamics.inverse.joint_moments)
+    if run.dynamics is not None:  # over the trusted moments only
+        trusted = run.moments_trusted
+        loads = np.where(trusted, np.abs(run.dynamics.inverse.joint_moments), np.nan)
         distance = np.array(run._angle_units) == "m"
-        row["max |τ| N·m"] = float(loads[:, ~distance].max()) if (~distance).any() else \
-            float("nan")
-        if distance.any():  # a slide's joint force (N) is not a moment
-            row["max |F| N"] = float(loads[:, distance].max())
+        for key, columns in (("max |τ| N·m", ~distance), ("max |F| N", distance)):
+            if columns.any() and (key == "max |τ| N·m" or distance.any()):
+                some = loads[:, columns]
+                # a slide's joint force (N) is not a moment
+                row[key] = float(np.nanmax(some)) if np.isfinite(some).any() else float("nan")
     return row

@@ -18,6 +18,8 @@ from fccgrb_cli.errors import InputError
 from fccgrb_cli.model import BaseMotion, Model
 from fccgrb_cli.solvers import KinematicResult, solve_ad
 from fccgrb_cli.solvers.ad.solve import stacked_drives
+from fccgrb_cli.solvers.conditioning import conditioning
+from fccgrb_cli.stretches import runs
 from fccgrb_cli.system import System, compile_system
 from fccgrb_cli.system.constraints import joint_neighbours, reachable
 
@@ -42,6 +44,7 @@ class Synthesis:
     markers: np.ndarray
     labels: tuple[str, ...]
     rate: float
+    warnings: tuple[str, ...] = ()
 
 
 def prescribed(model: Model, time: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -103,6 +106,10 @@ def synthesize(model: Model, duration: float = 3.0, rate: float = 100.0, tol: fl
     system = compile_system(model, angles="driver")
     drives = stacked_drives(system, theta, theta_d, theta_dd, base_trajectory(model, time))
     result = solve_ad(system, time, drives, start_pose(system), tol=tol, progress=progress)
+    near = _singular_positions(model, result)
+    if near:  # again, following the branch through the singular positions
+        result = solve_ad(system, time, drives, start_pose(system), tol=tol, continuation=True)
+        near = _singular_positions(model, result)
     if len(result.failed_frames):
         f = int(result.failed_frames[0])
         raise InputError(f"{model.source}: frame {f} (t = {time[f]:.3f} s): the kinematic "
@@ -111,4 +118,24 @@ def synthesize(model: Model, duration: float = 3.0, rate: float = 100.0, tol: fl
     which = [(tp.body, tp.point) for tp in model.tracked_points]
     markers = np.array([system.point_positions(q, which) for q in result.q])
     return Synthesis(system, result, markers.reshape(n_frames, len(which), 3),
-                     model.marker_labels, rate)
+                     model.marker_labels, rate, tuple(near))
+
+
+def _singular_positions(model: Model, result: KinematicResult) -> list[str]:
+    """A warning for each stretch of frames the motion spends near a singular position of the
+    driven model (solvers/conditioning.py), where the angles alone leave two assembly branches
+    (a parallelogram's change point): the analysis followed the one it was on by continuation
+    (the solutions' own curve through the position, not Φ_q q̇ = ν, which has no unique
+    solution there)."""
+    condition = conditioning(model, result.q)
+    out = []
+    for a, b in runs(condition.singular):
+        f = a + int(np.argmin(condition.ratio[a:b]))
+        out.append(f"{model.source}: frame indices {a}:{b} (t = {result.time[a]:.3f}–"
+                   f"{result.time[b - 1]:.3f} s) pass near a singular position of the driven "
+                   f"model (a change point: the angles alone leave two assembly branches; "
+                   f"nearest at frame index {f}, angles "
+                   f"{', '.join(f'{np.degrees(v):.1f}' for v in result.theta[f])} deg); the "
+                   "motion follows the branch it was on by continuation, and `fccgrb solve` "
+                   "flags these frames")
+    return out

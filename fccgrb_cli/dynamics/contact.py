@@ -32,14 +32,21 @@ def assign(loaded: np.ndarray, cop: np.ndarray, bodies: dict[str, np.ndarray],
            max_distance: float = MAX_DISTANCE) -> list[Contact]:
     """Assign each contact of a plate (``loaded`` per frame, ``cop`` frames × 3) to the body
     (``bodies``: name → frames × points × 3) with the smallest mean distance from the centre of
-    pressure to its nearest point."""
+    pressure to its nearest point, over the contact's frames where the body was solved (a
+    body never solved during a contact is infinitely far)."""
     out = []
     for start, stop in contacts(loaded):
         c = cop[start:stop, None, :]
-        distance = {name: float(np.mean(np.min(np.linalg.norm(p[start:stop] - c, axis=2),
-                                               axis=1)))
-                    for name, p in bodies.items()}
+        distance = {name: _mean_nearest(p[start:stop], c) for name, p in bodies.items()}
         best = min(distance, key=distance.get)
         near = distance[best] <= max_distance
         out.append(Contact(start, stop, best if near else None, distance[best]))
     return out
+
+
+def _mean_nearest(points: np.ndarray, cop: np.ndarray) -> float:
+    """The mean over frames of the distance from the centre of pressure to the nearest of the
+    points, over the frames where they are known (inf when none is)."""
+    nearest = np.min(np.linalg.norm(points - cop, axis=2), axis=1)
+    known = np.isfinite(nearest)
+    return float(np.mean(nearest[known])) if known.any() else float("inf")

@@ -35,8 +35,11 @@ def classical_dynamics(model: Model, result: KinematicResult, *, cutoff: float |
 
     ``batched`` True: every frame at once, each starting from the run's own body coordinates
     (they satisfy the same topology, and the drivers exactly when unfiltered), the multipliers
-    by stacked solves; False: frame by frame, each warm-started from the previous one (the
-    reference the batched path equals to rounding). None (the default): batched where Φ_q is
+    by stacked solves; False: frame by frame, each from the run's body coordinates too (the
+    reference the batched path equals to rounding). Starting from the run's configuration
+    keeps the classical model on the mixed solution's assembly branch where the angles alone
+    leave two (a parallelogram's change point); a frame that does not converge from there is
+    flagged (solvers/quality.py, ``BRANCH``). None (the default): batched where Φ_q is
     square. A taller Φ_q (a signed angle's sine row, a floating base's drivers beside its
     rigid-body rows) takes least squares: stacked QR costs as much per frame as LAPACK's
     frame-by-frame one and the batch's guesses need more Gauss–Newton iterations there (the
@@ -60,7 +63,9 @@ def classical_dynamics(model: Model, result: KinematicResult, *, cutoff: float |
                                       compiled=compiled,
                                       inverse=None if solved is None else solved.arrays)
     else:
-        kinematics = solve_ad(system, result.time, drives, body_q[0].copy(), tol=tol)
+        # each frame from the mixed solution's configuration too: the classical model stays
+        # on its assembly branch (a frame that cannot is flagged: solve_ad)
+        kinematics = solve_ad(system, result.time, drives, body_q, tol=tol)
     kinematics = replace(kinematics, method=result.method)
     inverse = inverse_dynamics(system, kinematics, loads, batched=batched, compiled=compiled,
                                solved=solved)

@@ -99,13 +99,30 @@ def _moment_name(name: str) -> str:
     return f"{name}_moment"
 
 
-def analyse_gait(model: Model, trial: Trial, clinical: ClinicalResults | None,
-                 trusted: np.ndarray, choice: str = "auto") -> GaitResults | None:
-    """The gait analysis of a solved trial, or None when the model has no clinical curves of
-    both sides (not a lower-limb model) — unless ``choice`` names a source, then that is an
-    error saying why."""
-    if clinical is None or not all(any(n.endswith(SUFFIX[s]) for n in clinical.names)
-                                   for s in SIDES):
+@dataclass(frozen=True)
+class FoundEvents:
+    """A trial's gait events: the ones chosen, every source's, why a source is missing, and the
+    landmark trajectories and vertical they were found with."""
+
+    chosen: Events
+    found: dict[str, Events]
+    notes: tuple[str, ...]
+    markers: dict[str, np.ndarray]
+    vertical: np.ndarray
+
+
+def _has_both_sides(clinical: ClinicalResults | None) -> bool:
+    return clinical is not None and all(any(n.endswith(SUFFIX[s]) for n in clinical.names)
+                                        for s in SIDES)
+
+
+def find_events(model: Model, trial: Trial, clinical: ClinicalResults | None,
+                choice: str = "auto", solved: np.ndarray | None = None) -> FoundEvents | None:
+    """The gait events of a solved trial from every source (``choice`` the one used), or None
+    when the model has no clinical curves of both sides (not a lower-limb model) — unless
+    ``choice`` names a source, then that is an error saying why. ``solved``: the frames with a
+    solution; events elsewhere, of any source, are left out (no data, no event)."""
+    if not _has_both_sides(clinical):
         if choice != "auto":
             raise InputError(f"{model.source}: --events {choice}: expected a model with "
                              "clinical angles of both legs (names ending _l and _r)")
@@ -132,17 +149,50 @@ def analyse_gait(model: Model, trial: Trial, clinical: ClinicalResults | None,
                                               f"{trial.path} with {model.source}")
     except InputError as error:
         notes.append(f"kinematic: {str(error).split(': ', 2)[-1]}")
+    if solved is not None:
+        found = {source: _with_data(events, solved, trial.rate, notes)
+                 for source, events in found.items()}
+        found = {source: events for source, events in found.items() if len(events)}
     chosen = _choose(found, choice, trial.path, notes)
     if chosen is None:
         return None
+    return FoundEvents(chosen, found, tuple(notes), markers, vertical)
+
+
+def analyse_gait(model: Model, trial: Trial, clinical: ClinicalResults | None,
+                 trusted: np.ndarray, choice: str = "auto", *, solved: np.ndarray | None = None,
+                 trusted_curves: np.ndarray | None = None,
+                 events: FoundEvents | None = None) -> GaitResults | None:
+    """The gait analysis of a solved trial (its events by :func:`find_events` unless
+    ``events`` holds them), or None as there. ``trusted``: per frame (the kinematics);
+    ``trusted_curves``: per frame and clinical curve (angles, then moments), where a moment can
+    be untrusted on a trusted frame (each variable's mean over the strides it is trusted on)."""
+    events = events or find_events(model, trial, clinical, choice, solved)
+    if events is None or clinical is None:
+        return None
+    markers, vertical, chosen = events.markers, events.vertical, events.chosen
     forward = _forward(markers, vertical)
     heels = {side: markers[f"{side}_heel"] for side in SIDES if f"{side}_heel" in markers}
     curves = _curves(clinical)
     filled = {k: bridged(v) for k, v in heels.items()}
     walk = Walk(trial.time, {k: v for k, v in filled.items() if v is not None}, forward,
                 vertical)
-    cycles = {side: side_cycles(side, chosen, trusted, curves, walk) for side in SIDES}
-    return GaitResults(chosen, found, cycles, forward, tuple(notes))
+    cycles = {side: side_cycles(side, chosen, trusted, curves, walk, trusted_curves)
+              for side in SIDES}
+    return GaitResults(chosen, events.found, cycles, forward, events.notes)
+
+
+def _with_data(events: Events, solved: np.ndarray, rate: float, notes: list[str]) -> Events:
+    """The events at frames with a solution (the nearest frame's); a note counts the others."""
+    frames = np.clip(np.round(events.time * rate).astype(int), 0, len(solved) - 1)
+    keep = solved[frames]
+    if keep.all():
+        return events
+    notes.append(f"{events.source}: {int((~keep).sum())} events at frames without a solution "
+                 "left out")
+    return Events(events.source, events.time[keep],
+                  tuple(s for s, k in zip(events.side, keep, strict=True) if k),
+                  tuple(s for s, k in zip(events.kind, keep, strict=True) if k))
 
 
 def _choose(found: dict[str, Events], choice: str, path: str, notes: list[str]

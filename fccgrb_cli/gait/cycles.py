@@ -34,9 +34,11 @@ SUFFIX = {"left": "_l", "right": "_r"}
 
 @dataclass(frozen=True)
 class SideCycles:
-    """One side's strides: start and end times (s); ``trusted`` per stride; ``curves``
-    (strides × 101 × variables) of ``names`` in ``units``; the spatiotemporal ``parameters``
-    (strides × PARAMETERS, NaN where an event is missing)."""
+    """One side's strides: start and end times (s); ``trusted`` per stride (its frames'
+    kinematics); ``curves`` (strides × 101 × variables) of ``names`` in ``units``; the
+    spatiotemporal ``parameters`` (strides × PARAMETERS, NaN where an event is missing);
+    ``trusted_curves`` (strides × variables, None: as ``trusted``) where a variable can be
+    untrusted on a trusted stride (a moment whose ground reaction no plate measured)."""
 
     side: str
     start: np.ndarray
@@ -46,21 +48,36 @@ class SideCycles:
     units: tuple[str, ...]
     curves: np.ndarray
     parameters: np.ndarray
+    trusted_curves: np.ndarray | None = None
 
     @property
     def n(self) -> int:
         return len(self.start)
 
+    @property
+    def trusted_per_variable(self) -> np.ndarray:
+        """strides × variables: each variable's strides that enter its mean."""
+        if self.trusted_curves is not None:
+            return self.trusted_curves & self.trusted[:, None]
+        return np.repeat(self.trusted[:, None], self.curves.shape[2], axis=1)
+
     def mean(self) -> np.ndarray:
-        """101 × variables over the trusted strides (NaN when there are none)."""
-        chosen = self.curves[self.trusted]
-        return chosen.mean(axis=0) if len(chosen) else np.full(self.curves.shape[1:], np.nan)
+        """101 × variables, each over its trusted strides (NaN where there are none)."""
+        use = self.trusted_per_variable
+        count = use.sum(axis=0)
+        total = np.einsum("spv,sv->pv", np.nan_to_num(self.curves), use.astype(float))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(count > 0, total / np.maximum(count, 1), np.nan)
 
     def sd(self) -> np.ndarray:
-        """Sample standard deviation over the trusted strides (NaN with fewer than two)."""
-        chosen = self.curves[self.trusted]
-        return chosen.std(axis=0, ddof=1) if len(chosen) > 1 else \
-            np.full(self.curves.shape[1:], np.nan)
+        """Sample standard deviation, each variable over its trusted strides (NaN with fewer
+        than two)."""
+        use = self.trusted_per_variable
+        count = use.sum(axis=0)
+        deviation = np.where(use[:, None, :], np.nan_to_num(self.curves) - self.mean(), 0.0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(count > 1, np.sqrt((deviation**2).sum(axis=0)
+                                               / np.maximum(count - 1, 1)), np.nan)
 
     def parameter(self, name: str) -> np.ndarray:
         return self.parameters[:, [p for p, _ in PARAMETERS].index(name)]
@@ -86,27 +103,33 @@ def normalized(time: np.ndarray, values: np.ndarray, start: float, stop: float) 
 
 def side_cycles(side: str, events: Events, trusted: np.ndarray,
                 curves: tuple[tuple[str, ...], tuple[str, ...], np.ndarray],
-                walk: Walk) -> SideCycles:
+                walk: Walk, trusted_curves: np.ndarray | None = None) -> SideCycles:
     """The strides of ``side`` (``curves``: every clinical name, unit and frames × n values;
-    ``trusted``: per frame)."""
+    ``trusted``: per frame; ``trusted_curves``: per frame and curve, when a curve can be
+    untrusted on a trusted frame)."""
     names, units, values = curves
     time = walk.time
     mine = [k for k, n in enumerate(names) if n.endswith(SUFFIX[side])]
     strikes = events.of(side, "strike")
     other = "left" if side == "right" else "right"
     rate = 1.0 / float(time[1] - time[0]) if len(time) > 1 else 1.0
-    starts, stops, ok, cycles, params = [], [], [], [], []
+    starts, stops, ok, cycles, params, per = [], [], [], [], [], []
     for a, b in itertools.pairwise(strikes):
         first, last = int(np.floor(a * rate)), int(np.ceil(b * rate))
         starts.append(a)
         stops.append(b)
-        ok.append(bool(trusted[max(first, 0):min(last, len(time) - 1) + 1].all()))
+        span = slice(max(first, 0), min(last, len(time) - 1) + 1)
+        ok.append(bool(trusted[span].all()))
+        if trusted_curves is not None:
+            per.append(trusted_curves[span][:, mine].all(axis=0))
         cycles.append(normalized(time, values[:, mine], a, b))
         params.append(_parameters(side, other, events, (a, b), walk))
     return SideCycles(side, np.array(starts), np.array(stops), np.array(ok, dtype=bool),
                       tuple(names[k] for k in mine), tuple(units[k] for k in mine),
                       np.array(cycles).reshape(len(cycles), SAMPLES, len(mine)),
-                      np.array(params).reshape(len(params), len(PARAMETERS)))
+                      np.array(params).reshape(len(params), len(PARAMETERS)),
+                      None if trusted_curves is None else
+                      np.array(per, dtype=bool).reshape(len(per), len(mine)))
 
 
 def _first_in(times: np.ndarray, a: float, b: float) -> float:
@@ -154,5 +177,6 @@ def pooled(per_trial: list[dict[str, SideCycles]]) -> dict[str, SideCycles]:
             np.concatenate([p.stop for p in parts]),
             np.concatenate([p.trusted for p in parts]), first.names, first.units,
             np.concatenate([p.curves for p in parts]),
-            np.concatenate([p.parameters for p in parts]))
+            np.concatenate([p.parameters for p in parts]),
+            np.concatenate([p.trusted_per_variable for p in parts]))
     return out

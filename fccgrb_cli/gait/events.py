@@ -145,7 +145,7 @@ def plate_events(path: str | Path, rate: float, stance: dict[str, np.ndarray],
     """Foot strikes and offs from the plates, for the feet the dynamics put on them (``stance``:
     body name → loaded frames; a body's side from its name, e.g. foot_l). A contact already
     under way at the first frame, or not ended at the last, gives no event there."""
-    sides = {body: _side_of(body) for body in stance}
+    sides = {body: side_of(body) for body in stance}
     if not stance or any(s is None for s in sides.values()):
         return None
     n_frames = len(next(iter(stance.values())))
@@ -172,7 +172,8 @@ def plate_events(path: str | Path, rate: float, stance: dict[str, np.ndarray],
     return _sorted("plates", items) if items else None
 
 
-def _side_of(name: str) -> str | None:
+def side_of(name: str) -> str | None:
+    """'left' or 'right' from a body's name (foot_l, left_foot, …), else None."""
     lower = name.lower()
     if lower.endswith(("_l", "_left")) or lower.startswith(("l_", "left_")):
         return "left"

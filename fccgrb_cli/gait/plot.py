@@ -54,13 +54,13 @@ def draw_cycles(gaits: dict[str, GaitResults], wanted: tuple[str, ...] = (),
         for name, gait in gaits.items():
             for side, c in gait.cycles.items():
                 matches = [j for j, n in enumerate(c.names) if _stem(n) == stem]
-                if not matches or not c.trusted.any():
+                if not matches or not c.trusted_per_variable[:, matches[0]].any():
                     continue
                 j = matches[0]
                 unit = c.units[j]
                 mean, sd = c.mean()[:, j], c.sd()[:, j]
-                label = f"{side} (n={int(c.trusted.sum())})" + (f", {name}" if len(gaits) > 1
-                                                                  else "")
+                count = int(c.trusted_per_variable[:, j].sum())
+                label = f"{side} (n={count})" + (f", {name}" if len(gaits) > 1 else "")
                 ax.plot(percent, mean, color=COLOURS.get(side, "k"), lw=1.4, label=label)
                 if np.isfinite(sd).all():
                     ax.fill_between(percent, mean - sd, mean + sd, color=COLOURS.get(side, "k"),

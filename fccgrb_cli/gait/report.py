@@ -28,13 +28,14 @@ def events_table(gait: GaitResults) -> str:
 
 
 def parameters_table(cycles: dict[str, SideCycles]) -> str:
-    """Spatiotemporal parameters: mean over each side's strides (and how many)."""
+    """Spatiotemporal parameters: mean over each side's trusted strides (and how many of how
+    many)."""
     sides = list(cycles)
     rows = [f"{'parameter':<24}" + "".join(f"{s:>16}" for s in sides)]
     for k, (name, unit) in enumerate(PARAMETERS):
         cells = [f"{name.replace('_', ' ') + ' (' + unit + ')':<24}"]
         for side in sides:
-            values = cycles[side].parameters[:, k]
+            values = cycles[side].parameters[cycles[side].trusted, k]
             finite = values[np.isfinite(values)]
             cells.append(f"{np.mean(finite):16.3g}" if len(finite) else f"{'–':>16}")
         rows.append("".join(cells))

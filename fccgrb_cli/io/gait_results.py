@@ -3,8 +3,10 @@
 * ``events/<source>/time`` (s from the trial's first frame), ``side``, ``kind`` — every source
   found (c3d, plates, kinematic); the group's attribute ``used`` names the one the cycles use;
 * ``cycles/<side>/curves`` (strides × 101 × variables; attributes ``names``, ``units``),
-  ``start``, ``stop`` (s), ``trusted`` (per stride), ``mean`` and ``sd`` (101 × variables over
-  the trusted strides), ``parameters`` (strides × parameters; attributes ``names``, ``units``);
+  ``start``, ``stop`` (s), ``trusted`` (per stride, its kinematics), ``trusted_curves``
+  (strides × variables: a moment can be untrusted on a trusted stride), ``mean`` and ``sd``
+  (101 × variables, each over its trusted strides), ``parameters`` (strides × parameters;
+  attributes ``names``, ``units``);
 * attributes ``forward`` (the direction of walking) and ``notes``;
 
 and, when ``fccgrb solve`` is given several trials, ``/subject/cycles/<side>/`` the same
@@ -38,6 +40,7 @@ def write_cycles(group, cycles: dict[str, SideCycles]) -> None:
             s[key].attrs.update({"names": list(c.names), "units": list(c.units)})
         for key in ("start", "stop", "trusted", "parameters"):
             put(s, key, getattr(c, key))
+        put(s, "trusted_curves", c.trusted_per_variable)
         s["parameters"].attrs.update({"names": [p for p, _ in PARAMETERS],
                                       "units": [u for _, u in PARAMETERS]})
 
@@ -46,7 +49,9 @@ def read_cycles(group) -> dict[str, SideCycles]:
     return {side: SideCycles(side, s["start"][()], s["stop"][()], s["trusted"][()],
                              _strings(s["curves"].attrs["names"]),
                              _strings(s["curves"].attrs["units"]), s["curves"][()],
-                             s["parameters"][()]) for side, s in group["cycles"].items()}
+                             s["parameters"][()],
+                             s["trusted_curves"][()] if "trusted_curves" in s else None)
+            for side, s in group["cycles"].items()}
 
 
 def write_subject(h5, runs: list[str], cycles: dict[str, SideCycles]) -> None:

@@ -26,13 +26,23 @@ Contract (SI units: m, rad, s):
                                  check flagged the frame (a frame on another assembly branch, a
                                  jump, a broken topology is never counted as converged)
       solver_converged           per frame, the solver's own verdict
-      flags                      per frame, why it is not trusted: a bit mask whose bits are the
-                                 attributes (unconverged 1, topology 2, jump 4; 0 = trusted;
+      flags                      per frame, why it is not trusted: a bit mask (uint16; files of
+                                 format 2 written before had uint8 and three bits) whose bits are
+                                 the attributes (unconverged 1, topology 2, jump 4, no_data 8,
+                                 singular 16, branch 32, angle_range 64, poor_fit 128,
+                                 calibration 256; 0 = trusted), and attribute ``bits``: JSON, per
+                                 bit its name, value, meaning, how many frames carry it, the
+                                 first, and this run's explanation (README, "What fccgrb checks
+                                 for you";
                                  see fccgrb_cli/solvers/quality.py)
       status                     per frame, the optimizer's own message (optimizers only)
       ed, ed_input               frames × markers: distance of each model point to the
                                  reference marker and to the input marker, m
     with inverse dynamics:
+      moment_flags               frames × angles, why each joint moment is not trusted where
+                                 its frame may be (bits as attributes and ``bits`` as for
+                                 ``flags``: kinematics 1, no_dynamics 2, contact 4,
+                                 noisy_rates 8; solvers/quality.py MOMENT_BITS); 0 = trusted
       joint_moments              frames × angles, N·m (N for a distance: attribute ``units``),
                                  conjugate to θ (τ_k = λ_k sin θ_k; −λ_k for a distance);
                                  attribute ``names``
@@ -78,7 +88,7 @@ from fccgrb_cli.io.hdf5_writer import writing
 from fccgrb_cli.io.lock import exclusive
 from fccgrb_cli.io.results_format import FORMAT_VERSION, check_run, reading, runs_group
 from fccgrb_cli.io.spill import StoredArray
-from fccgrb_cli.solvers.quality import BITS
+from fccgrb_cli.solvers.quality import BITS, FLAG_DTYPE, FRAME_BITS, MOMENT_BITS, bit_summary
 
 if TYPE_CHECKING:
     from fccgrb_cli.run import Run  # the Run writes itself here (Run.to_hdf5)
@@ -230,8 +240,10 @@ def _write_run(h5, run: Run, command: str, cell: dict | None) -> None:
         put(g, key, getattr(r, key))
     put(g, "converged", r.trusted)
     put(g, "solver_converged", r.converged)
-    put(g, "flags", r.flags if r.flags is not None else np.zeros(r.n_frames, np.uint8))
+    flags = r.flags if r.flags is not None else np.zeros(r.n_frames, FLAG_DTYPE)
+    put(g, "flags", flags.astype(FLAG_DTYPE))
     g["flags"].attrs.update(BITS)
+    g["flags"].attrs["bits"] = bit_summary(FRAME_BITS, flags)
     for key, per in (("theta", ""), ("theta_d", "/s"), ("theta_dd", "/s²")):
         put(g, key, getattr(r, key))
         g[key].attrs["names"] = list(r.angle_names)
@@ -289,6 +301,11 @@ def _write_dynamics(g, run: Run) -> None:
     inverse, kin = d.inverse, d.kinematics
     put(g, "joint_moments", inverse.joint_moments)
     g["joint_moments"].attrs["names"] = list(inverse.angle_names)
+    if run.moment_flags is not None:
+        put(g, "moment_flags", run.moment_flags.astype(FLAG_DTYPE))
+        g["moment_flags"].attrs.update({bit.name: bit.value for bit in MOMENT_BITS})
+        g["moment_flags"].attrs["bits"] = bit_summary(MOMENT_BITS, run.moment_flags)
+        g["moment_flags"].attrs["names"] = list(inverse.angle_names)
     g["joint_moments"].attrs.create(
         "units", ["N" if u == "m" else "N·m" for u in run._angle_units],
         dtype=h5py.string_dtype(encoding="utf-8"))

@@ -17,6 +17,7 @@ from fccgrb_cli.io.gait_results import read_gait
 from fccgrb_cli.io.results_format import check_run, reading, runs_group
 from fccgrb_cli.options import SolveOptions
 from fccgrb_cli.run import Run
+from fccgrb_cli.solvers.quality import FLAG_DTYPE
 from fccgrb_cli.solvers.result import KinematicResult
 
 
@@ -55,7 +56,8 @@ def _read_run(name: str, g) -> Run:
     messages = _strings(a["messages"])
     warnings = _strings(a["warnings"])[len(messages):]
     result = _read_result(g, names, time, a, g["solver_converged"][()], {
-        "messages": messages, "wall_s": float(a["wall_s"]), "flags": g["flags"][()],
+        "messages": messages, "wall_s": float(a["wall_s"]),
+        "flags": g["flags"][()].astype(FLAG_DTYPE),  # uint8 in files written before 16 bits
         "status": _strings(g["status"][()]) if "status" in g else ()})
     return Run(
         name=name, options=SolveOptions.from_json(str(a["options"])), result=result,
@@ -67,7 +69,8 @@ def _read_run(name: str, g) -> Run:
         dynamics=_read_dynamics(g, names, time) if "joint_moments" in g else None,
         warnings=warnings, notes=_strings(a["notes"]),
         clinical=_read_clinical(g["clinical"]) if "clinical" in g else None,
-        gait=read_gait(g["gait"]) if "gait" in g else None)
+        gait=read_gait(g["gait"]) if "gait" in g else None,
+        moment_flags=g["moment_flags"][()] if "moment_flags" in g else None)
 
 
 def _read_dynamics(g, names: tuple[str, ...], time: np.ndarray) -> Dynamics:

@@ -101,6 +101,20 @@ FRAME_BITS = (
 )
 BITS = {bit.name: bit.value for bit in FRAME_BITS}
 
+# a joint moment's own reasons, per frame and joint (dynamics where the kinematics are trusted)
+KINEMATICS, NO_DYNAMICS, CONTACT, NOISY = (1 << k for k in range(4))
+NOISE_SHARE = 0.5
+MOMENT_BITS = (
+    Bit("kinematics", KINEMATICS, "the frame, or a neighbour its central differences reach, is "
+        "flagged"),
+    Bit("no_dynamics", NO_DYNAMICS, "outside the stretches where the inverse dynamics ran "
+        "(unsolved frames, or solved stretches too short for the rates)"),
+    Bit("contact", CONTACT, "a contact body beyond the joint may be on the ground where no "
+        "force plate measures it (stance off the plates, a trial without plates)"),
+    Bit("noisy_rates", NOISY, f"more than {100 * NOISE_SHARE:.0f} % of the angular "
+        "accelerations' RMS above 15 Hz: differentiated marker noise (no --filter-cutoff)"),
+)
+
 
 def bit_summary(bits: tuple[Bit, ...], flags: np.ndarray, details: dict[str, str] | None = None
                 ) -> str:
@@ -311,3 +325,14 @@ def assessed(result: KinematicResult, points: np.ndarray, markers: np.ndarray,
     details = {bit: f.detail for bit, f in found.items() if f.detail}
     return replace(result, flags=flags, messages=result.messages + tuple(
         describe(flags, result.time, result.method, details)))
+
+
+def with_findings(result: KinematicResult, found: dict[int, Finding]) -> KinematicResult:
+    """An assessed ``result`` with more findings (a later stage's, e.g. the classical model's
+    singular positions) set in its flags and explained, for the frames they newly flag."""
+    before = result.flags if result.flags is not None else np.zeros(result.n_frames, FLAG_DTYPE)
+    flags = combined(before, found)
+    new = np.where(flags != before, flags & ~before, 0).astype(FLAG_DTYPE)
+    details = {bit: f.detail for bit, f in found.items() if f.detail}
+    return replace(result, flags=flags, messages=result.messages + tuple(
+        describe(new, result.time, result.method, details)))

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import time as clock
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 
@@ -21,6 +22,7 @@ from fccgrb_cli.errors import InputError
 from fccgrb_cli.solvers.batched import Drives, Stacked, blocks, factor, newton_stacked
 from fccgrb_cli.solvers.kernel_arrays import DrivenMotion, Drivers, Limits
 from fccgrb_cli.solvers.newton import linear_solve, newton_raphson
+from fccgrb_cli.solvers.quality import BRANCH, FLAG_DTYPE
 from fccgrb_cli.solvers.result import KinematicResult
 from fccgrb_cli.system import Drive, System
 
@@ -82,25 +84,48 @@ def frame_rates(system: System, q: np.ndarray, drive: Drive) -> tuple[np.ndarray
 @single_threaded
 def solve_ad(system: System, time: np.ndarray, drives: Drives, q_guess: np.ndarray, *,
              tol: float = 1e-10, max_iter: int = MAX_ITER,
-             progress: Callable[[int, int], None] | None = None) -> KinematicResult:
+             progress: Callable[[int, int], None] | None = None,
+             continuation: bool = False) -> KinematicResult:
     """AD analysis over all frames driven by ``drives`` (see :func:`stacked_drives`: θ, θ̇, θ̈
     frames × n_coordinates in rad, rad/s, rad/s², m, m/s, m/s² for distances, and the floating
-    bases' driven features and rates), from ``q_guess`` assembled to the first frame."""
+    bases' driven features and rates).
+
+    ``q_guess``: the first frame's starting configuration (nq; the model is assembled from it),
+    each later frame starting from the previous one's q + q̇ dt + ½ q̈ dt²; or one start per
+    frame (frames × nq: the classical model from the mixed solution's configuration, which keeps
+    it on the mixed solution's assembly branch), a frame that does not converge from its own
+    then starting from the previous frame's, and flagged ``BRANCH`` (solvers/quality.py): its
+    branch is not known to be the mixed solution's. ``continuation``: predict from the last
+    three solutions (q[f−3] − 3q[f−2] + 3q[f−1]) instead of the rates: at a singular position
+    (a parallelogram's change point) Φ_q q̇ = ν has no unique solution and a rate-based step
+    can leave the branch, while the solutions' own curve keeps to it (``synth``)."""
     n, nq = len(time), system.nq
     out = {k: np.zeros((n, nq)) for k in ("q", "qd", "qdd")}
     iterations = np.zeros(n, dtype=int)
     seconds = np.zeros(n)
     converged = np.zeros(n, dtype=bool)
+    fallback = np.zeros(n, dtype=bool)
     phi = np.zeros((n, system.n_rows))
-    q = assemble(system, q_guess, drives.theta[0], tol, max_iter, drives.ref[0])
+    starts = np.asarray(q_guess, dtype=float)
+    own = starts.ndim == 2
+    q = assemble(system, starts[0] if own else starts, drives.theta[0], tol, max_iter,
+                 drives.ref[0])
     qd = qdd = np.zeros(nq)
     for f in range(n):
         drive = drives.frame(f)
         started = clock.perf_counter()
+        predicted = q
         if f > 0:
             dt = time[f] - time[f - 1]
-            q = q + qd * dt + 0.5 * qdd * dt * dt
-        it = newton_raphson(system, q, drive, tol, max_iter)
+            predicted = (out["q"][f - 3] - 3 * out["q"][f - 2] + 3 * q
+                         if continuation and f >= 3 and converged[f - 3:f].all()
+                         else q + qd * dt + 0.5 * qdd * dt * dt)
+        it = None
+        if own and f > 0 and np.isfinite(starts[f]).all():
+            it = newton_raphson(system, starts[f], drive, tol, max_iter)
+            fallback[f] = not it.converged
+        if it is None or not it.converged:
+            it = newton_raphson(system, predicted, drive, tol, max_iter)
         q = it.q
         qd, qdd = frame_rates(system, q, drive)
         seconds[f] = clock.perf_counter() - started
@@ -110,7 +135,9 @@ def solve_ad(system: System, time: np.ndarray, drives: Drives, q_guess: np.ndarr
         if progress is not None:
             progress(f + 1, n)
     motion = DrivenMotion(out["q"], out["qd"], out["qdd"], phi, iterations, converged)
-    return _result(system, time, drives, motion, seconds, tol)
+    result = _result(system, time, drives, motion, seconds, tol)
+    return replace(result, flags=np.where(fallback, BRANCH, 0).astype(FLAG_DTYPE)) if own \
+        else result
 
 
 @single_threaded
@@ -120,9 +147,11 @@ def solve_ad_batched(system: System, time: np.ndarray, drives: Drives, guesses: 
     """``solve_ad`` with every frame solved at once from its own guess (``guesses``: frames
     × nq, e.g. the mixed-coordinate solution's body coordinates): Newton–Raphson on the
     stacked frames (``batched.newton_stacked``, ``BATCH_ITER`` iterations), then each frame
-    the batch left unconverged (or without a finite guess) by ``solve_ad``'s own path, in
-    order: assembled from its guess (the first frame) or extrapolated from the previous
-    frame's q, q̇, q̈. Velocities and accelerations by stacked solves of Φ_q q̇ = ν and
+    the batch left unconverged by Newton–Raphson from its guess with every iteration, and
+    failing that (or without a finite guess) by ``solve_ad``'s own path, in order: assembled
+    from its guess (the first frame) or extrapolated from the previous frame's q, q̇, q̈ —
+    flagged ``BRANCH`` (solvers/quality.py), since that start may lie on another assembly
+    branch than the guesses. Velocities and accelerations by stacked solves of Φ_q q̇ = ν and
     Φ_q q̈ = γ. Same answers as ``solve_ad`` wherever both reach the configuration the guesses
     lie by; ``time_s`` is the whole solve's time shared evenly among the frames. ``compiled``:
     each frame's Newton iterations and rates in the compiled kernels (kernels.driven_frames)
@@ -156,16 +185,24 @@ def solve_ad_batched(system: System, time: np.ndarray, drives: Drives, guesses: 
         it = newton_stacked(stacked, q[frames], drives.take(frames), tol,
                             min(BATCH_ITER, max_iter))
         q[frames], iterations[frames], converged[frames] = it.q, it.iterations, it.converged
+    fallback = np.zeros(n, dtype=bool)
     for f in np.flatnonzero(~converged):
-        if f == 0:
-            start = assemble(system, guesses[0], drives.theta[0], tol, max_iter, drives.ref[0])
-        else:
-            velocity, acceleration = frame_rates(system, q[f - 1], drives.frame(f - 1))
-            dt = time[f] - time[f - 1]
-            start = q[f - 1] + velocity * dt + 0.5 * acceleration * dt * dt
-        one = newton_raphson(system, start, drives.frame(f), tol, max_iter)
+        one = None
+        if f > 0 and np.isfinite(guesses[f]).all():  # its own guess, given every iteration
+            one = newton_raphson(system, guesses[f], drives.frame(f), tol, max_iter)
+            iterations[f] += one.iterations
+        if one is None or not one.converged:
+            fallback[f] = f > 0
+            if f == 0:
+                start = assemble(system, guesses[0], drives.theta[0], tol, max_iter,
+                                 drives.ref[0])
+            else:
+                velocity, acceleration = frame_rates(system, q[f - 1], drives.frame(f - 1))
+                dt = time[f] - time[f - 1]
+                start = q[f - 1] + velocity * dt + 0.5 * acceleration * dt * dt
+            one = newton_raphson(system, start, drives.frame(f), tol, max_iter)
+            iterations[f] += one.iterations
         q[f], converged[f] = one.q, one.converged
-        iterations[f] += one.iterations
     rest = np.flatnonzero(~done)
     for block in blocks(len(rest)):
         frames = rest[block]
@@ -177,8 +214,9 @@ def solve_ad_batched(system: System, time: np.ndarray, drives: Drives, guesses: 
     seconds = np.full(n, (clock.perf_counter() - started) / max(n, 1))
     if progress is not None:
         progress(n, n)
-    return _result(system, time, drives, DrivenMotion(q, qd, qdd, phi, iterations, converged),
-                   seconds, tol)
+    result = _result(system, time, drives, DrivenMotion(q, qd, qdd, phi, iterations, converged),
+                     seconds, tol)
+    return replace(result, flags=np.where(fallback, BRANCH, 0).astype(FLAG_DTYPE))
 
 
 def _result(system: System, time: np.ndarray, drives: Drives, motion: DrivenMotion,

@@ -34,10 +34,15 @@ KKT_TOL = 1e-6
 def kkt_satisfied(grad: np.ndarray, eq_jac: np.ndarray, eq: np.ndarray,
                   ineq_jac: np.ndarray | None = None, ineq: np.ndarray | None = None) -> bool:
     """First-order optimality at a point an optimizer stopped at without claiming success:
-    feasible (|c_eq| ≤ 1e-9, c_ineq ≥ −1e-9) and ∇f = Σ μ ∇c_eq + Σ λ ∇c_active with λ ≥ 0,
-    to 1e-6 relative. SLSQP stops with 'positive directional derivative' at degenerate optima
-    (zero-residual goal attainment, where every goal is active at once); this tells such a stop
-    from a failure."""
+    feasible (|c_eq| ≤ 1e-9, c_ineq ≥ −1e-9) and ∇f = Σ μ ∇c_eq + Σ λ ∇c_active for some
+    λ ≥ 0, to 1e-6 relative. SLSQP stops with 'positive directional derivative' at degenerate
+    optima (zero-residual goal attainment, where every goal is active at once, or a tolerance
+    at the precision limit); this tells such a stop from a failure. The multipliers are found
+    by least squares with λ ≥ 0 as a bound (bounded-variable least squares): at a degenerate
+    optimum they are not unique, and the minimum-norm ones may have a slightly negative λ
+    although non-negative ones fit exactly (the five-bar's exact markers with --tol 1e-14)."""
+    from scipy.optimize import lsq_linear
+
     if np.abs(eq).max(initial=0.0) > FEASIBLE:
         return False
     blocks = [eq_jac]
@@ -47,10 +52,10 @@ def kkt_satisfied(grad: np.ndarray, eq_jac: np.ndarray, eq: np.ndarray,
             return False
         blocks.append(ineq_jac[ineq <= 1e-7 * max(1.0, np.abs(ineq).max(initial=0.0))])
     A = np.vstack(blocks)
-    mult, *_ = np.linalg.lstsq(A.T, grad, rcond=None)
-    residual = np.linalg.norm(A.T @ mult - grad)
-    return bool(residual <= KKT_TOL * max(1.0, np.linalg.norm(grad))
-                and (mult[n_eq:] >= -KKT_TOL * max(1.0, np.abs(mult).max())).all())
+    lower = np.concatenate([np.full(n_eq, -np.inf), np.zeros(len(A) - n_eq)])
+    fit = lsq_linear(A.T, grad, bounds=(lower, np.inf), method="bvls", tol=1e-14)
+    residual = np.linalg.norm(A.T @ fit.x - grad)
+    return bool(residual <= KKT_TOL * max(1.0, np.linalg.norm(grad)))
 
 
 def judged(res, nq: int, grad: Callable, eq: Callable, eq_jac: Callable,
