@@ -557,6 +557,11 @@ def bench_startup(ws: Workspace) -> list[Artifact]:
     return _bench_console(ws, "bench-startup", "startup.py")
 
 
+def clean_margins(ws: Workspace) -> list[Artifact]:
+    _need_gait_trial()
+    return _bench_console(ws, "clean-margins", "clean_margins.py")
+
+
 @dataclass(frozen=True)
 class Block:
     name: str
@@ -572,6 +577,8 @@ BLOCKS = {b.name: b for b in (
     Block("table-subset", "cheap", table_subset, "check only: docs tables' AD and NRM rows"),
     Block("sweeps", "tables", sweeps, "docs/table1.md, docs/table2.md, README sweep line"),
     Block("gait-methods", "tables", gait_methods, "README: CNO-SQP against NRM-WLS on gait"),
+    Block("clean-margins", "tables", clean_margins, "README: each check on clean and broken "
+          "trials"),
     Block("bench-kinematics", "benchmarks", bench_kinematics, "README performance table"),
     Block("bench-optimization", "benchmarks", bench_optimization, "README performance table"),
     Block("bench-gait", "benchmarks", bench_gait, "README gait speed"),

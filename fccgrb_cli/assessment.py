@@ -175,13 +175,15 @@ def moment_flags(model: Model, result: KinematicResult, dynamics: Dynamics,
     return out, details
 
 
-def describe_moments(flags: np.ndarray, details: dict[int, str], time: np.ndarray) -> list[str]:
-    """One warning per moment bit the kinematics' own flags do not explain."""
+def describe_moments(flags: np.ndarray, details: dict[int, str], time: np.ndarray,
+                     trusted: np.ndarray) -> list[str]:
+    """One warning per moment bit on frames whose kinematics are trusted (the frames' own
+    flags are explained already)."""
     out = []
     for bit in MOMENT_BITS:
         if bit.value == KINEMATICS:
             continue
-        hit = np.flatnonzero((flags & bit.value).any(axis=1))
+        hit = np.flatnonzero((flags & bit.value).any(axis=1) & trusted)
         if len(hit):
             f = int(hit[0])
             extra = details.get(bit.value, "")

@@ -19,8 +19,9 @@ from fccgrb_cli.system.constraints import joint_neighbours, reachable
 @dataclass(frozen=True)
 class ClinicalResults:
     """Clinical angles (frames × n, deg), their moments (frames × n, N·m, None without the
-    dynamics), the subject's mass (kg, None when the model has none) and the frames of each
-    contact body's loaded stance (name → boolean per frame)."""
+    dynamics), the subject's mass (kg, None when the model has none), the frames of each
+    contact body's loaded stance (name → boolean per frame), the contact body beyond each
+    joint, and which moments are trusted (frames × n; None: all)."""
 
     names: tuple[str, ...]
     angles: np.ndarray
@@ -28,6 +29,7 @@ class ClinicalResults:
     mass: float | None
     stance: dict[str, np.ndarray]
     contact: tuple[str | None, ...] = ()
+    moments_trusted: np.ndarray | None = None
 
     def stance_of(self, k: int) -> np.ndarray | None:
         """Frames in which a force plate loads the contact body distal to angle k, or None."""
@@ -66,9 +68,10 @@ def distal_contact(model: Model, angle) -> str | None:
 
 
 def clinical_table(c: ClinicalResults) -> str:
-    """One line per clinical angle: its range (deg) and its moment's extremes (N·m/kg when the
-    subject's mass is known, else N·m) while a force plate loads the foot beyond it (over every
-    frame when none does: moments in stance off the plates lack the ground reaction)."""
+    """One line per clinical angle: its range (deg) and its trusted moment's extremes (N·m/kg
+    when the subject's mass is known, else N·m) while a force plate loads the foot beyond it
+    (over every frame when none does: moments in stance off the plates lack the ground
+    reaction, and are not trusted); '–' when no moment there is trusted."""
     per_kg = c.moments_per_kg
     moments, unit = (per_kg, "N·m/kg") if per_kg is not None else (c.moments, "N·m")
     width = max(len(n) for n in c.names)
@@ -81,9 +84,15 @@ def clinical_table(c: ClinicalResults) -> str:
         line = f"{name:>{width}}  {np.nanmin(angle):8.1f}  {np.nanmax(angle):8.1f}"
         if moments is not None:
             stance = c.stance_of(k)
-            over = stance if stance is not None and stance.any() else slice(None)
+            over = stance if stance is not None and stance.any() else \
+                np.ones(len(moments), dtype=bool)
+            if c.moments_trusted is not None:
+                over = over & c.moments_trusted[:, k]
             m = moments[over, k]
-            where = f"{int(stance.sum())} stance" if over is stance else "all"
-            line += f"  {np.nanmin(m):12.2f}  {np.nanmax(m):12.2f}  {where:>10}"
+            where = f"{int(over.sum())} " + ("stance" if stance is not None and stance.any()
+                                             else "all")
+            low, high = (f"{v:12.2f}" for v in (np.nanmin(m), np.nanmax(m))) if \
+                np.isfinite(m).any() else (f"{'–':>12}",) * 2
+            line += f"  {low}  {high}  {where:>10}"
         lines.append(line)
     return "\n".join(lines)

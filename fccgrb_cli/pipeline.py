@@ -72,13 +72,13 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
     del measured  # the reference itself, or no longer needed
     with _Store(spill) as store:  # a failing stage leaves no scratch file
         trial = store.trial(trial, model)
-        system, result, known = _kinematics(model, trial, inputs, options, truth, progress)
+        system, result, no_data = _kinematics(model, trial, inputs, options, truth, progress)
         result = store.rates(result)
         which = [(tp.body, tp.point) for tp in model.tracked_points]
         points = points_along(system, result.q, which)
         fit = distances(points, inputs)
         found = kinematic_findings(model, result, fit, options, truth is not None)
-        found[NO_DATA] = Finding(~known)
+        found[NO_DATA] = no_data
         result = assessed(result, points, inputs, found)
         ed, ed_input = (store.keep(key, values) for key, values in
                         (("ed", distances(points, reference)), ("ed_input", fit)))
@@ -103,7 +103,10 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
             moments, details = moment_flags(model, result, solved_dynamics, stance,
                                             None if events is None else events.chosen,
                                             trial.rate)
-            warnings += describe_moments(moments, details, result.time)
+            warnings += describe_moments(moments, details, result.time, result.trusted)
+            if clinical is not None:
+                clinical = replace(clinical, moments_trusted=moments[:, [
+                    k for k, a in enumerate(model.angles) if a.clinical_sign is not None]] == 0)
         gait = None if events is None else analyse_gait(
             model, trial, clinical, result.trusted, options.events, events=events,
             trusted_curves=curve_trust(model, result.trusted, moments))
@@ -201,16 +204,16 @@ def _reference(measured: np.ndarray, labels: list[str], trial: Trial,
 
 def _kinematics(model: Model, trial: Trial, inputs: np.ndarray, options: SolveOptions,
                 truth: Truth | None, progress: Progress
-                ) -> tuple[System, KinematicResult, np.ndarray]:
+                ) -> tuple[System, KinematicResult, Finding]:
     """The kinematic solve by the chosen method (FORMULATION §3), on every stretch of frames
     the markers determine (``solvers.determined``); the others are left unsolved (no data, no
-    answer), or are an error naming the first without ``--skip-unsolvable``. Also which frames
-    the markers determine."""
+    answer), or are an error naming the first without ``--skip-unsolvable``. Also the frames
+    the markers do not determine, named (the ``no_data`` finding)."""
     o, time = options, trial.time
     if o.method == "ad" and o.ad_drivers == "truth":
         system = compile_system(model, angles="driver")
         return (system, _solve_with_true_angles(system, trial, truth, o.tol, progress),
-                np.ones(len(time), dtype=bool))
+                Finding(np.zeros(len(time), dtype=bool)))
     mixed = compile_system(model, angles="coordinate", track=True)
     by_label = dict(zip(model.marker_labels, np.moveaxis(inputs, 1, 0), strict=True))
     vectors = vector_targets(model, trial, by_label)
@@ -227,7 +230,7 @@ def _kinematics(model: Model, trial: Trial, inputs: np.ndarray, options: SolveOp
     parts = runs(known)
     if len(parts) == 1 and parts[0] == (0, len(time)):
         return system, _solve(model, system, time, targets, options, trial.path,
-                              progress), known
+                              progress), Finding(~known)
     done = 0
 
     def step(k: int, _: int) -> None:
@@ -242,12 +245,11 @@ def _kinematics(model: Model, trial: Trial, inputs: np.ndarray, options: SolveOp
     unknown = np.flatnonzero(~known)
     messages = [shifted(m, a) for (a, _), (_, part) in zip(parts, solved, strict=True)
                 for m in part.messages]
-    gone = ~np.isfinite(targets[unknown]).all(axis=2).any(axis=0)
-    messages.insert(0, f"{trial.path}: {len(unknown)} frames (frame indices {spans(unknown)}): "
-                       "the markers present cannot determine the model (never seen there: "
-                       f"{', '.join(np.array(labels)[gone]) or 'none'}); left unsolved")
+    gone = (~np.isfinite(targets[unknown]).all(axis=2)).any(axis=0)
     result = merged(solved, len(time), time) if solved else _unsolved(system, time, o)
-    return system, replace(result, messages=tuple(messages)), known
+    return system, replace(result, messages=tuple(messages)), Finding(
+        ~known, f"{trial.path}: frame indices {spans(unknown)} (missing: "
+                f"{', '.join(np.array(labels)[gone])})")
 
 
 def _solve(model: Model, system: System, time: np.ndarray, targets: np.ndarray,

@@ -41,6 +41,7 @@ class Clinical:
     moments: np.ndarray | None
     moment_unit: str
     stance: tuple[np.ndarray | None, ...]
+    trusted: np.ndarray | None = None
 
 
 def _clinical(run) -> Clinical | None:
@@ -51,8 +52,9 @@ def _clinical(run) -> Clinical | None:
     moments = c[key][()] if key in c else None
     stance = tuple(c["stance"][body][()] if body in c["stance"] else None
                    for body in (str(b) for b in c["angles"].attrs["contact"]))
+    trusted = c["moments_trusted"][()] if "moments_trusted" in c else None
     return Clinical(tuple(str(x) for x in c["angles"].attrs["names"]), c["angles"][()],
-                    moments, "N·m/kg" if key == "moments_per_kg" else "N·m", stance)
+                    moments, "N·m/kg" if key == "moments_per_kg" else "N·m", stance, trusted)
 
 
 def _series(h5, name: str, run, top) -> Series:
@@ -112,7 +114,7 @@ def _sided(names: tuple[str, ...], wanted: tuple[str, ...]) -> list[str]:
 def draw_clinical(series: list[Series], wanted: tuple[str, ...] = ()):
     """Clinical angles (left column) and moments (right) of both legs, one row per joint;
     shaded where a force plate loads that leg's foot (moments off the plates in stance lack
-    the ground reaction)."""
+    the ground reaction); a moment is drawn faint and dotted where it is not trusted."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -147,8 +149,14 @@ def draw_clinical(series: list[Series], wanted: tuple[str, ...] = ()):
                 axes[row, 0].plot(s.time, s.clinical.angles[:, k], STYLES[i % 4],
                                   color=colour, lw=1.3, label=label)
                 if columns == 2:
-                    axes[row, 1].plot(s.time, s.clinical.moments[:, k], STYLES[i % 4],
+                    moment = s.clinical.moments[:, k]
+                    trusted = np.ones(len(moment), dtype=bool) if s.clinical.trusted is None \
+                        else s.clinical.trusted[:, k]
+                    axes[row, 1].plot(s.time, np.where(trusted, moment, np.nan), STYLES[i % 4],
                                       color=colour, lw=1.3, label=label)
+                    if not trusted.all():
+                        axes[row, 1].plot(s.time, np.where(trusted, np.nan, moment), ":",
+                                          color=colour, lw=0.8, alpha=0.4)
         axes[row, 0].set_ylabel(f"{stem.replace('_', ' ')} (deg)")
         if columns == 2:
             axes[row, 1].set_ylabel(c0.moment_unit)

@@ -19,6 +19,7 @@ The shared-data tests skip when ``../shared/data`` is absent.
 from __future__ import annotations
 
 import json
+import re
 from functools import cache
 from pathlib import Path
 
@@ -33,7 +34,6 @@ from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.solvers import quality
 from fccgrb_cli.solvers.quality import (
     ANGLE_RANGE,
-    BRANCH,
     CALIBRATION,
     NO_DATA,
     POOR_FIT,
@@ -125,10 +125,26 @@ def test_frames_without_markers_are_unsolved_by_every_method(method, extra):
 @pytest.mark.parametrize("method", ["nrm-wls", "cno-sqp", "mo-ed", "ad"])
 def test_frames_without_markers_are_an_error_without_skip_unsolvable(method):
     trial = _five_bar_with_a_blank_start()
-    path = Path("/tmp") / "unused.h5"
-    with pytest.raises(fc.InputError, match="frame index 0 .*cannot determine the model"):
+    with pytest.raises(fc.InputError, match=r"frame index 0 .*cannot determine the model.*"
+                                            r"--skip-unsolvable"):
         fc.solve(fc.load_model(MODELS / "five_bar.yaml"), trial, method=method, dynamics=False)
-    assert not path.exists() or True
+
+
+def test_frames_without_markers_on_the_command_line(tmp_path):
+    """One error line naming the frame and the option, exit status 2, nothing written; with
+    the option, the run and a summary that counts the frames as failed."""
+    trial = blanked(FIVE_BAR, tmp_path / "blank.c3d", slice(0, 40))
+    out = tmp_path / "r.h5"
+    one_error_line(run_cli("solve", MODELS / "five_bar.yaml", trial, "--method", "cno-sqp",
+                           "-o", out), "frame index 0", "cannot determine the model",
+                   "--skip-unsolvable")
+    assert not out.exists()
+    result = run_cli("solve", MODELS / "five_bar.yaml", trial, "--method", "cno-sqp",
+                     "--skip-unsolvable", "-o", out)
+    assert result.exit_code == 0, result.output
+    header, values = (re.split(r"\s{2,}", line.strip())
+                      for line in result.stdout.splitlines()[:2])
+    assert values[header.index("failed")] == "40"
 
 
 @needs_shared

@@ -14,6 +14,7 @@ from the flags' own code.
 
 from __future__ import annotations
 
+import json
 import re
 from functools import cache
 from pathlib import Path
@@ -59,13 +60,13 @@ def angle_error(run: Run) -> np.ndarray:
 
 
 def moment_error(run: Run) -> np.ndarray:
-    """Largest moment error per frame (zero where failed frames left no dynamics: the run then
-    says that the inverse dynamics was skipped, and gives no moment to be wrong)."""
-    if run.dynamics is None:
+    """Largest moment error per frame (zero where a failed frame left no dynamics: the run then
+    says which frames the inverse dynamics left out, and gives no moment to be wrong there)."""
+    error = np.abs(run.dynamics.inverse.joint_moments - true_moments()).max(axis=1)
+    if np.isnan(error).any():
         assert not run.result.converged.all()
-        assert any("inverse dynamics skipped" in w for w in run.warnings)
-        return np.zeros(run.result.n_frames)
-    return np.abs(run.dynamics.inverse.joint_moments - true_moments()).max(axis=1)
+        assert any("inverse dynamics on" in w for w in run.warnings)
+    return np.nan_to_num(error)
 
 
 TABLE = [("mo-tc", 30, False, "nrm"), ("mo-ed", 30, False, "nrm"), ("mo-ed", 7.5, False, "nrm"),
@@ -213,7 +214,11 @@ def test_flags_reach_the_summary_and_the_results_file(tmp_path: Path) -> None:
         solver = g["solver_converged"][()]
         warnings = list(g.attrs["warnings"])
         bits = dict(g["flags"].attrs)
-    assert bits == {"unconverged": 1, "topology": 2, "jump": 4}
+    meaning = json.loads(bits.pop("bits"))
+    assert bits == {"unconverged": 1, "topology": 2, "jump": 4, "no_data": 8, "singular": 16,
+                    "branch": 32, "angle_range": 64, "poor_fit": 128, "calibration": 256}
+    assert sorted(b["name"] for b in meaning) == sorted(bits)
+    assert {b["name"]: b["frames"] for b in meaning}["jump"] == int((flags & 4 > 0).sum())
     assert solver.all() and (flags & 4).sum() > 250
     assert (converged == (flags == 0)).all()
     assert int(row["flagged"]) == int((flags != 0).sum()) and int(row["failed"]) == 0

@@ -39,7 +39,7 @@ from fccgrb_cli.anatomy.frames import (
     shank_frames,
     thigh_frames,
 )
-from fccgrb_cli.anatomy.plausibility import implausibilities
+from fccgrb_cli.anatomy.plausibility import implausibilities, pose
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.model import Model
@@ -107,7 +107,8 @@ class Calibration:
     'anatomical' or 'davis', ``measurements`` the ones Davis' method used (else None);
     ``fit_mm``: how far the tracked markers strayed from their mean place in their segment over
     the frames (mean, largest; mm); ``warnings``: what is implausible (anatomy/plausibility.py),
-    each naming the markers to check."""
+    each naming the markers to check; ``pose``: its twists and knee flexion (deg,
+    ``anatomy.plausibility.pose``)."""
 
     text: str
     frames: tuple[int, int]
@@ -119,6 +120,7 @@ class Calibration:
     measurements: Measurements | None = None
     fit_mm: tuple[float, float] = (float("nan"), float("nan"))
     warnings: tuple[str, ...] = ()
+    pose: dict[str, float] | None = None
 
 
 def calibration_method(model: Model) -> str:
@@ -371,4 +373,4 @@ def calibrate(model: Model, trial: Trial, frames: tuple[int, int] | None = None,
               f"{'' if mass is not None else ' (not computed: no --mass)'}.\n")
     text = header + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=100)
     return Calibration(text, (start, stop), lengths, width, depth, mass, method, measurements,
-                       fit, tuple(warnings))
+                       fit, tuple(warnings), pose(seg))

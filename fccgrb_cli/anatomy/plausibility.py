@@ -68,19 +68,31 @@ def _mean_angle(degrees: np.ndarray) -> float:
     return float(np.degrees(np.arctan2(np.nanmean(np.sin(radians)), np.nanmean(np.cos(radians)))))
 
 
+def pose(frames: dict[str, Frames]) -> dict[str, float]:
+    """The calibration pose's twists at hip and knee and the knee's flexion (deg, mean over the
+    frames), by ``<joint>_twist_<side>`` and ``knee_flexion_<side>``; a twist's sign is the
+    right side's (external tibial torsion negative on both)."""
+    out = {}
+    for s in SIDES:
+        pelvis, thigh, shank = frames["pelvis"], frames[f"thigh_{s}"], frames[f"shank_{s}"]
+        # the left side's frames are mirrored: w points right on both, so a twist's sign flips
+        sign = 1.0 if s == "r" else -1.0
+        out[f"hip_twist_{s}"] = sign * _mean_angle(twist(pelvis, thigh))
+        out[f"knee_twist_{s}"] = sign * _mean_angle(twist(thigh, shank))
+        out[f"knee_flexion_{s}"] = _mean_angle(flexion(thigh, shank))
+    return out
+
+
 def implausibilities(frames: dict[str, Frames], lengths: dict[str, float],
                      builders: dict[str, str]) -> list[str]:
     """What is implausible in a calibration: ``frames`` by body (pelvis, thigh_r, …), the
     measured ``lengths`` (m, by body) and, by body, the landmarks (the trial's labels) its frame
     is built from, which each message names."""
     out = []
+    measured = pose(frames)
     for s, side in SIDES.items():
-        pelvis, thigh, shank = frames["pelvis"], frames[f"thigh_{s}"], frames[f"shank_{s}"]
-        # the left side's frames are mirrored: w points right on both, so a twist's sign flips
-        sign = 1.0 if s == "r" else -1.0
-        for name, angle, body in (("hip", sign * _mean_angle(twist(pelvis, thigh)), f"thigh_{s}"),
-                                  ("knee", sign * _mean_angle(twist(thigh, shank)),
-                                   f"shank_{s}")):
+        for name, angle, body in (("hip", measured[f"hip_twist_{s}"], f"thigh_{s}"),
+                                  ("knee", measured[f"knee_twist_{s}"], f"shank_{s}")):
             if abs(angle) > TWIST_DEG:
                 segment = body.split("_")[0]
                 out.append(f"the {side} {segment}'s frame is turned {angle:.0f}° about its long "
@@ -88,7 +100,7 @@ def implausibilities(frames: dict[str, Frames], lengths: dict[str, float],
                            f"{name}; bodies reach ±{TWIST_DEG:g}°): check the {side} "
                            f"{segment}'s markers {builders.get(body, '')} (a wand on the "
                            "wrong face, left and right swapped)")
-        knee = _mean_angle(flexion(thigh, shank))
+        knee = measured[f"knee_flexion_{s}"]
         low, high = KNEE_FLEXION_DEG
         if not low <= knee <= high:
             out.append(f"the {side} knee is flexed {knee:.0f}° in the calibration pose "

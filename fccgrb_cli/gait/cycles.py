@@ -115,7 +115,9 @@ def side_cycles(side: str, events: Events, trusted: np.ndarray,
     rate = 1.0 / float(time[1] - time[0]) if len(time) > 1 else 1.0
     starts, stops, ok, cycles, params, per = [], [], [], [], [], []
     for a, b in itertools.pairwise(strikes):
-        first, last = int(np.floor(a * rate)), int(np.ceil(b * rate))
+        # the frames the 101 samples interpolate between (an event within 1/1000 of a frame
+        # of one, as the C3D's times are, uses that frame alone)
+        first, last = int(np.floor(a * rate + 1e-3)), int(np.ceil(b * rate - 1e-3))
         starts.append(a)
         stops.append(b)
         span = slice(max(first, 0), min(last, len(time) - 1) + 1)

@@ -7,7 +7,11 @@ gait convention), else every joint angle and its moment. Angles in degrees (a di
 coordinate in metres), moments in N·m (a distance's joint force in N). Frames the quality checks
 do not trust are exported with their values, and counted: in the CSV's ``trusted`` column, in
 the .mot/.sto header (``untrustedFrames``) and in the C3D (``FCCGRB:UNTRUSTED``, the frame
-numbers); the command line says how many on stderr.
+numbers); the command line says how many on stderr. Moments have their own trust on top of
+their frame's (a ground reaction no plate measured, unfiltered accelerations: README, "What
+fccgrb checks for you"): the CSV's ``moments trusted`` column, the .sto's ``untrustedFrames``
+and the C3D's residual of the moment points count a frame whose exported moments are not all
+trusted.
 """
 
 from __future__ import annotations
@@ -62,11 +66,26 @@ def moment_curves(run: Run) -> Curves | None:
                         zip(m.names, m.units, strict=True)), m.units, m.values)
 
 
-def _storage_text(run: Run, curves: Curves, title: str, in_degrees: bool) -> str:
+def moments_trusted(run: Run) -> np.ndarray:
+    """Per frame: the frame is trusted and so is every exported moment (the clinical ones where
+    the model declares them, else every joint's)."""
+    trusted = run.moments_trusted
+    if trusted is None:
+        return run.trusted
+    clinical = run.clinical
+    if clinical is not None and clinical.moments is not None:
+        model = [a.name for a in run.model.angles]
+        trusted = trusted[:, [model.index(name) for name in clinical.names]]
+    return run.trusted & trusted.all(axis=1)
+
+
+def _storage_text(run: Run, curves: Curves, title: str, in_degrees: bool,
+                  trusted: np.ndarray | None = None) -> str:
     """OpenSim's Storage layout (read by OpenSim 3 and 4): a name line, key=value lines,
-    ``endheader``, then a tab-separated table whose first column is time."""
+    ``endheader``, then a tab-separated table whose first column is time; ``trusted``: per
+    frame (default the run's)."""
     time = run.result.time
-    untrusted = int((~run.trusted).sum())
+    untrusted = int((~(run.trusted if trusted is None else trusted)).sum())
     lines = [title, "version=1", f"nRows={len(time)}", f"nColumns={1 + len(curves.names)}",
              f"inDegrees={'yes' if in_degrees else 'no'}", f"untrustedFrames={untrusted}",
              f"units={' '.join(sorted(set(curves.units)))}", "endheader",
@@ -85,22 +104,25 @@ def write_sto(run: Run, path: str | Path) -> None:
     """The joint moments as an OpenSim storage file, as OpenSim's inverse dynamics writes them
     (N·m; ``inDegrees=no``)."""
     moments = _needs_moments(run, path)
-    _write_text(path, _storage_text(run, moments, f"{run.name}_moments", False))
+    _write_text(path, _storage_text(run, moments, f"{run.name}_moments", False,
+                                    moments_trusted(run)))
 
 
 def write_csv(run: Run, path: str | Path) -> None:
-    """One row per frame: ``time [s]``, ``trusted``, then every angle and moment as
-    ``name [unit]``; ``pandas.read_csv(path)`` reads it in one call."""
+    """One row per frame: ``time [s]``, ``trusted``, ``moments trusted`` (with moments: the frame
+    and every moment in the row trusted), then every angle and moment as ``name [unit]``;
+    ``pandas.read_csv(path)`` reads it in one call."""
     parts = [angle_curves(run)]
     moments = moment_curves(run)
     if moments is not None:
         parts.append(moments)
-    header = ["time [s]", "trusted"] + [f"{n} [{u}]" for c in parts
-                                        for n, u in zip(c.names, c.units, strict=True)]
+    flags = [run.trusted] + ([moments_trusted(run)] if moments is not None else [])
+    header = ["time [s]", "trusted"] + (["moments trusted"] if moments is not None else []) + [
+        f"{n} [{u}]" for c in parts for n, u in zip(c.names, c.units, strict=True)]
     values = np.column_stack([c.values for c in parts])
     rows = [",".join(header)]
-    for t, ok, row in zip(run.result.time, run.trusted, values, strict=True):
-        rows.append(",".join([f"{t:.10g}", "true" if ok else "false",
+    for t, *ok, row in zip(run.result.time, *flags, values, strict=True):
+        rows.append(",".join([f"{t:.10g}", *("true" if o else "false" for o in ok),
                               *(f"{v:.10g}" for v in row)]))
     _write_text(path, "\n".join(rows) + "\n")
 
@@ -142,6 +164,8 @@ def write_c3d(run: Run, path: str | Path, trial: str | Path | None = None) -> No
     extra = np.zeros((4, len(names), n_frames))
     extra[0] = np.column_stack([c.values for c in added]).T
     extra[3] = np.where(run.trusted, 0.0, -1.0)  # residual −1: Vicon's "invalid" frame
+    if moments is not None:
+        extra[3, len(angles.names):] = np.where(moments_trusted(run), 0.0, -1.0)
     c3d["parameters"]["POINT"]["LABELS"]["value"] = labels + names
     descriptions = list(c3d["parameters"]["POINT"].get("DESCRIPTIONS", {}).get("value", []))
     if descriptions:

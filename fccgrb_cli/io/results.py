@@ -48,6 +48,8 @@ Contract (SI units: m, rad, s):
                                  attribute ``names``
       lambda                     frames × equations of the classical model; attribute ``labels``
       classical/q, qd, qdd, theta, theta_d, theta_dd   the classical model driven by θ(t)
+      classical/flags            per frame, ``branch`` (32) where it was not solved from the
+                                 mixed solution's configuration
       energy/kinetic, potential, external_power        J, J, W (a power-balance check)
       residual_force, residual_moment                  frames × floating bases × 3: what the
                                  base drivers apply (N; N·m about the base origin); attribute
@@ -58,6 +60,8 @@ Contract (SI units: m, rad, s):
                                  ``contact`` (the contact body beyond each joint, or "")
       clinical/moments           frames × clinical angles, N·m, conjugate to them (with the
                                  dynamics); clinical/moments_per_kg, N·m/kg (attribute ``mass``)
+      clinical/moments_trusted   frames × clinical angles: the moment trusted (its frame and
+                                 its own checks, as ``moment_flags``)
       clinical/stance/<body>     per frame, True while a force plate loads that body
 Arrays of 64 KiB or more are stored chunked and gzip-compressed (``fccgrb_cli.io.datasets``):
 a long trial is written and read a chunk at a time; any HDF5 reader decodes them.
@@ -285,6 +289,9 @@ def _write_clinical(g, c: ClinicalResults) -> None:
     if c.moments is not None:
         put(out, "moments", c.moments)
         out["moments"].attrs.update({"names": list(c.names), "units": "N·m"})
+    if c.moments_trusted is not None:
+        put(out, "moments_trusted", c.moments_trusted)
+        out["moments_trusted"].attrs["names"] = list(c.names)
     if c.moments_per_kg is not None:
         put(out, "moments_per_kg", c.moments_per_kg)
         out["moments_per_kg"].attrs.update({"names": list(c.names), "units": "N·m/kg",
@@ -318,6 +325,8 @@ def _write_dynamics(g, run: Run) -> None:
     for key in ("q", "qd", "qdd", "theta", "theta_d", "theta_dd", "iterations", "time_s",
                 "phi_norm", "phi_top_max", "converged"):
         put(classical, key, getattr(kin, key))
+    if kin.flags is not None:  # the frames solved away from the mixed solution (branch)
+        put(classical, "flags", kin.flags)
     if inverse.base_names:
         for key in ("residual_force", "residual_moment"):
             put(g, key, getattr(inverse, key))

@@ -76,7 +76,8 @@ def _read_run(name: str, g) -> Run:
 def _read_dynamics(g, names: tuple[str, ...], time: np.ndarray) -> Dynamics:
     c = g["classical"]
     cutoff = float(c.attrs["cutoff_hz"])
-    kinematics = _read_result(c, names, time, dict(c.attrs), c["converged"][()], {})
+    kinematics = _read_result(c, names, time, dict(c.attrs), c["converged"][()],
+                              {"flags": c["flags"][()]} if "flags" in c else {})
     bases = _strings(g["residual_force"].attrs["bases"]) if "residual_force" in g else ()
     inverse = InverseDynamics(
         angle_names=names, row_labels=_strings(g["lambda"].attrs["labels"]),
@@ -100,4 +101,5 @@ def _read_clinical(c) -> ClinicalResults:
         moments=c["moments"][()] if "moments" in c else None,
         mass=None if mass is None else float(mass),
         stance={body: frames[()] for body, frames in c["stance"].items()},
-        contact=tuple(b or None for b in _strings(angles.attrs["contact"])))
+        contact=tuple(b or None for b in _strings(angles.attrs["contact"])),
+        moments_trusted=c["moments_trusted"][()] if "moments_trusted" in c else None)

@@ -1,5 +1,5 @@
 """The result of any mixed-coordinate method from its solved q per frame: θ, θ̇, θ̈, q̇ and q̈
-consistent with the topology, and warnings for angles near 0 or π."""
+consistent with the topology (angles near 0 or π are the quality checks': solvers/quality.py)."""
 
 from __future__ import annotations
 
@@ -10,13 +10,11 @@ from fccgrb_cli.solvers.result import FrameStats, KinematicResult
 from fccgrb_cli.system import System
 from fccgrb_cli.system.constraints import floating_bases
 
-NEAR_SINGULAR = np.radians(5.0)
-
 
 def mixed_result(system: System, time: np.ndarray, q_all: np.ndarray, stats: FrameStats, *,
                  method: str, tol: float, compiled: bool = False) -> KinematicResult:
     """The result of any mixed-coordinate method: θ from q, θ̇ and θ̈ by central differences,
-    consistent q̇ and q̈, and warnings for angles near 0 or π. A signed angle is the same
+    consistent q̇ and q̈. A signed angle is the same
     configuration every 2π: frames solved apart (in parallel, or from a fresh guess after a gap)
     are brought onto one continuous count of turns, starting from the first solved frame's
     angle in (−π, π] (as the markers give it). ``compiled``: the rates through the compiled
@@ -40,25 +38,6 @@ def mixed_result(system: System, time: np.ndarray, q_all: np.ndarray, stats: Fra
         method=method, tol=tol, time=np.asarray(time, dtype=float), q=q_all, qd=qd, qdd=qdd,
         theta=theta, theta_d=theta_d, theta_dd=theta_dd, angle_names=system.layout.angle_names,
         iterations=stats.iterations, time_s=stats.seconds, phi_norm=stats.phi_norm,
-        phi_top_max=stats.phi_top, converged=stats.converged,
-        messages=(*stats.messages, *near_singular(theta, system.layout.angle_names, time,
-                                                  system.distance_rows | system.full_angles)),
+        phi_top_max=stats.phi_top, converged=stats.converged, messages=tuple(stats.messages),
         wall_s=stats.wall_s, status=stats.status)
 
-
-def near_singular(theta: np.ndarray, names: tuple[str, ...], time: np.ndarray,
-                  distance: np.ndarray | None = None) -> list[str]:
-    """Warnings for angles that come within 5° of 0 or π, where s1·s2 = cos θ loses θ's sign
-    (coordinates marked in ``distance`` have no such point: distances and signed angles)."""
-    out = []
-    for k, name in enumerate(names):
-        if distance is not None and distance[k]:
-            continue
-        close = np.flatnonzero(np.minimum(theta[:, k], np.pi - theta[:, k]) < NEAR_SINGULAR)
-        if len(close):
-            f = int(close[0])
-            out.append(f"angle {name} comes within 5 deg of 0 or 180 deg ({len(close)} frames, "
-                       f"first frame index {f}, t = {time[f]:.3f} s, "
-                       f"{np.degrees(theta[f, k]):.1f} deg); "
-                       "cos θ is ambiguous there: choose vectors 90 deg apart at the neutral pose")
-    return out

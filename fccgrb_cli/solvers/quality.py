@@ -287,7 +287,8 @@ def describe(flags: np.ndarray, time: np.ndarray, method: str,
         JUMP: "the model moves more roughly than its markers (fourth differences more than "
               f"{JUMP_RATIO:g}× the markers'): a frame on another assembly branch, or a "
               "per-frame optimum that is not unique",
-        NO_DATA: "the markers present cannot determine the model; left unsolved",
+        NO_DATA: "the markers present cannot determine the model; left unsolved (by every "
+                 "method)",
         SINGULAR: "the mechanism is near a singular position, where the classical model "
                   "driven by the angles loses rank and joint moments blow up",
         BRANCH: "another assembly branch: the moments conjugate to the angles change sign "
