@@ -15,11 +15,14 @@ accelerations are mostly noise (unfiltered markers).
 
 from __future__ import annotations
 
+from itertools import pairwise
+
 import numpy as np
 
 from fccgrb_cli.clinical import distal_contact
 from fccgrb_cli.dynamics.convert import Dynamics
 from fccgrb_cli.filtering import NOISE_BAND_HZ, noise_share
+from fccgrb_cli.gait.analysis import FoundEvents
 from fccgrb_cli.gait.events import Events, side_of
 from fccgrb_cli.model import Model
 from fccgrb_cli.options import SolveOptions
@@ -105,9 +108,10 @@ CONTACT_MARGIN_S = 0.02  # a plate's contact counts this long beyond its loaded 
 
 def possible_contact(events: Events | None, side: str | None, n: int, rate: float
                      ) -> np.ndarray:
-    """Per frame, whether a foot may be on the ground by the gait events (from its strike to
-    its off; before the first event and after the last as that event implies); every frame
-    when its side or events are unknown (a standing trial, a model without sides)."""
+    """Per frame, whether a foot may be on the ground by gait events that do not come from the
+    plates themselves (the file's, else the markers'): from each strike to the next off, and
+    before the side's first event and after its last (unknown there); every frame when its
+    side or events are unknown (a standing trial, a model without sides)."""
     if events is None or side is None:
         return np.ones(n, dtype=bool)
     marks = sorted((t, kind) for t, s, kind in zip(events.time, events.side, events.kind,
@@ -115,17 +119,19 @@ def possible_contact(events: Events | None, side: str | None, n: int, rate: floa
     if not marks:
         return np.ones(n, dtype=bool)
     time = np.arange(n) / rate
-    out = np.zeros(n, dtype=bool)
-    down = marks[0][1] == "off"  # the foot is down before its first off
-    last = -np.inf
-    for t, kind in marks:
-        if down:
-            out[(time >= last) & (time <= t)] = True
-        down = kind == "strike"
-        last = t
-    if down:
-        out[time >= last] = True
+    out = (time <= marks[0][0]) | (time >= marks[-1][0])
+    for (t, kind), (later, _) in pairwise(marks):
+        if kind == "strike":  # down until the next event (its off; or an off missed)
+            out[(time >= t) & (time <= later)] = True
     return out
+
+
+def contact_events(found: FoundEvents | None) -> Events | None:
+    """The events that tell a foot's stance independently of the plates: the file's, else the
+    markers' (the plates' own events cover only the contacts the plates measure)."""
+    if found is None:
+        return None
+    return found.found.get("c3d") or found.found.get("kinematic")
 
 
 def moment_flags(model: Model, result: KinematicResult, dynamics: Dynamics,
@@ -162,8 +168,8 @@ def moment_flags(model: Model, result: KinematicResult, dynamics: Dynamics,
     if gone:
         details[CONTACT] = ("no force plate measures the ground's reaction on " + ", ".join(
             f"{body} ({frames} frames)" for body, frames in gone.items())
-            + (" while the gait events put it on the ground" if events is not None
-               else " and no gait events say when it is off the ground"))
+            + (" while the gait events (the file's or the markers') do not put it off the ground"
+               if events is not None else " and no gait events say when it is off the ground"))
     share = noise_share(dynamics.kinematics.theta, rate)
     if np.isfinite(share).any() and np.nanmedian(share) > NOISE_SHARE:
         out[:] |= NOISY

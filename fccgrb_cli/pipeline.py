@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from fccgrb_cli.assessment import (
+    contact_events,
     curve_trust,
     describe_moments,
     dynamic_findings,
@@ -101,8 +102,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
         moments = None
         if solved_dynamics is not None:
             moments, details = moment_flags(model, result, solved_dynamics, stance,
-                                            None if events is None else events.chosen,
-                                            trial.rate)
+                                            contact_events(events), trial.rate)
             warnings += describe_moments(moments, details, result.time, result.trusted)
             if clinical is not None:
                 clinical = replace(clinical, moments_trusted=moments[:, [
