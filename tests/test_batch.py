@@ -136,12 +136,32 @@ def test_report_lists_each_trial_with_its_frames_and_flags(walking_reference: Pa
 def _run_cycles(h5: h5py.File, run: str, side: str) -> tuple[np.ndarray, np.ndarray, list]:
     c = h5["runs"][run]["gait/cycles"][side]
     names = [n.decode() if isinstance(n, bytes) else n for n in c["curves"].attrs["names"]]
-    return c["curves"][()], c["trusted"][()], names, c["parameters"][()]
+    return c["curves"][()], c["trusted"][()], names, c["parameters"][()], \
+        c["trusted_curves"][()]
+
+
+def _masked(curves: np.ndarray, trusted: np.ndarray) -> np.ndarray:
+    """strides × 101 × variables with NaN where a stride's variable is not trusted (a moment
+    whose ground reaction no plate measured: README, "What fccgrb checks for you")."""
+    return np.where(trusted[:, None, :], curves, np.nan)
+
+
+def _mean_sd(curves: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each variable's mean and SD (n − 1) over the strides where it is known (NaN: none, or
+    one for the SD)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        count = np.isfinite(curves).sum(axis=0)
+        return np.nanmean(curves, axis=0), np.where(count > 1,
+                                                    np.nanstd(curves, axis=0, ddof=1), np.nan)
 
 
 def test_pooling_per_subject_and_group_matches_numpy(walking_reference: Path) -> None:
-    """Subject: mean ± SD (n − 1) over every trusted stride of all its trials; group: mean and
-    between-subject SD of the subjects' means; recomputed from each run's own cycles."""
+    """Subject: mean ± SD (n − 1) over every trusted stride of all its trials, each variable
+    over the strides it is trusted on; group: mean and between-subject SD of the subjects'
+    means; recomputed from each run's own cycles."""
     with h5py.File(walking_reference, "r") as h5:
         subject_means: dict[str, dict[str, np.ndarray]] = {}
         subject_params: dict[str, dict[str, np.ndarray]] = {}
@@ -149,20 +169,19 @@ def test_pooling_per_subject_and_group_matches_numpy(walking_reference: Path) ->
             runs = [r for r in h5["runs"] if h5["runs"][r].attrs["subject"] == subject]
             for side in ("left", "right"):
                 parts = [_run_cycles(h5, r, side) for r in runs]
-                curves = np.concatenate([p[0][p[1]] for p in parts])
+                curves = np.concatenate([_masked(p[0], p[4])[p[1]] for p in parts])
                 params = np.concatenate([p[3][p[1]] for p in parts])
                 assert len(curves) >= 2
+                mean, sd = _mean_sd(curves)
                 stored = h5["subjects"][subject]["cycles"][side]
-                np.testing.assert_allclose(stored["mean"][()], curves.mean(axis=0), rtol=1e-12,
-                                           atol=1e-12)
-                np.testing.assert_allclose(stored["sd"][()], curves.std(axis=0, ddof=1),
-                                           rtol=1e-10, atol=1e-12)
+                np.testing.assert_allclose(stored["mean"][()], mean, rtol=1e-12, atol=1e-12)
+                np.testing.assert_allclose(stored["sd"][()], sd, rtol=1e-10, atol=1e-12)
                 table = h5["subjects"][subject]["spatiotemporal"][side]
                 np.testing.assert_allclose(table["mean"][()], params.mean(axis=0), rtol=1e-12)
                 np.testing.assert_allclose(table["sd"][()], params.std(axis=0, ddof=1),
                                            rtol=1e-10)
                 assert (table["n"][()] == len(params)).all()
-                subject_means.setdefault(subject, {})[side] = curves.mean(axis=0)
+                subject_means.setdefault(subject, {})[side] = mean
                 subject_params.setdefault(subject, {})[side] = params.mean(axis=0)
         for group, members in (("control", ["A"]), ("patients", ["B"])):
             g = h5["groups"][group]

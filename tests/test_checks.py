@@ -534,3 +534,17 @@ def test_a_results_file_with_8_bit_flags_still_reads(tmp_path):
     assert again.result.flags.dtype == np.uint16 and again.result.flags[7] == 4
     assert not again.trusted[7]
     assert again.moments_trusted is None or not again.moments_trusted[7].any()
+
+
+def test_the_kkt_check_wants_non_negative_multipliers_where_some_exist():
+    """min f over x ≥ 0, y free, at the corner x = 0 with two copies of the active constraint
+    (a degenerate point, as goal attainment's at zero residual): ∇f = (1, 0) is met by λ = (1,
+    0) — or by λ = (−1, 1), which a minimum-norm fit need not avoid — so the point is optimal;
+    for ∇f = (−1, 0) every fit needs a negative λ: not optimal (moving into x > 0 descends)."""
+    from fccgrb_cli.solvers.goal.reference import kkt_satisfied
+
+    no_equality = np.zeros((0, 2)), np.zeros(0)
+    active = np.array([[1.0, 0.0], [2.0, 0.0]]), np.zeros(2)
+    assert kkt_satisfied(np.array([1.0, 0.0]), *no_equality, *active)
+    assert not kkt_satisfied(np.array([-1.0, 0.0]), *no_equality, *active)
+    assert not kkt_satisfied(np.array([1.0, 0.5]), *no_equality, *active)  # ∇f off their span
