@@ -90,7 +90,10 @@ def calibrate(template: Model, trial: Trial, *, mass: float | None = None,
     joint centres, marker positions and, with the subject's ``mass`` (kg), de Leva inertia.
     A Helen Hayes/Davis template (``configs/models/helen_hayes.yaml``) takes the subject's
     ``knee_width``, ``ankle_width`` and ``marker_diameter`` in mm (defaults 100, 70, 14: give
-    the measured ones); ``mapping``: the template's label → the trial's."""
+    the measured ones); ``mapping``: the template's label → the trial's. The personal model's
+    gravity points down the trial's vertical, found from its plates and markers
+    (``fccgrb_cli.io.lab_axes``); where nothing in the trial tells, the template's own gravity
+    stays, so a template loaded with the lab's gravity states it."""
     from fccgrb_cli.anatomy.calibrate import Measurements
     from fccgrb_cli.anatomy.calibrate import calibrate as personalize
     from fccgrb_cli.model import parse_model

@@ -18,7 +18,7 @@ from fccgrb_cli import __version__, scratch
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.inputs import refuse_inputs
 from fccgrb_cli.model import Model, load_model
-from fccgrb_cli.options import SEED_MAX, WORKERS_MAX, SolveOptions, click_options, from_cli
+from fccgrb_cli.options import AXES, SEED_MAX, WORKERS_MAX, SolveOptions, click_options, from_cli
 from fccgrb_cli.params import Bounded
 from fccgrb_cli.progress import Progress
 from fccgrb_cli.system.structure import analyse, check_tracking
@@ -27,6 +27,7 @@ if TYPE_CHECKING:
     from fccgrb_cli.run import Run
 
 FORM = click.Choice(["model", "full", "reduced"])
+VERTICALS = ("auto", *AXES)
 ACCEPT_TRUNCATED = click.option(
     "--accept-truncated", is_flag=True,
     help="Use a trial whose data end before the last frame its header announces (an "
@@ -390,11 +391,14 @@ def _frame_range(text: str | None) -> tuple[int, int] | None:
               help="The template's label → the trial's, where a lab spells them otherwise "
                    "(repeatable NAME=LABEL, comma-separated pairs, or a YAML file of NAME: "
                    "LABEL lines; the same map serves `fccgrb solve --map`).")
+@click.option("--vertical", type=click.Choice(VERTICALS), default="auto", show_default=True,
+              help="The lab's up: auto finds it from the trial (as `fccgrb solve --vertical`), "
+                   "or an axis states it; the personal model's gravity points down it.")
 @ACCEPT_TRUNCATED
 @reports_input_errors
 def calibrate(model: str, trial: str, output: str, frames: str | None,
               mass: float | None, knee_width: float | None, ankle_width: float | None,
-              marker_diameter: float | None, mapping: tuple[str, ...],
+              marker_diameter: float | None, mapping: tuple[str, ...], vertical: str,
               accept_truncated: bool) -> None:
     """Personalize MODEL (a lower-limb template such as configs/models/lower_limb.yaml or
     helen_hayes.yaml) from TRIAL's markers: ISB segment frames from the landmarks named in its
@@ -420,7 +424,11 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
     data = read_trial(trial, accept_truncated)
     for message in data.warnings:
         click.echo(f"fccgrb: warning: {message}", err=True)
-    result = personalize(template, data, _frame_range(frames), mass, measured, labels)
+    result = personalize(template, data, _frame_range(frames), mass, measured, labels,
+                         vertical)
+    for message in result.axes.warnings:
+        click.echo(f"fccgrb: warning: {message}", err=True)
+    click.echo(f"fccgrb: {result.axes.note()}", err=True)
     personal = parse_model(result.text, output)
     analyse(personal)
     with atomic_path(output) as tmp:

@@ -16,10 +16,9 @@ def lowpass(signal: np.ndarray, rate: float, cutoff: float, order: int = 2) -> n
     from scipy.signal import butter, filtfilt  # 0.5 s to import: only where a filter is used
 
     b, a = butter(order, cutoff / (rate / 2))
-    pad = 3 * max(len(a), len(b))
-    if len(signal) <= pad:
+    if len(signal) < frames_needed(order):
         raise InputError(f"--filter-cutoff: the trial has {len(signal)} frames; the filter needs "
-                         f"more than {pad}")
+                         f"at least {frames_needed(order)}")
     return filtfilt(b, a, signal, axis=0)
 
 
@@ -48,3 +47,7 @@ def noise_share(signal: np.ndarray, rate: float, above: float = NOISE_BAND_HZ) -
     with np.errstate(invalid="ignore", divide="ignore"):
         share = np.where(total > 0, np.sqrt(high / total), np.nan)
     return np.where(np.sqrt(high / count) < NOISE_FLOOR, 0.0, share)
+def frames_needed(order: int) -> int:
+    """The fewest samples the forward-backward filter of ``order`` takes: more than its padding,
+    three times the filter's length (order + 1 coefficients), as scipy's filtfilt pads."""
+    return 3 * (order + 1) + 1

@@ -26,6 +26,7 @@ METHODS = ("ad", "nrm-ls", "nrm-wls", "cno-sqp", "cno-ip", "mo-tc", "mo-ed")
 # Processes beyond the CPUs gain nothing; a pool of 100,000 forks until the machine stops.
 WORKERS_MAX = max(8, 4 * (os.cpu_count() or 1))
 SEED_MAX = 2**32 - 1  # numpy's seeds
+AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
 
 
 _META = {"flag": None, "unit": "", "choices": (), "low": None, "low_open": False, "high": None,
@@ -142,6 +143,13 @@ class SolveOptions:
              "converted for inverse dynamics. Off by default; 6 Hz is the gait standard.")
     filter_order: int = _option(2, low=1, high=8,
                                 help="Order of that Butterworth filter (each pass).")
+    # --- the lab ---------------------------------------------------------------------------
+    vertical: str = _option(
+        "auto", choices=("auto", *AXES),
+        help="The lab's up, for a model of floating bodies (a subject): auto finds it from the "
+             "trial (force plates' normals signed by their force, the model's pose fitted to "
+             "the markers; POINT:Y_SCREEN reported beside them) and turns the model's gravity "
+             "onto it; an axis states it. A model tied to its ground keeps its own frame.")
     # --- gait ----------------------------------------------------------------------------
     events: str = _option(
         "auto", choices=("auto", "c3d", "plates", "kinematic", "none"),

@@ -24,7 +24,9 @@ from fccgrb_cli.assessment import (
 from fccgrb_cli.clinical import clinical_results
 from fccgrb_cli.dynamics.convert import Dynamics, classical_dynamics
 from fccgrb_cli.errors import InputError
+from fccgrb_cli.filtering import frames_needed
 from fccgrb_cli.gait.analysis import analyse_gait, find_events, landmark_labels
+from fccgrb_cli.io.lab_axes import lab_axes
 from fccgrb_cli.io.labels import match_labels, vector_targets
 from fccgrb_cli.io.plate_loads import plate_loads
 from fccgrb_cli.io.trial import Trial
@@ -59,6 +61,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
     StoredArray in their place, which ``write_run`` copies into the results as stored), so that
     a long trial's memory stays at the markers, q and the dynamics stage's working arrays."""
     options = options or SolveOptions()
+    _check_length(trial, options)
     model = prepared(model, options)
     labels = match_labels(model, trial, dict(options.mapping))
     unknown = sorted(set(options.perturb_markers) - set(model.marker_labels))
@@ -66,6 +69,8 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
         raise InputError(f"--perturb-markers: expected marker names of the model "
                          f"({', '.join(model.marker_labels)}), got {', '.join(unknown)}")
     measured = trial.select(labels)
+    axes = lab_axes(model, trial, measured, options.vertical)
+    model = model.with_gravity(axes.gravity)
     truth = _truth_for(trial, model) if truth is None else truth
     reference = _reference(measured, labels, trial, truth)
     inputs = perturb(measured, model.marker_labels, trial.rate, options.perturb_level_m,
@@ -86,8 +91,8 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
         reference, inputs, points = (store.keep(key, values) for key, values in
                                      (("reference", reference), ("markers_input", inputs),
                                       ("model_points", points)))
-        warnings: list[str] = [*trial.warnings, *_quality_advice(result)]
-        notes: list[str] = []
+        warnings: list[str] = [*trial.warnings, *axes.warnings, *_quality_advice(result)]
+        notes: list[str] = [axes.note()] if axes.chosen_by != "ground" else []
         stance: dict[str, np.ndarray] = {}
         solved_dynamics = _dynamics(model, trial, system, result, options, warnings, notes, stance)
         if solved_dynamics is not None:
@@ -98,7 +103,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
             model, result.theta,
             None if solved_dynamics is None else solved_dynamics.inverse.joint_moments, stance)
         events = None if options.events == "none" else \
-            find_events(model, trial, clinical, options.events, result.converged)
+            find_events(model, trial, clinical, options.events, result.converged, axes)
         moments = None
         if solved_dynamics is not None:
             moments, details = moment_flags(model, result, solved_dynamics, stance,
@@ -120,7 +125,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
             form=",".join(sorted({b.form for b in model.bodies})),
             model_text=model.text, trial_path=trial.path,
             dynamics=solved_dynamics, warnings=tuple(warnings), notes=tuple(notes),
-            clinical=clinical, gait=gait, moment_flags=moments)
+            clinical=clinical, gait=gait, moment_flags=moments, axes=axes)
 
 
 class _Store:
@@ -314,6 +319,10 @@ def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResul
             + (f", or in stretches of solved frames shorter than {least} "
                f"(frame indices {spans(short)})" if len(short) else ""))
     if not parts:
+        if options.dynamics and n < least:
+            raise InputError(f"{trial.path}: {n} frame{'s' * (n != 1)}; the inverse dynamics "
+                             f"needs a stretch of at least {least} solved frames (rates by "
+                             "central differences)")
         return None
     baseline = options.method == "ad" and options.ad_drivers == "markers"
     contact_points = {body: _body_points(system, result.q, body)
@@ -336,6 +345,17 @@ def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResul
     if len(pieces) == 1 and parts[0] == (0, n):
         return pieces[0][1]
     return merged(pieces, n, result.time)
+
+
+def _check_length(trial: Trial, options: SolveOptions) -> None:
+    """A trial too short for the filter asked for is an error naming the frames it needs."""
+    if options.filter_cutoff is None:
+        return
+    need = frames_needed(options.filter_order)
+    if trial.n_frames < need:
+        raise InputError(f"{trial.path}: {trial.n_frames} frame{'s' * (trial.n_frames != 1)}; "
+                         f"--filter-cutoff needs at least {need} (a Butterworth of order "
+                         f"{options.filter_order} run forward and backward), or solve without it")
 
 
 def _quality_advice(result: KinematicResult) -> list[str]:

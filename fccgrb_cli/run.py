@@ -13,6 +13,7 @@ import numpy as np
 from fccgrb_cli.clinical import ClinicalResults
 from fccgrb_cli.dynamics.convert import Dynamics
 from fccgrb_cli.gait.analysis import GaitResults
+from fccgrb_cli.io.lab_axes import LabAxes
 from fccgrb_cli.model import Model
 from fccgrb_cli.named import NamedArray
 from fccgrb_cli.options import SolveOptions
@@ -46,6 +47,7 @@ class Run:
     clinical: ClinicalResults | None = None
     gait: GaitResults | None = None
     moment_flags: np.ndarray | None = None
+    axes: LabAxes | None = None
 
     def __repr__(self) -> str:
         r = self.result
@@ -90,11 +92,13 @@ class Run:
     # --- the Python API's view: named arrays with units ------------------------------------
     @cached_property
     def model(self) -> Model:
-        """The model as solved (the run's YAML with the options' form and tracked markers)."""
+        """The model as solved (the run's YAML with the options' form and tracked markers, and
+        the gravity of the lab's axes)."""
         from fccgrb_cli.model import parse_model
         from fccgrb_cli.options import prepared
 
-        return prepared(parse_model(self.model_text, self.trial_path), self.options)
+        model = prepared(parse_model(self.model_text, self.trial_path), self.options)
+        return model if self.axes is None else model.with_gravity(self.axes.gravity)
 
     def _named(self, values: np.ndarray, names: tuple[str, ...], units: tuple[str, ...]
                ) -> NamedArray:

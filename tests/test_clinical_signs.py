@@ -56,6 +56,7 @@ from fccgrb_cli.dynamics.convert import classical_dynamics
 from fccgrb_cli.model import Model, parse_model
 from fccgrb_cli.solvers import KinematicResult, solve_ad
 from fccgrb_cli.solvers.ad.solve import stacked_drives
+from fccgrb_cli.solvers.rates import MIN_FRAMES
 from fccgrb_cli.system import System, compile_system
 
 MODEL_PATH = Path(__file__).resolve().parents[1] / "configs" / "models" / "lower_limb.yaml"
@@ -285,9 +286,10 @@ class Solved:
 
 
 def solve_cases(p: Posture, cases: dict[tuple, Case]) -> Solved:
-    """All cases in one run, one frame each, through the pipeline's converted model."""
+    """All cases in one run, one frame each, through the pipeline's converted model (at least
+    three frames of the still posture: the accelerations need three)."""
     keys = list(cases)
-    n = len(keys)
+    n = max(len(keys), MIN_FRAMES)
     result = _held(p.system, p.theta, p.geometry.q, p.base, n)
     loads = []
     for side in SIDES:

@@ -41,6 +41,7 @@ from fccgrb_cli.anatomy.frames import (
 )
 from fccgrb_cli.anatomy.plausibility import implausibilities, pose
 from fccgrb_cli.errors import InputError
+from fccgrb_cli.io.lab_axes import LabAxes, lab_axes
 from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.model import Model
 
@@ -121,6 +122,7 @@ class Calibration:
     fit_mm: tuple[float, float] = (float("nan"), float("nan"))
     warnings: tuple[str, ...] = ()
     pose: dict[str, float] | None = None
+    axes: LabAxes | None = None
 
 
 def calibration_method(model: Model) -> str:
@@ -260,13 +262,27 @@ def _pose(frames: Frames) -> dict:
             "v": _round(axes[:, 1], 9), "w": _round(axes[:, 2], 9)}
 
 
+def _tracked_markers(model: Model, trial: Trial, window: slice,
+                     mapping: dict[str, str]) -> np.ndarray:
+    """The template's tracked markers over the window (frames × points × 3, NaN where the
+    trial lacks one)."""
+    out = np.full((len(range(trial.n_frames)[window]), len(model.tracked_points), 3), np.nan)
+    for k, tp in enumerate(model.tracked_points):
+        found = trial.find(mapping.get(tp.marker, tp.marker))
+        if found is not None:
+            out[:, k] = trial.select([found])[window, 0]
+    return out
+
+
 def calibrate(model: Model, trial: Trial, frames: tuple[int, int] | None = None,
               mass: float | None = None, measurements: Measurements | None = None,
-              mapping: dict[str, str] | None = None) -> Calibration:
+              mapping: dict[str, str] | None = None, vertical: str = "auto") -> Calibration:
     """The template ``model`` personalized from ``trial`` over frame indices [A, B), by the
     method its landmarks choose (:func:`calibration_method`); ``measurements`` (Davis' method
     only; default :class:`Measurements`), ``mapping``: the template's label → the trial's,
-    where a lab spells them otherwise."""
+    where a lab spells them otherwise. The personal model's gravity points down the trial's
+    vertical (``io.lab_axes``; ``vertical``: 'auto' or the axis up), as its poses lie in the
+    trial's frame."""
     method = calibration_method(model)
     if method != "davis" and measurements is not None:
         raise InputError(f"--knee-width, --ankle-width, --marker-diameter: expected only with a "
@@ -287,6 +303,7 @@ def calibrate(model: Model, trial: Trial, frames: tuple[int, int] | None = None,
                          f"{', '.join(BODIES)}; missing {', '.join(absent)}")
     window = slice(start, stop)
     lm = _landmarks(model, trial, window, METHODS[method], mapping)
+    axes = lab_axes(model, trial, _tracked_markers(model, trial, window, mapping), vertical)
     if method == "davis":
         measurements = measurements or Measurements()
         anatomy = davis_segment_frames(lm, measurements)
@@ -359,6 +376,8 @@ def calibrate(model: Model, trial: Trial, frames: tuple[int, int] | None = None,
         for key in ("mass", "com", "inertia"):
             spec.pop(key, None)
         spec.update(inertia.get(body, {}))
+    if tuple(axes.gravity) != tuple(model.gravity):
+        doc["gravity"] = _round(axes.gravity, 9)
     doc.pop("subject", None)
     if mass is not None:
         doc["subject"] = {"mass": mass}
@@ -370,7 +389,8 @@ def calibrate(model: Model, trial: Trial, frames: tuple[int, int] | None = None,
               + ("knee and ankle centres: Davis et al. (1991), " + measurements.describe()
                  + "; " if measurements is not None else "")
               + "inertia: de Leva (1996)"
-              f"{'' if mass is not None else ' (not computed: no --mass)'}.\n")
+              f"{'' if mass is not None else ' (not computed: no --mass)'}.\n"
+              f"# {axes.note()}\n")
     text = header + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=100)
     return Calibration(text, (start, stop), lengths, width, depth, mass, method, measurements,
-                       fit, tuple(warnings), pose(seg))
+                       fit, tuple(warnings), pose(seg), axes)

@@ -20,6 +20,7 @@ from fccgrb_cli.gait.events import (
     kinematic_events,
     plate_events,
 )
+from fccgrb_cli.io.lab_axes import LabAxes
 from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.model import Model
 
@@ -101,14 +102,16 @@ def _moment_name(name: str) -> str:
 
 @dataclass(frozen=True)
 class FoundEvents:
-    """A trial's gait events: the ones chosen, every source's, why a source is missing, and the
-    landmark trajectories and vertical they were found with."""
+    """A trial's gait events: the ones chosen, every source's, why a source is missing, the
+    landmark trajectories and vertical they were found with, and the lab axes' direction of
+    walking (None when the axes did not say)."""
 
     chosen: Events
     found: dict[str, Events]
     notes: tuple[str, ...]
     markers: dict[str, np.ndarray]
     vertical: np.ndarray
+    walking: np.ndarray | None = None
 
 
 def _has_both_sides(clinical: ClinicalResults | None) -> bool:
@@ -117,19 +120,20 @@ def _has_both_sides(clinical: ClinicalResults | None) -> bool:
 
 
 def find_events(model: Model, trial: Trial, clinical: ClinicalResults | None,
-                choice: str = "auto", solved: np.ndarray | None = None) -> FoundEvents | None:
+                choice: str = "auto", solved: np.ndarray | None = None,
+                lab: LabAxes | None = None) -> FoundEvents | None:
     """The gait events of a solved trial from every source (``choice`` the one used), or None
     when the model has no clinical curves of both sides (not a lower-limb model) — unless
     ``choice`` names a source, then that is an error saying why. ``solved``: the frames with a
-    solution; events elsewhere, of any source, are left out (no data, no event)."""
+    solution; events elsewhere, of any source, are left out (no data, no event). ``lab``: the
+    run's lab axes (``io.lab_axes``; default: up against the model's gravity), whose vertical
+    the events, step lengths and widths are measured with."""
     if not _has_both_sides(clinical):
         if choice != "auto":
             raise InputError(f"{model.source}: --events {choice}: expected a model with "
                              "clinical angles of both legs (names ending _l and _r)")
         return None
-    vertical = -np.asarray(model.gravity, dtype=float)
-    vertical = vertical / np.linalg.norm(vertical) if np.linalg.norm(vertical) else \
-        np.array([0.0, 0.0, 1.0])
+    vertical = _vertical(model, lab)
     markers = _landmark_markers(model, trial)
     found: dict[str, Events] = {}
     notes: list[str] = []
@@ -156,7 +160,8 @@ def find_events(model: Model, trial: Trial, clinical: ClinicalResults | None,
     chosen = _choose(found, choice, trial.path, notes)
     if chosen is None:
         return None
-    return FoundEvents(chosen, found, tuple(notes), markers, vertical)
+    return FoundEvents(chosen, found, tuple(notes), markers, vertical,
+                      None if lab is None else lab.forward)
 
 
 def analyse_gait(model: Model, trial: Trial, clinical: ClinicalResults | None,
@@ -171,7 +176,7 @@ def analyse_gait(model: Model, trial: Trial, clinical: ClinicalResults | None,
     if events is None or clinical is None:
         return None
     markers, vertical, chosen = events.markers, events.vertical, events.chosen
-    forward = _forward(markers, vertical)
+    forward = _forward(markers, vertical, events.walking)
     heels = {side: markers[f"{side}_heel"] for side in SIDES if f"{side}_heel" in markers}
     curves = _curves(clinical)
     filled = {k: bridged(v) for k, v in heels.items()}
@@ -209,12 +214,24 @@ def _choose(found: dict[str, Events], choice: str, path: str, notes: list[str]
     return next(iter(found.values()), None)
 
 
-def _forward(markers: dict[str, np.ndarray], vertical: np.ndarray) -> np.ndarray:
-    """The direction of walking: the pelvis's horizontal travel (x when it is unknown)."""
+def _vertical(model: Model, lab: LabAxes | None) -> np.ndarray:
+    """The unit vector up: the lab axes', else against the model's gravity, else +z."""
+    up = -np.asarray(model.gravity, dtype=float) if lab is None else lab.up
+    norm = np.linalg.norm(up)
+    return up / norm if norm else np.array([0.0, 0.0, 1.0])
+
+
+def _forward(markers: dict[str, np.ndarray], vertical: np.ndarray,
+             walking: np.ndarray | None) -> np.ndarray:
+    """The direction of walking: the pelvis's horizontal travel; else the lab axes' (the
+    markers' mean velocity); else x (y when x is up)."""
     pelvis = bridged(markers["pelvis"]) if "pelvis" in markers else None
-    if pelvis is None:
-        return np.array([1.0, 0.0, 0.0])
-    travel = pelvis[-1] - pelvis[0]
-    travel -= (travel @ vertical) * vertical
-    norm = np.linalg.norm(travel)
-    return travel / norm if norm > 0 else np.array([1.0, 0.0, 0.0])
+    if pelvis is not None:
+        travel = pelvis[-1] - pelvis[0]
+        travel -= (travel @ vertical) * vertical
+        norm = np.linalg.norm(travel)
+        if norm > 0:
+            return travel / norm
+    if walking is not None:
+        return walking
+    return np.eye(3)[1 if abs(vertical[0]) > 0.5 else 0]

@@ -5,10 +5,12 @@
   in ``EVENT:CONTEXTS`` (Vicon Nexus). Event times count from the capture's start, frame 1 at
   t = 0, so a trial whose first frame is F starts at (F − 1)/rate.
 * ``plates``: each force plate's force normal to it, where the inverse dynamics assigned a foot
-  to it. A contact is detected where the force exceeds the threshold (default 20 N, robust to
-  the plate's noise), then its start and end are moved outwards to where the force leaves the
-  plate's own noise band (its unloaded level plus five standard deviations, at least 2 N), so
-  that the event marks the first and last contact rather than the threshold's crossing.
+  to it. A contact is detected where the force averaged over a frame exceeds the threshold
+  (default 20 N, robust to the plate's noise), then its start and end are moved outwards, on
+  the plate's analog samples, to where the force leaves the plate's own noise band (its
+  unloaded level plus five standard deviations, at least 2 N), the crossing interpolated
+  between samples, so that the event marks the first and last contact rather than the
+  threshold's crossing, to a fraction of a sample rather than of a frame.
 * ``kinematic``: Zeni, Richards and Higginson (2008), Gait & Posture 27:710–714: foot strike at
   each maximum of the heel's position relative to the pelvis along the direction of walking,
   foot off at each minimum of the toe's (markers low-passed at 6 Hz first).
@@ -106,33 +108,48 @@ def c3d_events(path: str | Path, n_frames: int, rate: float) -> Events | None:
     return _sorted("c3d", items) if items else None
 
 
-def _plate_normal_forces(path: str | Path, n_frames: int) -> list[np.ndarray]:
-    """Each plate's force normal to it per frame (N, analog samples averaged over each frame;
-    empty for a plate whose corners do not give a normal)."""
+@dataclass(frozen=True)
+class NormalForce:
+    """One plate's force normal to it (N): per frame (the frame's analog samples averaged) and
+    per analog sample (``per`` to a frame, the first at the frame's own instant)."""
+
+    framed: np.ndarray
+    samples: np.ndarray
+    per: int
+
+
+def _plate_normal_forces(path: str | Path, n_frames: int) -> list[NormalForce | None]:
+    """Each plate's force normal to it (None for a plate whose corners do not give a normal,
+    or with fewer samples than frames)."""
     import ezc3d
 
     c3d = ezc3d.c3d(str(path), extract_forceplat_data=True)
-    out = []
+    out: list[NormalForce | None] = []
     for raw in c3d["data"].get("platform", []):
         corners = np.asarray(raw["corners"], dtype=float).T
         normal = np.cross(corners[2] - corners[0], corners[3] - corners[1])
         force = np.asarray(raw["force"], dtype=float)
         per = force.shape[1] // n_frames if n_frames else 0
         if per < 1 or not np.isfinite(normal).all() or not np.linalg.norm(normal):
-            out.append(np.zeros(0))
+            out.append(None)
             continue
-        framed = force[:, : per * n_frames].reshape(3, n_frames, per).mean(axis=2)
-        out.append(np.abs(normal @ framed) / np.linalg.norm(normal))
+        samples = np.abs(normal @ force[:, : per * n_frames]) / np.linalg.norm(normal)
+        out.append(NormalForce(samples.reshape(n_frames, per).mean(axis=1), samples, per))
     return out
 
 
 def _widen(force: np.ndarray, start: int, stop: int, floor: float) -> tuple[float, float]:
-    """A contact [start, stop) found at the threshold, moved outwards to the last frames above
-    ``floor``, with the crossing of ``floor`` interpolated linearly between frames."""
-    a = start
+    """A contact [start, stop) (sample indices) found at the threshold, its edges moved to the
+    outermost samples above ``floor`` of the run of such samples they lie in (inwards first,
+    where the frame that reached the threshold began or ended below the floor), with the
+    crossing of ``floor`` interpolated linearly between samples."""
+    a, b = start, stop - 1
+    while a < b and force[a] <= floor:
+        a += 1
+    while b > a and force[b] <= floor:
+        b -= 1
     while a > 0 and force[a - 1] > floor:
         a -= 1
-    b = stop - 1
     while b + 1 < len(force) and force[b + 1] > floor:
         b += 1
     t0 = a - (force[a] - floor) / (force[a] - force[a - 1]) if a > 0 else float(a)
@@ -143,33 +160,47 @@ def _widen(force: np.ndarray, start: int, stop: int, floor: float) -> tuple[floa
 def plate_events(path: str | Path, rate: float, stance: dict[str, np.ndarray],
                  threshold: float = 20.0) -> Events | None:
     """Foot strikes and offs from the plates, for the feet the dynamics put on them (``stance``:
-    body name → loaded frames; a body's side from its name, e.g. foot_l). A contact already
+    body name → loaded frames; a body's side from its name, e.g. foot_l). A contact is a run of
+    frames whose mean force reaches ``threshold``; its edges are found on the analog samples
+    (the first and last above the noise floor, the crossing interpolated between samples: a
+    frame's mean would put an onset inside the frame up to a frame early). A contact already
     under way at the first frame, or not ended at the last, gives no event there."""
     sides = {body: side_of(body) for body in stance}
     if not stance or any(s is None for s in sides.values()):
         return None
     n_frames = len(next(iter(stance.values())))
     items: list[tuple[float, str, str]] = []
-    for force in _plate_normal_forces(path, n_frames):
-        if not len(force):
+    for plate in _plate_normal_forces(path, n_frames):
+        if plate is None:
             continue
-        loaded = force >= threshold
-        quiet = ~np.convolve(loaded, np.ones(2 * int(0.05 * rate) + 1), "same").astype(bool)
-        rest = force[quiet] if quiet.sum() >= 10 else np.zeros(10)
+        loaded = plate.framed >= threshold
+        quiet = ~_near(loaded, int(0.05 * rate))
+        rest = plate.samples.reshape(n_frames, plate.per)[quiet].ravel() \
+            if quiet.sum() >= 10 else np.zeros(10)
         floor = float(np.median(rest) + max(5.0 * 1.4826 * np.median(np.abs(rest -
                                                                             np.median(rest))),
                                             2.0))
         edges = np.flatnonzero(np.diff(np.concatenate([[0], loaded.astype(int), [0]])))
+        sample_rate = rate * plate.per
         for start, stop in zip(edges[::2], edges[1::2], strict=True):
             body = max(stance, key=lambda b: int(stance[b][start:stop].sum()))
             if not stance[body][start:stop].any():
                 continue
-            first, last = _widen(force, start, stop, floor)
+            first, last = _widen(plate.samples, start * plate.per, stop * plate.per, floor)
             if start > 0:
-                items.append((first / rate, sides[body], "strike"))
+                items.append((first / sample_rate, sides[body], "strike"))
             if stop < n_frames:
-                items.append((last / rate, sides[body], "off"))
+                items.append((last / sample_rate, sides[body], "off"))
     return _sorted("plates", items) if items else None
+
+
+def _near(mask: np.ndarray, half: int) -> np.ndarray:
+    """Frames within ``half`` frames of a True frame of ``mask`` (any length, even shorter than
+    the window)."""
+    counts = np.concatenate([[0], np.cumsum(mask)])
+    frames = np.arange(len(mask))
+    return counts[np.minimum(frames + half + 1, len(mask))] - counts[np.maximum(frames - half,
+                                                                                 0)] > 0
 
 
 def side_of(name: str) -> str | None:

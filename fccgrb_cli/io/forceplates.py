@@ -97,7 +97,7 @@ def unloaded_under_a_foot(corners: np.ndarray, normal_force: np.ndarray, markers
     with np.errstate(invalid="ignore"):
         inside = (s1 >= STAND_MARGIN) & (s1 <= l1 - STAND_MARGIN) & \
             (s2 >= STAND_MARGIN) & (s2 <= l2 - STAND_MARGIN)
-        low = np.abs(rel @ _normal(corners)) <= STAND_HEIGHT
+        low = np.abs(rel @ plate_normal(corners)) <= STAND_HEIGHT
     speed = np.full(inside.shape, np.inf)
     if len(markers) > 2:
         speed[1:-1] = np.linalg.norm(markers[2:] - markers[:-2], axis=2) * rate / 2.0
@@ -159,9 +159,9 @@ def read_force_plates(path: str | Path, n_frames: int, threshold: float = 20.0
         free = _blocks(np.nan_to_num(np.asarray(raw["Tz"], dtype=float)), n_frames) * moment
         problem = plausibility(corners, force)
         if problem is None:
-            problem = unloaded_under_a_foot(corners, force @ _normal(corners), markers, labels,
+            problem = unloaded_under_a_foot(corners, force @ plate_normal(corners), markers, labels,
                                             rate)
-        loaded = np.abs(force @ _normal(corners)) >= threshold if problem is None else \
+        loaded = np.abs(force @ plate_normal(corners)) >= threshold if problem is None else \
             np.zeros(n_frames, dtype=bool)
         centre = corners.mean(axis=0) if np.isfinite(corners).all() else np.zeros(3)
         force[~loaded] = 0.0
@@ -171,7 +171,7 @@ def read_force_plates(path: str | Path, n_frames: int, threshold: float = 20.0
     return plates
 
 
-def _normal(corners: np.ndarray) -> np.ndarray:
+def plate_normal(corners: np.ndarray) -> np.ndarray:
     """The plate's unit normal (from its diagonals): the direction of the 'vertical' force."""
     n = np.cross(corners[2] - corners[0], corners[3] - corners[1])
     return n / np.linalg.norm(n)

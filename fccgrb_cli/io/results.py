@@ -15,7 +15,11 @@ Contract (SI units: m, rad, s):
                        ``filter_cutoff_hz`` (the angles' low-pass, NaN when unfiltered: the
                        AD baseline's drivers, and the angles converted for the dynamics),
                        ``warnings`` (every warning the run printed: frames flagged or not
-                       converged and why, a truncated trial accepted, …; empty when none)
+                       converged and why, a truncated trial accepted, …; empty when none),
+                       the lab's axes (``fccgrb_cli.io.lab_axes``): ``vertical`` (the axis up,
+                       '+z'), ``gravity`` (m/s², what the dynamics used), ``vertical_chosen_by``
+                       ('ground', 'model', 'option' or 'file'), ``vertical_why`` (the cues),
+                       ``up`` and ``walking`` (unit vectors; NaN when not walking)
       q, qd, qdd                 frames × nq
       theta, theta_d, theta_dd   frames × angles; attributes ``names`` and ``units`` (per column:
                                  rad, or m for a distance coordinate; per s, per s²)
@@ -89,6 +93,7 @@ from fccgrb_cli.io.atomic import atomic_path, check_target
 from fccgrb_cli.io.datasets import put as put_array
 from fccgrb_cli.io.gait_results import write_gait, write_subject
 from fccgrb_cli.io.hdf5_writer import writing
+from fccgrb_cli.io.lab_axes import LabAxes
 from fccgrb_cli.io.lock import exclusive
 from fccgrb_cli.io.results_format import FORMAT_VERSION, check_run, reading, runs_group
 from fccgrb_cli.io.spill import StoredArray
@@ -233,6 +238,8 @@ def _write_run(h5, run: Run, command: str, cell: dict | None) -> None:
     g.attrs.create("warnings", [*r.messages, *run.warnings], dtype=text)
     g.attrs.create("messages", list(r.messages), dtype=text)
     g.attrs.create("notes", list(run.notes), dtype=text)
+    if run.axes is not None:
+        _write_axes(g, run.axes)
     g.attrs.update({"options": run.options.to_json(), "model": run.model_text,
                     "trial": run.trial_path, "rate": run.rate,
                     "labels": list(run.labels)})
@@ -263,6 +270,14 @@ def _write_run(h5, run: Run, command: str, cell: dict | None) -> None:
         _write_clinical(g, run.clinical)
     if run.gait is not None:
         write_gait(g, run.gait)
+
+
+def _write_axes(g, axes: LabAxes) -> None:
+    g.attrs.update({"vertical": axes.vertical, "gravity": np.asarray(axes.gravity),
+                    "vertical_chosen_by": axes.chosen_by, "vertical_why": axes.why,
+                    "up": axes.up,
+                    "walking": np.full(3, np.nan) if axes.forward is None else axes.forward})
+
 
 def put(group, key: str, values) -> None:
     """``io.datasets.put``, or for an array held in a Spill its stored dataset as it is."""

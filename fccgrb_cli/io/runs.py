@@ -14,6 +14,7 @@ from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.datasets import open_results
 from fccgrb_cli.io.gait_results import read_gait
+from fccgrb_cli.io.lab_axes import LabAxes
 from fccgrb_cli.io.results_format import check_run, reading, runs_group
 from fccgrb_cli.options import SolveOptions
 from fccgrb_cli.run import Run
@@ -70,7 +71,18 @@ def _read_run(name: str, g) -> Run:
         warnings=warnings, notes=_strings(a["notes"]),
         clinical=_read_clinical(g["clinical"]) if "clinical" in g else None,
         gait=read_gait(g["gait"]) if "gait" in g else None,
-        moment_flags=g["moment_flags"][()] if "moment_flags" in g else None)
+        moment_flags=g["moment_flags"][()] if "moment_flags" in g else None,
+        axes=_read_axes(a))
+
+
+def _read_axes(a: dict) -> LabAxes | None:
+    """The run's lab axes (absent in files written before them)."""
+    if "vertical" not in a:
+        return None
+    walking = np.asarray(a["walking"], dtype=float)
+    return LabAxes(str(a["vertical"]), np.asarray(a["up"], dtype=float),
+                   tuple(float(x) for x in a["gravity"]), str(a["vertical_chosen_by"]),
+                   str(a["vertical_why"]), None if np.isnan(walking).any() else walking)
 
 
 def _read_dynamics(g, names: tuple[str, ...], time: np.ndarray) -> Dynamics:

@@ -308,6 +308,10 @@ class Model:
         """The same model with every body in the given form (paper Eq. 1 or Eq. 4)."""
         return replace(self, bodies=tuple(replace(b, form=form) for b in self.bodies))
 
+    def with_gravity(self, gravity: Vec3) -> Model:
+        """The same model under another gravity (m/s²): the lab's vertical found from a trial."""
+        return replace(self, gravity=(float(gravity[0]), float(gravity[1]), float(gravity[2])))
+
     def with_tracked(self, markers: tuple[str, ...]) -> Model:
         """The same model tracking only the named markers (points and vectors)."""
         keep = set(markers)

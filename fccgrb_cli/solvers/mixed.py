@@ -7,6 +7,7 @@ import numpy as np
 
 from fccgrb_cli.solvers.rates import central_derivatives, consistent_rates
 from fccgrb_cli.solvers.result import FrameStats, KinematicResult
+from fccgrb_cli.solvers.turns import counted, gap_messages
 from fccgrb_cli.system import System
 from fccgrb_cli.system.constraints import floating_bases
 
@@ -16,17 +17,16 @@ def mixed_result(system: System, time: np.ndarray, q_all: np.ndarray, stats: Fra
     """The result of any mixed-coordinate method: θ from q, θ̇ and θ̈ by central differences,
     consistent q̇ and q̈. A signed angle is the same
     configuration every 2π: frames solved apart (in parallel, or from a fresh guess after a gap)
-    are brought onto one continuous count of turns, starting from the first solved frame's
-    angle in (−π, π] (as the markers give it). ``compiled``: the rates through the compiled
-    kernels (a solve that ran in them)."""
+    are brought onto one continuous count of turns (``turns.counted``: the converged frames
+    only). ``compiled``: the rates through the compiled kernels (a solve that ran in them)."""
     n_body = system.layout.n_body_q
     full = n_body + np.flatnonzero(system.full_angles)
+    gaps: list[str] = []
     if len(full):
-        solved = np.flatnonzero(np.isfinite(q_all[:, full]).all(axis=1))
         q_all = q_all.copy()
-        turns = q_all[np.ix_(solved, full)]
-        turns[0] -= 2 * np.pi * np.round(turns[0] / (2 * np.pi))
-        q_all[np.ix_(solved, full)] = np.unwrap(turns, axis=0)
+        solved = np.isfinite(q_all[:, full]).all(axis=1) & np.asarray(stats.converged, bool)
+        q_all[:, full], uncertain = counted(q_all[:, full], solved)
+        gaps = gap_messages(uncertain, time)
     theta = q_all[:, n_body:]
     dt = float(time[1] - time[0]) if len(time) > 1 else 1.0
     theta_d, theta_dd = central_derivatives(theta, dt)
@@ -38,6 +38,7 @@ def mixed_result(system: System, time: np.ndarray, q_all: np.ndarray, stats: Fra
         method=method, tol=tol, time=np.asarray(time, dtype=float), q=q_all, qd=qd, qdd=qdd,
         theta=theta, theta_d=theta_d, theta_dd=theta_dd, angle_names=system.layout.angle_names,
         iterations=stats.iterations, time_s=stats.seconds, phi_norm=stats.phi_norm,
-        phi_top_max=stats.phi_top, converged=stats.converged, messages=tuple(stats.messages),
+        phi_top_max=stats.phi_top, converged=stats.converged,
+        messages=(*stats.messages, *gaps),
         wall_s=stats.wall_s, status=stats.status)
 

@@ -12,12 +12,16 @@ import numpy as np
 from fccgrb_cli.solvers.batched import Drives, Stacked, blocks, factor
 from fccgrb_cli.system import System
 
+MIN_FRAMES = 3  # a second derivative needs three samples
+
 
 def central_derivatives(y: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """First and second derivatives along axis 0: 3-point central stencils inside, second-order
-    one-sided stencils at the ends (needs 4 samples; fewer give zeros for what is undefined)."""
+    one-sided stencils at the ends (4 samples; 3 give the one central second derivative at
+    every sample; 2 a first difference and no second derivative). What fewer samples leave
+    undefined is NaN, never a zero that reads as a body at rest."""
     y = np.asarray(y, dtype=float)
-    d1, d2 = np.zeros_like(y), np.zeros_like(y)
+    d1, d2 = np.full_like(y, np.nan), np.full_like(y, np.nan)
     n = len(y)
     if n >= 3:
         d1[1:-1] = (y[2:] - y[:-2]) / (2 * dt)

@@ -19,6 +19,7 @@ from fccgrb_cli.solvers.batched import Drives
 from fccgrb_cli.solvers.initial import initial_guess
 from fccgrb_cli.solvers.rates import central_derivatives
 from fccgrb_cli.solvers.result import KinematicResult
+from fccgrb_cli.solvers.turns import counted
 from fccgrb_cli.system import System, compile_system
 
 
@@ -65,7 +66,7 @@ def solve_baseline(model, time: np.ndarray, targets: np.ndarray, *, cutoff: floa
     fits = marker_fits(fit_system, targets)
     theta = np.array([fit_system.angles_at(q) for q in fits])
     full = fit_system.full_angles
-    theta[:, full] = np.unwrap(theta[:, full], axis=0)  # signed angles keep counting turns
+    theta[:, full] = counted(theta[:, full], np.ones(len(theta), bool))[0]  # keep counting
     ad = compile_system(model, angles="driver")
     n_body = ad.layout.n_body_q
     base = np.array([ad.base_reference(q[:n_body]) for q in fits])

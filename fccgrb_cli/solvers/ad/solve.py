@@ -116,10 +116,10 @@ def solve_ad(system: System, time: np.ndarray, drives: Drives, q_guess: np.ndarr
         started = clock.perf_counter()
         predicted = q
         if f > 0:
-            dt = time[f] - time[f - 1]
+            dt = time[f] - time[f - 1]  # rates undefined (NaN: too few frames) add nothing
             predicted = (out["q"][f - 3] - 3 * out["q"][f - 2] + 3 * q
                          if continuation and f >= 3 and converged[f - 3:f].all()
-                         else q + qd * dt + 0.5 * qdd * dt * dt)
+                         else q + np.nan_to_num(qd) * dt + 0.5 * np.nan_to_num(qdd) * dt * dt)
         it = None
         if own and f > 0 and np.isfinite(starts[f]).all():
             it = newton_raphson(system, starts[f], drive, tol, max_iter)
@@ -199,7 +199,8 @@ def solve_ad_batched(system: System, time: np.ndarray, drives: Drives, guesses: 
             else:
                 velocity, acceleration = frame_rates(system, q[f - 1], drives.frame(f - 1))
                 dt = time[f] - time[f - 1]
-                start = q[f - 1] + velocity * dt + 0.5 * acceleration * dt * dt
+                start = q[f - 1] + np.nan_to_num(velocity) * dt \
+                    + 0.5 * np.nan_to_num(acceleration) * dt * dt
             one = newton_raphson(system, start, drives.frame(f), tol, max_iter)
             iterations[f] += one.iterations
         q[f], converged[f] = one.q, one.converged
