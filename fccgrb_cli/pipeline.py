@@ -39,6 +39,7 @@ from fccgrb_cli.solvers import KinematicResult, solve_ad
 from fccgrb_cli.solvers.ad.baseline import solve_baseline
 from fccgrb_cli.solvers.ad.solve import stacked_drives
 from fccgrb_cli.solvers.determined import determined
+from fccgrb_cli.solvers.mixed import recounted
 from fccgrb_cli.solvers.nrm.problem import unsolvable_text
 from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
 from fccgrb_cli.solvers.quality import JUMP, NO_DATA, Finding, assessed, with_findings
@@ -251,8 +252,10 @@ def _kinematics(model: Model, trial: Trial, inputs: np.ndarray, options: SolveOp
     messages = [shifted(m, a) for (a, _), (_, part) in zip(parts, solved, strict=True)
                 for m in part.messages]
     gone = (~np.isfinite(targets[unknown]).all(axis=2)).any(axis=0)
-    result = merged(solved, len(time), time) if solved else _unsolved(system, time, o)
-    return system, replace(result, messages=tuple(messages)), Finding(
+    result = recounted(system, replace(merged(solved, len(time), time),
+                                       messages=tuple(messages))) if solved else \
+        _unsolved(system, time, o)
+    return system, result, Finding(
         ~known, f"{trial.path}: frame indices {spans(unknown)} (missing: "
                 f"{', '.join(np.array(labels)[gone])})")
 
@@ -304,8 +307,15 @@ def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResul
     if options.dynamics is False:
         return None
     n = result.n_frames
-    solved = result.converged & np.isfinite(result.q).all(axis=1)
     least = shortest(options.filter_order if options.filter_cutoff is not None else None)
+    if n < least:
+        tiny = (f"{trial.path}: {n} frame{'s' * (n != 1)}; the inverse dynamics needs at least "
+                f"{least} (a stretch of solved frames long enough for its rates)")
+        if options.dynamics:
+            raise InputError(tiny)
+        warnings.append(f"{tiny}; skipped")
+        return None
+    solved = result.converged & np.isfinite(result.q).all(axis=1)
     parts = runs(solved, least)
     covered = np.zeros(n, dtype=bool)
     for a, b in parts:
@@ -319,10 +329,6 @@ def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResul
             + (f", or in stretches of solved frames shorter than {least} "
                f"(frame indices {spans(short)})" if len(short) else ""))
     if not parts:
-        if options.dynamics and n < least:
-            raise InputError(f"{trial.path}: {n} frame{'s' * (n != 1)}; the inverse dynamics "
-                             f"needs a stretch of at least {least} solved frames (rates by "
-                             "central differences)")
         return None
     baseline = options.method == "ad" and options.ad_drivers == "markers"
     contact_points = {body: _body_points(system, result.q, body)

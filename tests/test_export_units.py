@@ -76,9 +76,9 @@ def test_csv_degrees_and_newton_metres(solved, tmp_path: Path):
     results, _, degrees, newton_metres = solved
     lines = _export(results, "csv", tmp_path / "t.csv").read_text("utf-8").splitlines()
     header = lines[0].split(",")
-    assert header == ["time [s]", "trusted", *(f"{n} [deg]" for n in SIGNS),
+    assert header == ["time [s]", "trusted", "moments trusted", *(f"{n} [deg]" for n in SIGNS),
                       *(f"{n}_moment [N·m]" for n in SIGNS)]
-    rows = np.array([[float(v) for v in line.split(",")[2:]] for line in lines[1:]])
+    rows = np.array([[float(v) for v in line.split(",")[3:]] for line in lines[1:]])
     np.testing.assert_allclose(rows[:, :4], degrees, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(rows[:, 4:], newton_metres, rtol=1e-9, atol=1e-9)
 

@@ -3,6 +3,8 @@ consistent with the topology (angles near 0 or π are the quality checks': solve
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from fccgrb_cli.solvers.rates import central_derivatives, consistent_rates
@@ -42,3 +44,24 @@ def mixed_result(system: System, time: np.ndarray, q_all: np.ndarray, stats: Fra
         messages=(*stats.messages, *gaps),
         wall_s=stats.wall_s, status=stats.status)
 
+
+def recounted(system: System, result: KinematicResult) -> KinematicResult:
+    """A result merged from stretches solved apart (``stretches.merged``) with its signed angles
+    on one count of turns over the whole trial (``turns.counted``, which each stretch's own
+    result applied within it only); whole turns move θ (and the mixed coordinates in q) but not
+    their rates. Gaps the count was carried across at over half a turn are warned of."""
+    columns = np.flatnonzero(system.full_angles)
+    if not len(columns):
+        return result
+    solved = np.isfinite(result.theta[:, columns]).all(axis=1) & np.asarray(result.converged,
+                                                                            bool)
+    new, uncertain = counted(result.theta[:, columns], solved)
+    shift = np.where(solved[:, None], new - result.theta[:, columns], 0.0)
+    theta = result.theta.copy()
+    theta[:, columns] += shift
+    q = result.q
+    if q.shape[1] > system.layout.n_body_q:  # the angles are coordinates (mixed methods)
+        q = q.copy()
+        q[:, system.layout.n_body_q + columns] += shift
+    return replace(result, theta=theta, q=q,
+                   messages=(*result.messages, *gap_messages(uncertain, result.time)))
