@@ -219,6 +219,7 @@ def solve(model: str, trials: tuple[str, ...], output: str, accept_truncated: bo
     runs = []
     for path in paths:
         run = _solve_one(loaded, path, chosen, accept_truncated, output)
+        _report_kernels()
         if len(paths) > 1:
             run = dataclasses.replace(run, name=f"{Path(path).stem}-{run.name}")
         _write_and_show(run, output)
@@ -244,6 +245,30 @@ def _solve_one(model: Model, path: str, options: SolveOptions, accept_truncated:
     return solve_trial(model, read_trial(path, accept_truncated), options,
                        progress=Progress(f"solve {options.method} {Path(path).name}"),
                        spill=Path(output).resolve().parent)
+
+
+def _report_kernels() -> None:
+    """How long this process spent loading (or compiling) the compiled kernels, on stderr: a
+    one-time cost per process that no ms/frame includes."""
+    from fccgrb_cli.solvers.engine import KernelClock
+
+    seconds, compiled = KernelClock.take()
+    if seconds:
+        what = "compiled" if compiled else "loaded"
+        click.echo(f"fccgrb: compiled kernels {what} in {seconds:.2f} s (once per process; not "
+                   "in ms/frame)", err=True)
+
+
+@main.command("compile")
+@reports_input_errors
+def compile_command() -> None:
+    """Compile the numba kernels now (once per install, about a minute; otherwise the first
+    solve that runs in them does it), by solving a few frames of a built-in model with every
+    compiled method."""
+    from fccgrb_cli.precompile import precompile
+
+    total = precompile(lambda method, seconds: click.echo(f"{method}: {seconds:.1f} s"))
+    click.echo(f"compiled kernels ready ({total:.1f} s)")
 
 
 def _write_and_show(run: Run, output: str) -> None:

@@ -193,10 +193,7 @@ def _kinematics(model: Model, trial: Trial, inputs: np.ndarray, options: SolveOp
         labels = model.marker_labels + tuple(tv.marker for tv in model.tracked_vectors)
         return system, solve_nrm(system, time, targets, NrmSettings.from_options(o),
                                  labels=labels, source=trial.path, progress=progress)
-    from fccgrb_cli.solvers.optimize.solve import (  # scipy.optimize: 0.1 s
-        Settings,
-        solve_optimization,
-    )
+    from fccgrb_cli.solvers.optimize.solve import Settings, solve_optimization
 
     return system, solve_optimization(system, time, targets, Settings.from_options(o),
                                       progress)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 from fccgrb_cli.errors import InputError
 
 NRM_COMPILED_FROM = 1000  # frames from which 'auto' takes the compiled NRM (use_kernels)
@@ -31,3 +33,63 @@ def numba_available() -> bool:
     from importlib.util import find_spec
 
     return find_spec("numba") is not None
+
+
+# --- loading the kernels: apart from the timed per-frame work ---------------------------------
+NOTICE_AFTER = 2.0  # s: loading a kernel from numba's cache takes ~0.1–0.3 s; longer: compiling
+REPORT_EVERY = 10.0  # s between the lines that say compiling goes on
+
+
+class KernelClock:
+    """The seconds this process spent loading (or compiling) compiled kernels, which no
+    ms/frame includes: :func:`ready` adds to it, ``fccgrb solve`` reports it apart."""
+
+    seconds = 0.0
+    compiled: ClassVar[list[str]] = []  # kernels this process compiled (not in numba's cache)
+
+    @classmethod
+    def take(cls) -> tuple[float, list[str]]:
+        """The seconds and the compiled kernels since the last call, then zero."""
+        out = cls.seconds, list(cls.compiled)
+        cls.seconds, cls.compiled = 0.0, []
+        return out
+
+
+def ready(kernel, *args) -> float:
+    """Load (or, the first time after an install, compile) ``kernel`` for the types of
+    ``args``, a call that does no work (an empty block of frames), before the caller's clock
+    starts; while numba compiles, a line on stderr says so and how long it has taken. Returns
+    the seconds it took."""
+    import sys
+    import threading
+    import time
+
+    started = time.perf_counter()
+    done = threading.Event()
+
+    def tell() -> None:
+        if done.wait(NOTICE_AFTER):
+            return
+        sys.stderr.write("fccgrb: compiling the compiled kernels for this machine, once per "
+                         "install (about a minute; 'fccgrb compile' does it ahead of time)\n")
+        while not done.wait(REPORT_EVERY):
+            sys.stderr.write(f"fccgrb: compiling … {time.perf_counter() - started:.0f} s\n")
+        sys.stderr.flush()
+
+    watcher = threading.Thread(target=tell, daemon=True)
+    watcher.start()
+    try:
+        kernel(*args)
+    finally:
+        done.set()
+        watcher.join()
+    seconds = time.perf_counter() - started
+    KernelClock.seconds += seconds
+    name = f"{kernel.__module__}.{kernel.__name__}"
+    if sum(kernel.stats.cache_misses.values()) and name not in _COMPILED:
+        _COMPILED.add(name)
+        KernelClock.compiled.append(name)
+    return seconds
+
+
+_COMPILED: set[str] = set()
