@@ -40,6 +40,7 @@ def test_a_compile_says_so_while_it_lasts_and_its_time_is_kept_apart(monkeypatch
     monkeypatch.setattr(engine, "NOTICE_AFTER", 0.02)
     monkeypatch.setattr(engine, "REPORT_EVERY", 0.05)
     monkeypatch.setattr(engine, "_COMPILED", set())
+    monkeypatch.setattr(KernelClock, "told", False)
     KernelClock.take()
     kernel = SlowKernel(0.3, compiled=True)
     seconds = ready(kernel, "s", 0, 0)
@@ -52,6 +53,9 @@ def test_a_compile_says_so_while_it_lasts_and_its_time_is_kept_apart(monkeypatch
     assert taken == pytest.approx(seconds) and seconds >= 0.3
     assert compiled == ["fake.kernel"]
     assert KernelClock.take() == (0.0, [])
+    ready(SlowKernel(0.3, compiled=True))  # a second kernel: its progress, not the notice again
+    again = capsys.readouterr().err.splitlines()
+    assert again and all(line.startswith("fccgrb: compiling …") for line in again)
 
 
 def test_a_load_from_the_cache_says_nothing(monkeypatch, capsys):

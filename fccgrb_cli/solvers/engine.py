@@ -45,6 +45,7 @@ class KernelClock:
     ms/frame includes: :func:`ready` adds to it, ``fccgrb solve`` reports it apart."""
 
     seconds = 0.0
+    told = False  # whether the compile notice was printed
     compiled: ClassVar[list[str]] = []  # kernels this process compiled (not in numba's cache)
 
     @classmethod
@@ -70,8 +71,11 @@ def ready(kernel, *args) -> float:
     def tell() -> None:
         if done.wait(NOTICE_AFTER):
             return
-        sys.stderr.write("fccgrb: compiling the compiled kernels for this machine, once per "
-                         "install (about a minute; 'fccgrb compile' does it ahead of time)\n")
+        if not KernelClock.told:  # the notice once per process; progress for each kernel
+            KernelClock.told = True
+            sys.stderr.write("fccgrb: compiling the compiled kernels for this machine, once "
+                             "per install (about a minute; 'fccgrb compile' does it ahead of "
+                             "time)\n")
         while not done.wait(REPORT_EVERY):
             sys.stderr.write(f"fccgrb: compiling … {time.perf_counter() - started:.0f} s\n")
         sys.stderr.flush()
