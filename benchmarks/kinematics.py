@@ -72,7 +72,7 @@ def main() -> None:
                     for method, weight in (("nrm-ls", None), ("nrm-wls", 1e-3)):
                         for engine in engines:
                             settings = NrmSettings(weight, tol, engine=engine)
-                            if engine == "compiled" and not settings.compiled(mc, len(r.time)):
+                            if engine == "compiled" and not settings.compiled(mc):
                                 continue
                             rows.append((method, engine, tol, level, partial(
                                 solve_nrm, mc, r.time, markers, settings)))

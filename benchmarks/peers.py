@@ -28,8 +28,7 @@ gets exactly these arrays. Solvers:
 Timings (``time.perf_counter``; best of ``--repeat`` runs, the run with the smallest ms/frame;
 the answers of every repeat are identical). Before any timing, one untimed solve of each fccgrb
 method on the P0 markers: one-time start-up (numba loading its cached kernels) is left out.
-fccgrb runs on its compiled engine (``engine="compiled"``; 'auto' takes it from 1000 frames, 200
-for CNO-SQP, and these are 300-frame trials):
+fccgrb runs on its compiled engine (``engine="compiled"``, what 'auto' takes for these models):
 
 - fccgrb ms/frame: the mean of the solver's own per-frame times (``KinematicResult.time_s``):
   one frame's warm-start prediction (frame 0: the initial guess from the markers) and iterations

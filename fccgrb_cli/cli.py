@@ -287,6 +287,7 @@ def solve(model: str, trials: tuple[str, ...], output: str, accept_truncated: bo
         if np.isnan(run.result.theta).all():
             raise InputError(f"{path}: no frame could be solved (in every frame the markers "
                              "present cannot determine the model); nothing was written")
+        _report_kernels()
         if len(paths) > 1:
             name = check_name(f"{Path(path).stem}-{run.name}", f"{path}: run name")
             run = dataclasses.replace(run, name=name)
@@ -322,6 +323,30 @@ def _solve_one(model: Model, path: str, options: SolveOptions, accept_truncated:
     return solve_trial(model, read_trial(path, accept_truncated), options,
                        progress=Progress(f"solve {options.method} {Path(path).name}"),
                        spill=Path(output).resolve().parent)
+
+
+def _report_kernels() -> None:
+    """How long this process spent loading (or compiling) the compiled kernels, on stderr: a
+    one-time cost per process that no ms/frame includes."""
+    from fccgrb_cli.solvers.engine import KernelClock
+
+    seconds, compiled = KernelClock.take()
+    if seconds:
+        what = "compiled" if compiled else "loaded"
+        click.echo(f"fccgrb: compiled kernels {what} in {seconds:.2f} s (once per process; not "
+                   "in ms/frame)", err=True)
+
+
+@main.command("compile")
+@reports_input_errors
+def compile_command() -> None:
+    """Compile the numba kernels now (once per install, about a minute; otherwise the first
+    solve that runs in them does it), by solving a few frames of a built-in model with every
+    compiled method."""
+    from fccgrb_cli.precompile import precompile
+
+    total = precompile(lambda method, seconds: click.echo(f"{method}: {seconds:.1f} s"))
+    click.echo(f"compiled kernels ready ({total:.1f} s)")
 
 
 def _show(run: Run, output: str) -> None:

@@ -94,8 +94,9 @@ class SolveOptions:
         "auto", choices=("auto", "compiled", "numpy"),
         help="Per-frame arithmetic of NRM and of the structured optimizers: compiled kernels "
              "(numba), the same iteration in numpy (equal to 1e-12; goal attainment's to 1e-8), "
-             "or auto: compiled for trials of 1000 frames or more (200 for the optimizers; "
-             "loading numba costs ~0.25 s once), where no body is reduced.")
+             "or auto: compiled wherever numba is installed and no body is reduced (loading "
+             "the kernels, ~0.3 s once per process, is reported apart from ms/frame; the first "
+             "run after an install compiles them: 'fccgrb compile').")
     skip_unsolvable: bool = _option(
         False, help="Report frames whose remaining markers cannot determine the model as "
                     "unsolved and go on, instead of stopping with an error.")

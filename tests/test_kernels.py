@@ -215,9 +215,9 @@ def test_reduced_bodies_stay_on_the_numpy_path() -> None:
     model = load_model(MODELS / "five_bar.yaml").with_form("reduced")
     system = compile_system(model, angles="coordinate", track=True)
     assert not supported(system)
-    assert not NrmSettings(engine="auto").compiled(system, 10**6)
+    assert not NrmSettings(engine="auto").compiled(system)
     with pytest.raises(InputError, match="reduced"):
-        NrmSettings(engine="compiled").compiled(system, 10)
+        NrmSettings(engine="compiled").compiled(system)
 
 
 def test_weights_follow_the_settings() -> None:

@@ -48,7 +48,7 @@ def classical_dynamics(model: Model, result: KinematicResult, *, cutoff: float |
     batch frame by frame in machine code (any Φ_q of full column rank) where they take the
     model."""
     system = compile_system(model, angles="driver")
-    compiled = kernels_for(system, engine, len(result.time))
+    compiled = kernels_for(system, engine)
     if batched is None:
         batched = compiled or system.n_rows == system.nq
     n_body = system.layout.n_body_q
@@ -72,11 +72,11 @@ def classical_dynamics(model: Model, result: KinematicResult, *, cutoff: float |
     return Dynamics(kinematics, inverse, tuple(loads), cutoff)
 
 
-def kernels_for(system: System, engine: str, n_frames: int) -> bool:
+def kernels_for(system: System, engine: str) -> bool:
     """Whether the classical model's batch runs in the compiled kernels (engine.use_kernels);
     where they cannot take the model, or numba is missing, it stays in numpy even with
     'compiled' (the kinematic stage has already said so when it ran in them)."""
     from fccgrb_cli.solvers.engine import numba_available, use_kernels
     from fccgrb_cli.system.sparse import compilable
 
-    return compilable(system) and numba_available() and use_kernels(engine, True, n_frames)
+    return compilable(system) and numba_available() and use_kernels(engine, True)

@@ -136,12 +136,15 @@ def _stacked(system: System, M: np.ndarray, g: np.ndarray, motion: KinematicResu
     rhs_x = forces - xdd @ M.T
     rhs = rhs_x if xq is None else np.einsum("fxq,fx->fq", xq, rhs_x)
     if compiled:
+        from fccgrb_cli.solvers.engine import ready
         from fccgrb_cli.solvers.kernels import multipliers_frames
         from fccgrb_cli.system.sparse import sparse_of
 
         some, misfit = np.empty((len(frames), system.n_rows)), np.empty(len(frames))
-        multipliers_frames(sparse_of(system), np.ascontiguousarray(q),
-                           np.ascontiguousarray(rhs), some, misfit)
+        args = (np.ascontiguousarray(q), np.ascontiguousarray(rhs), some, misfit)
+        s = sparse_of(system)
+        ready(multipliers_frames, s, *(a[:0] for a in args))
+        multipliers_frames(s, *args)
         lam[frames], residual[frames] = some, misfit
         return lam, residual, x, xd, power
     for block in blocks(len(frames)):

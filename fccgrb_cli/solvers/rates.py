@@ -83,6 +83,7 @@ def consistent_rates(system: System, q: np.ndarray, theta_d: np.ndarray, theta_d
 def _compiled_rates(system: System, q: np.ndarray, theta_d: np.ndarray, theta_dd: np.ndarray,
                     base: tuple[np.ndarray, np.ndarray, np.ndarray] | None
                     ) -> tuple[np.ndarray, np.ndarray]:
+    from fccgrb_cli.solvers.engine import ready
     from fccgrb_cli.solvers.kernels import BaseRates, rates_frames
     from fccgrb_cli.system.sparse import sparse_of
 
@@ -91,8 +92,11 @@ def _compiled_rates(system: System, q: np.ndarray, theta_d: np.ndarray, theta_dd
     base_d = base[1] if base is not None else np.zeros((n, 0))
     base_dd = base[2] if base is not None else np.zeros((n, 0))
     qd, qdd = np.full_like(q, np.nan), np.full_like(q, np.nan)
-    rates_frames(sparse_of(system), np.ascontiguousarray(q), np.ascontiguousarray(theta_d),
-                 np.ascontiguousarray(theta_dd),
-                 BaseRates(columns, np.ascontiguousarray(base_d), np.ascontiguousarray(base_dd)),
-                 qd, qdd)
+    args = (np.ascontiguousarray(q), np.ascontiguousarray(theta_d),
+            np.ascontiguousarray(theta_dd),
+            BaseRates(columns, np.ascontiguousarray(base_d), np.ascontiguousarray(base_dd)),
+            qd, qdd)
+    s = sparse_of(system)
+    ready(rates_frames, s, *(a[:0] for a in args[:3]), args[3], *(a[:0] for a in args[4:]))
+    rates_frames(s, *args)
     return qd, qdd

@@ -169,16 +169,20 @@ def solve_ad_batched(system: System, time: np.ndarray, drives: Drives, guesses: 
     done = np.zeros(n, dtype=bool)  # q, q̇, q̈ and Φ in place (the compiled kernels')
     phi, qd, qdd = np.empty((n, system.n_rows)), np.empty_like(q), np.empty_like(q)
     if compiled:
+        from fccgrb_cli.solvers.engine import ready
         from fccgrb_cli.solvers.kernels import NO_INVERSE, driven_frames
         from fccgrb_cli.system.sparse import sparse_of
 
         arrays = (drives.theta, drives.theta_d, drives.theta_dd, drives.ref, drives.ref_d,
                   drives.ref_dd)
-        driven_frames(sparse_of(system), q,
-                      Drivers(*(np.ascontiguousarray(a, dtype=float) for a in arrays)),
-                      Limits(tol, min(BATCH_ITER, max_iter)),
-                      DrivenMotion(q, qd, qdd, phi, iterations, converged),
-                      NO_INVERSE if inverse is None else inverse)
+        drivers = Drivers(*(np.ascontiguousarray(a, dtype=float) for a in arrays))
+        limits = Limits(tol, min(BATCH_ITER, max_iter))
+        motion = DrivenMotion(q, qd, qdd, phi, iterations, converged)
+        inverse = NO_INVERSE if inverse is None else inverse
+        s = sparse_of(system)
+        started += ready(driven_frames, s, q[:0], drivers, limits,
+                         DrivenMotion(*(a[:0] for a in motion)), inverse)
+        driven_frames(s, q, drivers, limits, motion, inverse)
         done[:] = converged
     for block in blocks(len(finite)) if not compiled else ():
         frames = finite[block]

@@ -13,7 +13,6 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-from scipy.optimize import Bounds, NonlinearConstraint, minimize
 
 from fccgrb_cli.solvers.goal.reference import FEASIBLE, FrameOutcome, judged
 from fccgrb_cli.solvers.optimize.problem import FrameProblem
@@ -24,6 +23,10 @@ def solve_cno_frame(problem: FrameProblem, q0: np.ndarray, *, algorithm: str, ob
     """One frame by SQP ('sqp') or trust-constr ('ip'). trust-constr stops on the optimality
     (gtol = 100·tol) or step (xtol = tol) test, its barrier at 100·tol, starting from a barrier
     parameter of 1e-3: at the paper's 1e-10 for everything it took 10 s a frame."""
+    # imported here: scipy.optimize takes 0.1–0.2 s to load, which a run whose frames all stay
+    # in the engine's own optimizer never needs
+    from scipy.optimize import Bounds, NonlinearConstraint, minimize
+
     fun = problem.tc if objective == "tc" else problem.ed
     scale = 1e6 if objective == "tc" else 1e3  # m² → mm², m → mm: ftol acts on sensible units
 

@@ -12,7 +12,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import minimize
 
 from fccgrb_cli.solvers.optimize.problem import FrameProblem
 
@@ -77,6 +76,8 @@ def judged(res, nq: int, grad: Callable, eq: Callable, eq_jac: Callable,
 def solve_goal_frame(problem: FrameProblem, q0: np.ndarray, *, objective: str, tol: float,
                      max_iter: int) -> FrameOutcome:
     """One frame of goal attainment."""
+    from scipy.optimize import minimize  # 0.1–0.2 s to load: only when a frame comes here
+
     nq = len(q0)
     w = np.where(problem.point_weights > 0, problem.point_weights, 1.0)
     active = problem.point_weights > 0

@@ -12,6 +12,7 @@ import numpy as np
 
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.solvers import kernels
+from fccgrb_cli.solvers.engine import ready
 from fccgrb_cli.solvers.initial import initial_guess
 from fccgrb_cli.solvers.mixed import mixed_result
 from fccgrb_cli.solvers.nrm.problem import (
@@ -50,6 +51,9 @@ def solve_compiled(system: System, time: np.ndarray, targets: np.ndarray,
     extrapolate = settings.warm_start != "previous"
     outputs = kernels.FrameOutputs(state.q, state.iterations, state.phi_norm, state.phi_top,
                                    state.converged, state.unsolved)
+    ready(kernels.solve_frames, s, trial, limits, HESSIAN_CODES[settings.hessian], 0, 0,
+          kernels.WarmStart(guess, use_guess, state.history, state.counts, extrapolate),
+          outputs)
     f = 0
     while f < n:
         stop = min(n, f + BLOCK)

@@ -106,8 +106,8 @@ class NrmSettings:
         return cls(None if o.method == "nrm-ls" else o.tracking_weight, o.tol,
                    o.max_iter or 50, o.warm_start, o.hessian, o.skip_unsolvable, o.engine)
 
-    def compiled(self, system: System, n_frames: int) -> bool:
+    def compiled(self, system: System) -> bool:
         """Whether this solve runs in the compiled kernels (see :func:`use_kernels`)."""
         from fccgrb_cli.system.sparse import supported
 
-        return use_kernels(self.engine, supported(system), n_frames)
+        return use_kernels(self.engine, supported(system))

@@ -45,7 +45,7 @@ def solve_nrm(system: System, time: np.ndarray, targets: np.ndarray,
     if not system.mixed or not system.n_targets:
         raise ValueError("solve_nrm needs angles='coordinate' and track=True")
     labels = labels or tuple(f"target {k}" for k in range(system.n_targets))
-    if settings.compiled(system, len(time)):
+    if settings.compiled(system):
         from fccgrb_cli.solvers.nrm.compiled import solve_compiled
 
         return solve_compiled(system, time, targets, settings, labels=labels, source=source,

@@ -12,6 +12,7 @@ from collections.abc import Callable
 import numpy as np
 
 from fccgrb_cli.solvers import kernels
+from fccgrb_cli.solvers.engine import ready
 from fccgrb_cli.solvers.initial import initial_guess
 from fccgrb_cli.solvers.newton import Iterate
 from fccgrb_cli.solvers.nrm.compiled import BLOCK
@@ -51,6 +52,8 @@ def run_frames_compiled(system: System, settings: Settings, targets: np.ndarray,
     extrapolate = settings.warm_start != "previous"
     outputs = kernels.FrameOutputs(q_all, iterations, phi_norm, phi_top, converged,
                                    np.zeros(n, dtype=bool))
+    ready(optimizer_kernels.solve_frames, s, KINDS[settings.method], trial, limits, 0, 0,
+          kernels.WarmStart(guess, use_guess, history, state, extrapolate), outputs)
     f = 0
     while f < n:
         started = clock.perf_counter()

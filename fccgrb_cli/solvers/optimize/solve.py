@@ -44,7 +44,6 @@ if TYPE_CHECKING:
 METHODS = ("cno-sqp", "cno-ip", "mo-tc", "mo-ed")
 PARALLEL_INITS = ("same", "chunks", "nrm")
 REJOINED = 1e-6
-COMPILED_FROM = 200
 
 
 def _run_frames(system: System, settings: Settings, targets: np.ndarray, frames: list[int],
@@ -94,7 +93,7 @@ def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
     label = settings.method + ("-ed" if settings.method.startswith("cno")
                                and settings.objective == "ed" else "")
     init = settings.init
-    compiled = not settings.parallel and compiled_structured(system, settings, n)
+    compiled = not settings.parallel and compiled_structured(system, settings)
     if compiled:
         from fccgrb_cli.solvers.optimize.compiled import run_frames_compiled
 
@@ -126,11 +125,10 @@ def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
                         tol=settings.tol, compiled=compiled)
 
 
-def compiled_structured(system: System, settings: Settings, n_frames: int) -> bool:
+def compiled_structured(system: System, settings: Settings) -> bool:
     """Whether the sequential structured optimizer runs in the compiled kernels
-    (engine.use_kernels), 'auto' from ``COMPILED_FROM`` frames (its numpy path costs ~1 ms a
-    frame, so numba's ~0.25 s start pays from a few hundred). MO-ED needs each point's distance
-    curvature inside the factor's envelope (goal/kernels.py's ed_fits)."""
+    (engine.use_kernels). MO-ED needs each point's distance curvature inside the factor's
+    envelope (goal/kernels.py's ed_fits)."""
     from fccgrb_cli.system.sparse import supported
 
     fits = supported(system)
@@ -139,8 +137,7 @@ def compiled_structured(system: System, settings: Settings, n_frames: int) -> bo
         from fccgrb_cli.system.sparse import sparse_of
 
         fits = ed_fits(sparse_of(system), len(system.trk_weight))
-    return settings.structured and use_kernels(settings.engine, fits, n_frames,
-                                               COMPILED_FROM)
+    return settings.structured and use_kernels(settings.engine, fits)
 
 
 def _parallel(system: System, time: np.ndarray, targets: np.ndarray, settings: Settings,

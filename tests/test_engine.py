@@ -1,0 +1,81 @@
+"""The compiled kernels' start-up, kept apart from the per-frame figures: each kernel is loaded
+(or compiled) by an empty call before any clock starts, a compile says so on stderr while it
+lasts, ``fccgrb solve`` reports the load apart, and ``fccgrb compile`` compiles ahead of time."""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+from cli_helpers import run_cli
+
+from fccgrb_cli.solvers import engine
+from fccgrb_cli.solvers.engine import KernelClock, numba_available, ready
+
+ROOT = Path(__file__).resolve().parents[1]
+MODEL = ROOT / "configs" / "models" / "five_bar.yaml"
+TRIAL = ROOT / "sample_data" / "five_bar.c3d"
+
+
+class SlowKernel:
+    """A stand-in for a numba dispatcher that takes ``seconds`` and did (not) compile."""
+
+    __module__ = "fake"
+    __name__ = "kernel"
+
+    def __init__(self, seconds: float, compiled: bool) -> None:
+        self.seconds = seconds
+        self.calls: list[tuple] = []
+        self.stats = SimpleNamespace(cache_misses=Counter({"sig": 1} if compiled else {}))
+
+    def __call__(self, *args) -> None:
+        self.calls.append(args)
+        time.sleep(self.seconds)
+
+
+def test_a_compile_says_so_while_it_lasts_and_its_time_is_kept_apart(monkeypatch, capsys):
+    monkeypatch.setattr(engine, "NOTICE_AFTER", 0.02)
+    monkeypatch.setattr(engine, "REPORT_EVERY", 0.05)
+    monkeypatch.setattr(engine, "_COMPILED", set())
+    monkeypatch.setattr(KernelClock, "told", False)
+    KernelClock.take()
+    kernel = SlowKernel(0.3, compiled=True)
+    seconds = ready(kernel, "s", 0, 0)
+    assert kernel.calls == [("s", 0, 0)]
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("fccgrb: compiling the compiled kernels")
+    assert "fccgrb compile" in err[0]
+    assert len(err) >= 2 and all(line.startswith("fccgrb: compiling …") for line in err[1:])
+    taken, compiled = KernelClock.take()
+    assert taken == pytest.approx(seconds) and seconds >= 0.3
+    assert compiled == ["fake.kernel"]
+    assert KernelClock.take() == (0.0, [])
+    ready(SlowKernel(0.3, compiled=True))  # a second kernel: its progress, not the notice again
+    again = capsys.readouterr().err.splitlines()
+    assert again and all(line.startswith("fccgrb: compiling …") for line in again)
+
+
+def test_a_load_from_the_cache_says_nothing(monkeypatch, capsys):
+    monkeypatch.setattr(engine, "NOTICE_AFTER", 5.0)
+    KernelClock.take()
+    ready(SlowKernel(0.0, compiled=False))
+    assert capsys.readouterr().err == ""
+    seconds, compiled = KernelClock.take()
+    assert seconds > 0.0 and compiled == []
+
+
+@pytest.mark.skipif(not numba_available(), reason="numba is not installed")
+def test_solve_reports_the_kernels_load_apart_and_compile_prepares_them(tmp_path):
+    compiled = run_cli("compile")
+    assert compiled.exit_code == 0, compiled.output
+    assert compiled.output.splitlines()[-1].startswith("compiled kernels ready")
+    out = run_cli("solve", MODEL, TRIAL, "--engine", "compiled", "-o", tmp_path / "c.h5")
+    assert out.exit_code == 0, out.output
+    lines = [line for line in out.stderr.splitlines() if "compiled kernels" in line]
+    assert len(lines) == 1 and "not in ms/frame" in lines[0], out.stderr
+    numpy = run_cli("solve", MODEL, TRIAL, "--engine", "numpy", "-o", tmp_path / "n.h5")
+    assert numpy.exit_code == 0, numpy.output
+    assert "compiled kernels" not in numpy.stderr
