@@ -26,7 +26,7 @@ from fccgrb_cli.model import parse_model
 from fccgrb_cli.solvers.smooth import filter as reference
 from fccgrb_cli.solvers.smooth import kernels, rotation
 from fccgrb_cli.solvers.smooth.coordinates import Coordinates
-from fccgrb_cli.solvers.smooth.noise import cutoff, marker_noise
+from fccgrb_cli.solvers.smooth.noise import marker_noise, strength
 from fccgrb_cli.solvers.smooth.prior import density, noise_shape, transition
 from fccgrb_cli.solvers.smooth.start import initial_state
 from fccgrb_cli.solvers.smooth.trial import SmoothSettings, smooth_motion
@@ -207,8 +207,9 @@ def test_likelihood_engines_agree_and_find_the_cutoff() -> None:
     a = reference.log_likelihood(z, var, F, Q, mean0, cov0, order)
     k = kernels.log_likelihood(z, var, F, Q, mean0, cov0, order)
     assert abs(a - k) < 1e-9 * abs(a)
-    found = cutoff(time, z, var, kernels.log_likelihood)
-    assert abs(found / fc - 1) < 0.25
+    found = strength(time, z, var, kernels.log_likelihood)
+    assert abs(found.cutoff / fc - 1) < 0.25
+    assert found.extra < 0.2 * r
 
 
 def test_marker_noise_from_residuals_ignores_a_slow_artefact() -> None:

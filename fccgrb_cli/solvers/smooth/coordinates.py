@@ -258,8 +258,7 @@ class Coordinates:
         linearize_frames(_sparse(self.system), np.ascontiguousarray(guesses),
                          np.ascontiguousarray(drives.theta), np.ascontiguousarray(drives.ref),
                          self.base_units(d), self.point_offset.astype(np.int64),
-                         self.point_local, POSITION_TOL, POSITION_ITER, q, S, points, H,
-                         converged)
+                         self.point_local, POSITION_ITER, q, S, points, H, converged)
         if not converged.all():  # the numpy path's continuation decides, and names a failure
             redo = np.flatnonzero(~converged)
             again = self.linearize(d[redo], guesses[redo])

@@ -3,11 +3,11 @@
 ``filter.log_likelihood``, on plain arrays.
 
 The prior's F and Q are block-diagonal with upper-triangular blocks (one p × p block per
-coordinate), so F P Fᵀ costs ~n² p³ instead of 2 (np)³ (loops); the products with
-C = I − U M E go to BLAS as dense matrix products (at 45 × 45 they beat loops that use C's
-structure, measured 67 against 119 µs for C P Cᵀ + U N Uᵀ). Kept per frame between the passes:
-the output rows of P⁻ (3n × np; overwritten by the rows of I − P⁻Ω once the backward pass has
-used them), U, M, N, ν and P⁻ Γ P⁻ at the outputs (3n × 3n).
+coordinate), so F P Fᵀ costs ~n² p³ instead of 2 (np)³ (loops); C = I − U M E changes a
+matrix by low-rank terms (n or 2n columns), which go to BLAS as thin matrix products. Kept
+per frame between the passes: the output rows of P⁻ (3n × np; overwritten by the rows of
+I − P⁻Ω once the backward pass has used them), U, M, N, ν and P⁻ Γ P⁻ at the outputs
+(3n × 3n).
 """
 
 from __future__ import annotations
@@ -83,14 +83,41 @@ def _apply(F: np.ndarray, x: np.ndarray, out: np.ndarray, transpose: bool) -> No
 
 
 @njit(cache=True)
-def _c_matrix(U: np.ndarray, M: np.ndarray, p: int) -> np.ndarray:
-    """C = I − U M E (E picks each coordinate's first state)."""
+def _c_x_ct(X: np.ndarray, U: np.ndarray, M: np.ndarray, N: np.ndarray, p: int) -> None:
+    """X ← C X Cᵀ + U N Uᵀ for C = I − U M E (E picks each coordinate's first state):
+    X + [U V] [[M (E X Eᵀ) M + N, −M], [−M, 0]] [U V]ᵀ with V = X Eᵀ, one rank-2n product."""
     m, n = U.shape
-    C = np.eye(m)
-    UM = U @ M
+    W = np.empty((m, 2 * n))
+    W[:, :n] = U
     for a in range(n):
-        C[:, a * p] -= UM[:, a]
-    return C
+        W[:, n + a] = X[:, a * p]
+    XE = np.empty((n, n))
+    for a in range(n):
+        for c in range(n):
+            XE[a, c] = X[a * p, c * p]
+    K = np.zeros((2 * n, 2 * n))
+    K[:n, :n] = M @ XE @ M + N
+    K[:n, n:] = -M
+    K[n:, :n] = -M
+    X += (W @ K) @ W.T
+
+
+@njit(cache=True)
+def _ct_x_c(X: np.ndarray, U: np.ndarray, M: np.ndarray, p: int) -> np.ndarray:
+    """X ← Cᵀ X C for the same C (only the n rows and columns of the coordinates' first states
+    change: X − Eᵀ M Uᵀ X − X U M E + Eᵀ M (Uᵀ X U) M E); returns X U (before the change)."""
+    n = U.shape[1]
+    XU = X @ U
+    XUM = XU @ M
+    inner = M @ (U.T @ XU) @ M
+    for a in range(n):
+        X[:, a * p] -= XUM[:, a]
+    for a in range(n):
+        X[a * p, :] -= XUM[:, a]
+    for a in range(n):
+        for c in range(n):
+            X[a * p, c * p] += inner[a, c]
+    return XU
 
 
 @njit(cache=True)
@@ -163,8 +190,12 @@ def smooth_passes(F: np.ndarray, Q: np.ndarray, mean0: np.ndarray, cov0: np.ndar
         Nf = np.linalg.solve(G, np.linalg.solve(G, A[f]).T)
         Ns[f] = 0.5 * (Nf + Nf.T)
         x += U @ nus[f]
-        C = _c_matrix(U, Ms[f], p)  # Joseph's form: C P Cᵀ + U N Uᵀ (stays positive definite)
-        P[:, :] = (C @ P) @ C.T + (U @ Ns[f]) @ U.T
+        # Joseph's form C P Cᵀ + U N Uᵀ, which is P − U K Uᵀ with K = 2M − M B M − N (= M in
+        # exact arithmetic, and like Joseph's first-order insensitive to M's rounding: the
+        # short form P − U M Uᵀ drifts off positive definite over hundreds of frames)
+        K = 2.0 * Ms[f] - Ms[f] @ B @ Ms[f] - Ns[f]
+        K = 0.5 * (K + K.T)
+        P -= (U @ K) @ U.T
         _symmetrize(P)
     lam = np.zeros(m)
     lam_t = np.empty(m)
@@ -182,20 +213,19 @@ def smooth_passes(F: np.ndarray, Q: np.ndarray, mean0: np.ndarray, cov0: np.ndar
         _apply(F, lam_t, lam, True)
         if not covariance:
             continue
-        LU = Lam @ U  # a = Cᵀ Λ̂ U − Eᵀ, with Λ̂ before it becomes Ω
-        corr2 = Mf @ (U.T @ LU)
+        LU = _ct_x_c(Lam, U, Mf, p)  # Ω = Eᵀ M E + Cᵀ Λ̂ C; LU = Λ̂ U
+        corr2 = Mf @ (U.T @ LU)  # a = Cᵀ Λ̂ U − Eᵀ
         a_mat[:, :] = LU
         for a in range(n):
             for c in range(n):
                 a_mat[a * p, c] -= corr2[a, c]
             a_mat[a * p, a] -= 1.0
-        C = _c_matrix(U, Mf, p)
-        Lam[:, :] = (C.T @ Lam) @ C  # Ω = Eᵀ M E + Cᵀ Λ̂ C
         for a in range(n):
             for c in range(n):
                 Lam[a * p, c * p] += Mf[a, c]
         _symmetrize(Lam)
-        Gam[:, :] = (C.T @ Gam) @ C + (a_mat @ Ns[f]) @ a_mat.T  # Γ = a N aᵀ + Cᵀ Γ̂ C
+        _ct_x_c(Gam, U, Mf, p)  # Γ = a N aᵀ + Cᵀ Γ̂ C
+        Gam += (a_mat @ Ns[f]) @ a_mat.T
         _symmetrize(Gam)
         tails[f] = (Prow @ Gam) @ Prow.T
         T = -(Prow @ Lam)
@@ -213,8 +243,7 @@ def smooth_passes(F: np.ndarray, Q: np.ndarray, mean0: np.ndarray, cov0: np.ndar
         T = rows[f]
         cov[f] = (T @ Pi) @ T.T + tails[f]
         if np.any(Ms[f] != 0.0):
-            C = _c_matrix(Us[f], Ms[f], p)
-            Pi[:, :] = (C @ Pi) @ C.T + (Us[f] @ Ns[f]) @ Us[f].T
+            _c_x_ct(Pi, Us[f], Ms[f], Ns[f], p)
             _symmetrize(Pi)
 
 

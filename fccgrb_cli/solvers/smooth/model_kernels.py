@@ -1,6 +1,8 @@
 """The measurement model of ``coordinates.py`` compiled (numba), for classical systems with
 fully-defined bodies: per frame, Newton–Raphson on Φ(q; d) = 0 from a guess (the normal
-equations on NRM's envelope, as kernels.driven_frames does it), then the sensitivity
+equations on NRM's envelope, as kernels.driven_frames does it; after the first factorization
+chord steps on it while they contract by ``CHORD_RATE``, until max |Φ| < ``RESIDUAL``: the
+smoother's guesses are q + S Δd from the iterate before, ~Δd² off), then the sensitivity
 S = ∂q/∂d column by column on the same factor (Φ_qᵀΦ_q S_k = Φ_qᵀ ν_k: exact for a square Φ_q,
 least squares for a taller one whose equations hold), the tracked points and their Jacobian
 H = C S. The numpy path (coordinates.Coordinates.linearize) is the reference; the tests compare.
@@ -13,6 +15,19 @@ from numba import njit
 
 from fccgrb_cli.solvers.kernels import cholesky, jacobian, normal_equations, residual, substitute
 from fccgrb_cli.system.sparse import SparseSystem
+
+RESIDUAL = 1e-13  # max |Φ| (m, or unit-vector components) that ends a frame's iteration
+CHORD_RATE = 0.1  # a chord step must shrink the step before it this much, else factor afresh
+
+
+@njit(cache=True)
+def _largest(v: np.ndarray) -> float:
+    """‖v‖∞ (inf where v holds a NaN)."""
+    out = 0.0
+    for x in v:
+        if not abs(x) <= out:
+            out = abs(x) if np.isfinite(x) else np.inf
+    return out
 
 
 @njit(cache=True)
@@ -37,10 +52,10 @@ def _unit_nu(s: SparseSystem, theta: np.ndarray, k: int, n_angles: int,
 @njit(cache=True)
 def linearize_frames(s: SparseSystem, guesses: np.ndarray, theta: np.ndarray,
                      ref: np.ndarray, base_units: np.ndarray, offsets: np.ndarray,
-                     local: np.ndarray, tol: float, max_iter: int, q_out: np.ndarray,
+                     local: np.ndarray, max_iter: int, q_out: np.ndarray,
                      S_out: np.ndarray, points: np.ndarray, H: np.ndarray,
                      converged: np.ndarray) -> None:
-    """Every frame: q from its guess (Φ(q; θ, ref) = 0 to ``tol`` on ‖Δq‖∞), S (nq × n),
+    """Every frame: q from its guess (max |Φ(q; θ, ref)| < RESIDUAL), S (nq × n),
     the tracked points (``offsets``: each one's body's first column, ``local``: its a, b, c)
     and H (3 markers × n). ``base_units``: frames × base coordinates × slots × 3."""
     n_rows, nq = len(s.c_const) + len(s.dot_c), s.nq
@@ -54,13 +69,25 @@ def linearize_frames(s: SparseSystem, guesses: np.ndarray, theta: np.ndarray,
     empty = np.zeros((0, 3))
     for f in range(len(guesses)):
         q[:] = guesses[f]
-        ok = False
+        ok = factored = refresh = False
+        previous = np.inf
         for _ in range(max_iter):
             residual(s, q, theta[f], ref[f], F, phi)
-            jacobian(s, q, F, values)
-            normal_equations(s, values, phi, w, N, g)
-            if not cholesky(s.first, N, L):
+            if factored and _largest(phi) < RESIDUAL:
+                ok = True
                 break
+            if factored and not refresh:  # a chord step on the frame's factor
+                for p in range(nq):
+                    g[p] = 0.0
+                for r in range(n_rows):
+                    for m in range(s.j_ptr[r], s.j_ptr[r + 1]):
+                        g[s.j_col[m]] += values[m] * phi[r]
+            else:
+                jacobian(s, q, F, values)
+                normal_equations(s, values, phi, w, N, g)
+                factored = cholesky(s.first, N, L)
+                if not factored:
+                    break
             substitute(s.first, L, g, out)
             size = 0.0
             for p in range(nq):
@@ -68,9 +95,8 @@ def linearize_frames(s: SparseSystem, guesses: np.ndarray, theta: np.ndarray,
                 size = max(size, abs(out[p]))
             if not np.isfinite(size):
                 break
-            if size < tol:
-                ok = True
-                break
+            refresh = size > CHORD_RATE * previous  # slow contraction: factor afresh
+            previous = size
         if not ok:
             continue
         converged[f] = True

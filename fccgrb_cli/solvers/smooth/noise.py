@@ -10,13 +10,18 @@ coordinate's prior by maximum likelihood.
   variance: an estimate of the white noise only. A low-frequency soft-tissue artefact is not
   noise to a smoother — it moves with the motion, in its band, and no smoother can tell it from
   motion — so it stays in the motion, as it does with any filter.
-* Each coordinate's cutoff f_c: its frames' own estimates z_k = (A⁻¹ b)_k with variance
-  (A⁻¹)_kk, and the prior of order p whose equivalent cutoff is f_c (``prior.density``); the
-  likelihood of z_k by the Kalman filter's prediction errors is maximized over f_c on a
-  log-spaced grid between ``LOWEST`` Hz and 0.45 × the frame rate, then refined by golden
-  section (to ``PRECISION``). The coordinates are taken one at a time (their frames' estimates
-  are correlated, which the smoother itself then takes into account): a coupled likelihood
-  would cost a coupled filter per trial point.
+* Each coordinate's strength: its frames' own estimates z_k = (A⁻¹ b)_k carry the markers'
+  noise, variance (A⁻¹)_kk σ², and possibly noise the residuals cannot see — a marker cluster
+  that moves as a whole on the skin, or noise correlated between markers, moves the estimate
+  without leaving a residual — modelled as white noise of variance τ_k² on the coordinate.
+  The likelihood of z_k under the prior of order p whose equivalent cutoff is f_c
+  (``prior.density``) with noise (A⁻¹)_kk σ² + τ_k², by the Kalman filter's prediction
+  errors, is maximized over f_c (between ``LOWEST`` Hz and 0.45 × the frame rate) and τ_k
+  (coordinate ascent, ``strength``). On the five-bar with white marker noise τ comes out ~0;
+  on the Qualisys walking trial the estimates' own noise is 3–4 times the markers' (τ² 7–20
+  times (A⁻¹)_kk σ²) and the cutoffs 13–28 Hz. The coordinates are taken one at a time
+  (their frames' estimates are correlated, which the smoother itself then takes into account):
+  a coupled likelihood would cost a coupled filter per trial point.
 """
 
 from __future__ import annotations
@@ -31,8 +36,9 @@ from fccgrb_cli.solvers.smooth.start import initial_state
 
 LOWEST = 0.2  # Hz
 HIGHEST = 0.45  # of the frame rate
-GRID = 16
-PRECISION = 0.005  # relative, on the cutoff
+GRID = 12
+PRECISION = 0.01  # relative, on the cutoff
+ESTIMATE_FRAMES = 2000
 THIRD = np.array([1.0, -3.0, 3.0, -1.0])
 MAD = 0.6744897501960817  # the median of |N(0, 1)|
 FLOOR = 1e-6  # m: the noise level below which the markers are taken as exact (1 µm)
@@ -71,39 +77,111 @@ def marker_noise(residuals: np.ndarray, leverage: np.ndarray) -> float:
     return max(float(np.median(scaled)) / MAD, FLOOR)
 
 
-def cutoff(time: np.ndarray, z: np.ndarray, variance: np.ndarray,
-           likelihood: Callable, order: int = ORDER) -> float:
-    """The maximum-likelihood equivalent cutoff (Hz) of one coordinate's frame estimates
-    (``likelihood``: filter.log_likelihood or its compiled twin)."""
-    dt = float(time[1] - time[0])
-    seen = np.isfinite(variance) & np.isfinite(z)
-    r = float(np.median(variance[seen]))
-    var = np.where(seen, variance, np.inf)
-    values = np.where(seen, z, 0.0)
+@dataclass(frozen=True)
+class Strength:
+    """One coordinate's smoothing strength: the equivalent cutoff (Hz) of its prior and the
+    variance of the noise its frames' estimates carry beyond the markers' white noise (its
+    unit², 0 where there is none)."""
 
-    def log_l(log_fc: float) -> float:
-        omega = 2.0 * np.pi * np.exp(log_fc)
-        F = transition(order, dt, omega)
-        Q = density(np.exp(log_fc), r, dt, order) * noise_shape(order, dt, omega)
-        mean0, cov0 = initial_state(time, values, var, order, omega)
-        value = likelihood(values, var, F, Q, mean0, cov0, order)
+    cutoff: float
+    extra: float
+
+
+class _Likelihood:
+    """log L(f_c, τ²) of one coordinate's frame estimates (see the module's docstring)."""
+
+    def __init__(self, time: np.ndarray, z: np.ndarray, variance: np.ndarray,
+                 likelihood: Callable, order: int) -> None:
+        seen = np.isfinite(variance) & np.isfinite(z)
+        window = _window(seen)
+        self.time, self.order, self.likelihood = time[window], order, likelihood
+        self.dt = float(time[1] - time[0])
+        self.z = np.where(seen, z, 0.0)[window]
+        self.variance = np.where(seen, variance, np.inf)[window]
+        self.r = float(np.median(variance[seen]))
+
+    def __call__(self, log_fc: float, extra: float) -> float:
+        fc = float(np.exp(log_fc))
+        omega = 2.0 * np.pi * fc
+        var = self.variance + extra
+        F = transition(self.order, self.dt, omega)
+        Q = density(fc, self.r + extra, self.dt, self.order) * noise_shape(self.order,
+                                                                          self.dt, omega)
+        mean0, cov0 = initial_state(self.time, self.z, var, self.order, omega)
+        value = self.likelihood(self.z, var, F, Q, mean0, cov0, self.order)
         return value if np.isfinite(value) else -np.inf
 
-    low, high = np.log(LOWEST), np.log(HIGHEST / dt)
-    grid = np.linspace(low, high, GRID)
-    scores = np.array([log_l(g) for g in grid])
-    k = int(np.argmax(scores))
-    a, b = grid[max(k - 1, 0)], grid[min(k + 1, GRID - 1)]
-    golden = (np.sqrt(5.0) - 1.0) / 2.0
-    c, d = b - golden * (b - a), a + golden * (b - a)
-    fc, fd = log_l(c), log_l(d)
-    while b - a > PRECISION:
+
+def _window(seen: np.ndarray) -> slice:
+    """The frames the estimate reads: every one, or the ``ESTIMATE_FRAMES`` around the middle
+    of the measured ones in a longer trial (the strength is the trial's, and a filter pass per
+    trial point over every frame of a long trial would cost more than the smoothing)."""
+    idx = np.flatnonzero(seen)
+    if len(seen) <= ESTIMATE_FRAMES:
+        return slice(0, len(seen))
+    middle = int(idx[len(idx) // 2])
+    start = min(max(0, middle - ESTIMATE_FRAMES // 2), len(seen) - ESTIMATE_FRAMES)
+    return slice(start, start + ESTIMATE_FRAMES)
+
+
+def _golden(f: Callable[[float], float], a: float, b: float, tol: float) -> tuple[float, float]:
+    """The maximum of a unimodal f on [a, b] (golden section): (x, f(x))."""
+    ratio = (np.sqrt(5.0) - 1.0) / 2.0
+    c, d = b - ratio * (b - a), a + ratio * (b - a)
+    fc, fd = f(c), f(d)
+    while b - a > tol:
         if fc >= fd:
             b, d, fd = d, c, fc
-            c = b - golden * (b - a)
-            fc = log_l(c)
+            c = b - ratio * (b - a)
+            fc = f(c)
         else:
             a, c, fc = c, d, fd
-            d = a + golden * (b - a)
-            fd = log_l(d)
-    return float(np.exp((a + b) / 2.0))
+            d = a + ratio * (b - a)
+            fd = f(d)
+    x = (a + b) / 2.0
+    return x, f(x)
+
+
+def _best_cutoff(log_l: _Likelihood, extra: float, low: float, high: float,
+                 grid: int) -> tuple[float, float]:
+    """(log f_c, log L) maximizing over [low, high]: a grid, then golden section."""
+    points = np.linspace(low, high, grid) if grid else np.array([low, high])
+    if grid:
+        scores = [log_l(g, extra) for g in points]
+        k = int(np.argmax(scores))
+        low, high = points[max(k - 1, 0)], points[min(k + 1, grid - 1)]
+    return _golden(lambda x: log_l(x, extra), low, high, PRECISION)
+
+
+def strength(time: np.ndarray, z: np.ndarray, variance: np.ndarray, likelihood: Callable,
+             cutoff_hz: float | None = None, order: int = ORDER) -> Strength:
+    """The maximum-likelihood strength of one coordinate's frame estimates (``likelihood``:
+    filter.log_likelihood or its compiled twin); ``cutoff_hz``: the cutoff given, only the
+    extra noise estimated. Coordinate ascent: the cutoff without extra noise, then the extra
+    noise's log-ratio to the frames' median variance (a grid over e^−4…e^6, then golden
+    section), the cutoff again near its value, the noise again; the extra noise is kept where
+    it raises the likelihood over none."""
+    log_l = _Likelihood(time, z, variance, likelihood, order)
+    dt = log_l.dt
+    if cutoff_hz is not None:
+        fixed = float(np.log(cutoff_hz))
+        fit = lambda lo, hi, extra, grid: (fixed, log_l(fixed, extra))  # noqa: E731
+    else:
+        def fit(lo: float, hi: float, extra: float, grid: int) -> tuple[float, float]:
+            return _best_cutoff(log_l, extra, lo, hi, grid)
+    low, high = np.log(LOWEST), np.log(HIGHEST / dt)
+    f0, l0 = fit(low, high, 0.0, GRID)
+
+    def extra_of(x: float) -> float:
+        return log_l.r * float(np.exp(x))
+
+    xs = np.arange(-4.0, 7.0)
+    scores = [log_l(f0, extra_of(x)) for x in xs]
+    k = int(np.argmax(scores))
+    x, _ = _golden(lambda v: log_l(f0, extra_of(v)), xs[max(k - 1, 0)],
+                   xs[min(k + 1, len(xs) - 1)], 0.05)
+    f1, _ = fit(max(low, f0 - 0.7), min(high, f0 + 0.7), extra_of(x), 0)
+    x, l1 = _golden(lambda v: log_l(f1, extra_of(v)), x - 1.0, x + 1.0, 0.05)
+    if l1 > l0:
+        return Strength(float(np.exp(f1)), extra_of(x))
+    return Strength(float(np.exp(f0)), 0.0)

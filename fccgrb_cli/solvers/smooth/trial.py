@@ -28,13 +28,13 @@ import numpy as np
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.solvers.smooth import filter as reference
 from fccgrb_cli.solvers.smooth.coordinates import Coordinates
-from fccgrb_cli.solvers.smooth.noise import FrameEstimates, cutoff, marker_noise
+from fccgrb_cli.solvers.smooth.noise import FrameEstimates, Strength, marker_noise, strength
 from fccgrb_cli.solvers.smooth.prior import DERIVATIVES, ORDER, density
 from fccgrb_cli.solvers.smooth.start import WINDOW, initial_state
 from fccgrb_cli.system import System
 from fccgrb_cli.system.sparse import compilable
 
-STEP = 1e-9  # rad or m: Gauss–Newton stops when d moves less
+STEP = 1e-6  # rad or m: Gauss–Newton stops when d moves less (its next step is ~1e-8)
 ITERATIONS = 8
 
 
@@ -52,10 +52,10 @@ class SmoothSettings:
 @dataclass(frozen=True)
 class Motion:
     """The smoothed motion: the coordinates' names and units, d, ḋ, d̈ (frames × n), the
-    covariance of (d, ḋ, d̈) that the marker noise gives (frames × 3n × 3n, derivative-major),
-    q of the classical system (frames × nq), the frames whose markers were used, the markers'
-    noise σ (m) and each coordinate's equivalent cutoff (Hz), whether each was estimated, the
-    Gauss–Newton iterations, and the chart of the coordinates."""
+    covariance of (d, ḋ, d̈) that the noise gives (frames × 3n × 3n, derivative-major), q of
+    the classical system (frames × nq), the frames whose markers were used, the markers' noise
+    σ (m), each coordinate's strength (noise.Strength: cutoff, extra noise), whether the
+    cutoffs were estimated, the Gauss–Newton iterations, and the chart of the coordinates."""
 
     coordinates: Coordinates
     d: np.ndarray
@@ -65,9 +65,19 @@ class Motion:
     q: np.ndarray
     used: np.ndarray
     noise: float
-    cutoffs: np.ndarray
+    strengths: tuple[Strength, ...]
     estimated: bool
     iterations: int
+
+    @property
+    def cutoffs(self) -> np.ndarray:
+        """Each coordinate's equivalent cutoff (Hz)."""
+        return np.array([s.cutoff for s in self.strengths])
+
+    @property
+    def extra_sd(self) -> np.ndarray:
+        """Each coordinate's own noise beyond the markers' (its unit: rad or m)."""
+        return np.sqrt([s.extra for s in self.strengths])
 
     @property
     def sd(self) -> np.ndarray:
@@ -101,28 +111,30 @@ def smooth_motion(system: System, time: np.ndarray, markers: np.ndarray, use: np
     noise = settings.noise
     for iteration in range(ITERATIONS + 1):
         lin = coordinates.linearize(d, q, passes.compiled and compilable(system))
-        q = lin.q
         r = (y - lin.points).reshape(len(d), -1) * W
         HW = lin.H * W[:, :, None]
         A = np.einsum("fri,frj->fij", HW, lin.H)
         b = np.einsum("fri,fr->fi", HW, r) + np.einsum("fij,fj->fi", A, d)
         if chains is None:
             noise = noise if noise is not None else _noise(A, b, d, lin.H, r, W)
-            chains, cutoffs = _chains(time, A / noise**2, b / noise**2, coordinates, settings,
-                                      passes)
+            chains, strengths = _chains(time, A / noise**2, b / noise**2, coordinates,
+                                        settings, passes)
+            extra = np.array([s.extra for s in strengths])
+        A_info, b_info = with_extra_noise(A / noise**2, b / noise**2, extra)
         last = iteration == ITERATIONS
-        values, cov = passes(chains, A / noise**2, b / noise**2, last)
+        values, cov = passes(chains, A_info, b_info, last)
         step = float(np.abs(values[:, 0] - d).max())
+        q = lin.q + np.einsum("fqk,fk->fq", lin.S, values[:, 0] - d)  # the next guesses
         d = values[:, 0]
         if last:
             break
         if step < STEP:  # one more pass at this linearization, with the covariance
-            values, cov = passes(chains, A / noise**2, b / noise**2, True)
+            values, cov = passes(chains, A_info, b_info, True)
             d = values[:, 0]
             break
-    q = coordinates.positions(d, q)
+    q = coordinates.linearize(d, q, passes.compiled and compilable(system)).q
     return Motion(coordinates, d, values[:, 1], values[:, 2], cov, q, usable, float(noise),
-                  cutoffs, settings.cutoff is None, iteration + 1)
+                  strengths, settings.cutoff is None, iteration + 1)
 
 
 def _noise(A: np.ndarray, b: np.ndarray, d: np.ndarray, H: np.ndarray, r: np.ndarray,
@@ -139,27 +151,39 @@ def _noise(A: np.ndarray, b: np.ndarray, d: np.ndarray, H: np.ndarray, r: np.nda
     return marker_noise(np.where(keep, e, np.nan), np.where(keep, leverage, np.nan))
 
 
+def with_extra_noise(A: np.ndarray, b: np.ndarray, extra: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """A frame's information about d when its estimate also carries white noise of variance
+    Σ = diag(extra) on the coordinates: (Σ + A⁻¹)⁻¹ = (I + A Σ)⁻¹ A and (I + A Σ)⁻¹ b, which
+    stay defined where A is singular."""
+    if not np.any(extra):
+        return A, b
+    G = np.eye(A.shape[1]) + A * extra[None, None, :]
+    A_new = np.linalg.solve(G, A)
+    return 0.5 * (A_new + A_new.transpose(0, 2, 1)), np.linalg.solve(G, b[..., None])[..., 0]
+
+
 def _chains(time: np.ndarray, A: np.ndarray, b: np.ndarray, coordinates: Coordinates,
-            settings: SmoothSettings, passes) -> tuple[reference.Chains, np.ndarray]:
-    """Each coordinate's prior: its cutoff (estimated by maximum likelihood unless given),
-    its spectral density at its frames' median variance, and its first frame's prior."""
+            settings: SmoothSettings, passes) -> tuple[reference.Chains, tuple[Strength, ...]]:
+    """Each coordinate's prior: its strength (estimated by maximum likelihood, the cutoff
+    given where it is), its spectral density at its frames' median variance, and its first
+    frame's prior."""
     est = FrameEstimates.of(A, b)
     dt = float(time[1] - time[0])
     n = coordinates.n
-    if settings.cutoff is not None:
-        cutoffs = np.full(n, float(settings.cutoff))
-    else:
-        likelihood = passes.log_likelihood
-        cutoffs = np.array([cutoff(time, est.z[:, k], est.variance[:, k], likelihood)
-                            for k in range(n)])
+    strengths = tuple(strength(time, est.z[:, k], est.variance[:, k], passes.log_likelihood,
+                               settings.cutoff) for k in range(n))
+    extra = np.array([s.extra for s in strengths])
+    cutoffs = np.array([s.cutoff for s in strengths])
     seen = np.isfinite(est.variance)
-    r = np.array([np.median(est.variance[seen[:, k], k]) for k in range(n)])
+    variance = est.variance + extra
+    r = np.array([np.median(variance[seen[:, k], k]) for k in range(n)])
     scale = 2.0 * np.pi * cutoffs
     means, covs = zip(*(initial_state(time, np.where(seen[:, k], est.z[:, k], 0.0),
-                                      est.variance[:, k], ORDER, scale[k]) for k in range(n)),
+                                      variance[:, k], ORDER, scale[k]) for k in range(n)),
                       strict=True)
     return reference.Chains.build(ORDER, dt, scale, density(cutoffs, r, dt), np.array(means),
-                                  np.array(covs)), cutoffs
+                                  np.array(covs)), strengths
 
 
 class _Passes:
