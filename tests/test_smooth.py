@@ -147,7 +147,7 @@ def test_compiled_passes_equal_numpy() -> None:
     want = reference.smooth(chains, A, b, covariance=True)
     n = b.shape[1]
     values, cov = np.empty((len(A), 3 * n)), np.empty((len(A), 3 * n, 3 * n))
-    kernels.smooth_passes(chains.F, chains.Q, chains.mean0.ravel(), chains.cov0, A, b, True,
+    kernels.smooth_passes(chains.arrays(), A, b, True,
                           values, cov)
     unscale = chains.unscale()
     np.testing.assert_allclose((values * unscale).reshape(want.values.shape), want.values,
@@ -173,7 +173,7 @@ def test_noise_part_covariance_matches_monte_carlo() -> None:
                       rng.normal(size=(N, n)))
         b[25:28] = 0.0
         v = np.empty((N, 3 * n))
-        kernels.smooth_passes(chains.F, chains.Q, chains.mean0.ravel(), chains.cov0, A, b,
+        kernels.smooth_passes(chains.arrays(), A, b,
                               False, v, np.empty((0, 3 * n, 3 * n)))
         draws.append(v * chains.unscale())
     empirical = np.var(np.array(draws), axis=0)

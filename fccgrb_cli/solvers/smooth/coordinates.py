@@ -247,7 +247,12 @@ class Coordinates:
         return Linearized(q, S, self.markers(q), self.marker_jacobian(q, S))
 
     def _compiled(self, d: np.ndarray, guesses: np.ndarray) -> Linearized:
-        from fccgrb_cli.solvers.smooth.model_kernels import linearize_frames
+        from fccgrb_cli.solvers.smooth.model_kernels import (
+            Drivers,
+            Linearization,
+            Points,
+            linearize_frames,
+        )
 
         n_frames, nq, n = len(d), self.system.nq, self.n
         k = len(self.point_offset)
@@ -255,10 +260,12 @@ class Coordinates:
         q, S = np.full((n_frames, nq), np.nan), np.zeros((n_frames, nq, n))
         points, H = np.empty((n_frames, k, 3)), np.empty((n_frames, 3 * k, n))
         converged = np.zeros(n_frames, dtype=bool)
-        linearize_frames(_sparse(self.system), np.ascontiguousarray(guesses),
-                         np.ascontiguousarray(drives.theta), np.ascontiguousarray(drives.ref),
-                         self.base_units(d), self.point_offset.astype(np.int64),
-                         self.point_local, POSITION_ITER, q, S, points, H, converged)
+        linearize_frames(_sparse(self.system),
+                         Drivers(np.ascontiguousarray(guesses),
+                                 np.ascontiguousarray(drives.theta),
+                                 np.ascontiguousarray(drives.ref), self.base_units(d)),
+                         Points(self.point_offset.astype(np.int64), self.point_local),
+                         POSITION_ITER, Linearization(q, S, points, H, converged))
         if not converged.all():  # the numpy path's continuation decides, and names a failure
             redo = np.flatnonzero(~converged)
             again = self.linearize(d[redo], guesses[redo])

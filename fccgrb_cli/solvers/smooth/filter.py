@@ -73,6 +73,12 @@ class Chains:
     def order(self) -> int:
         return self.F.shape[1]
 
+    def arrays(self):
+        """The kernels' ChainArrays (kernels.py)."""
+        from fccgrb_cli.solvers.smooth.kernels import ChainArrays
+
+        return ChainArrays(self.F, self.Q, np.ascontiguousarray(self.mean0.ravel()), self.cov0)
+
     def unscale(self) -> np.ndarray:
         """ω^j for every output (3n, derivative-major: d of all coordinates, then ḋ, then d̈)."""
         j = np.arange(DERIVATIVES)[:, None]

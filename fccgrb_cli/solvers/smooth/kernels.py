@@ -12,8 +12,20 @@ I − P⁻Ω once the backward pass has used them), U, M, N, ν and P⁻ Γ P⁻
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
+
+
+class ChainArrays(NamedTuple):
+    """The prior as the kernels take it (filter.Chains's arrays): F and Q (n × p × p), the
+    first frame's mean (np) and covariance blocks (n × p × p)."""
+
+    F: np.ndarray
+    Q: np.ndarray
+    mean0: np.ndarray
+    cov0: np.ndarray
 
 
 @njit(cache=True)
@@ -133,11 +145,11 @@ def _symmetrize(X: np.ndarray) -> None:
 
 
 @njit(cache=True)
-def smooth_passes(F: np.ndarray, Q: np.ndarray, mean0: np.ndarray, cov0: np.ndarray,
-                  A: np.ndarray, b: np.ndarray, covariance: bool, values: np.ndarray,
-                  cov: np.ndarray) -> None:
+def smooth_passes(chain: ChainArrays, A: np.ndarray, b: np.ndarray, covariance: bool,
+                  values: np.ndarray, cov: np.ndarray) -> None:
     """The three passes of filter.smooth in scaled units (the caller unscales): ``values``
     (frames × 3n, derivative-major) and, with ``covariance``, ``cov`` (frames × 3n × 3n)."""
+    F, Q, mean0, cov0 = chain
     n, p = F.shape[0], F.shape[1]
     m = n * p
     N = A.shape[0]

@@ -35,7 +35,6 @@ def smoothed_signal(signal: np.ndarray, rate: float, cutoff_hz: float) -> np.nda
                           np.array([s[0] for s in starts]), np.array([s[1] for s in starts]))
     A = np.broadcast_to(np.eye(channels), (frames, channels, channels)).copy()
     values = np.empty((frames, DERIVATIVES * channels))
-    smooth_passes(chains.F, chains.Q, np.ascontiguousarray(chains.mean0.ravel()), chains.cov0,
-                  A, np.ascontiguousarray(signal), False, values,
+    smooth_passes(chains.arrays(), A, np.ascontiguousarray(signal), False, values,
                   np.empty((0, DERIVATIVES * channels, DERIVATIVES * channels)))
     return values[:, :channels]

@@ -208,8 +208,7 @@ class _Passes:
         N, n = b.shape
         values = np.empty((N, DERIVATIVES * n))
         cov = np.empty((N if covariance else 0, DERIVATIVES * n, DERIVATIVES * n))
-        self._kernel(chains.F, chains.Q, np.ascontiguousarray(chains.mean0.ravel()),
-                     chains.cov0, np.ascontiguousarray(A), np.ascontiguousarray(b),
+        self._kernel(chains.arrays(), np.ascontiguousarray(A), np.ascontiguousarray(b),
                      covariance, values, cov)
         unscale = chains.unscale()
         values = (values * unscale).reshape(N, DERIVATIVES, n)
