@@ -8,7 +8,7 @@ What the stages use lives in their layers: the trial's labels each marker follow
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +25,7 @@ from fccgrb_cli.model import Model
 from fccgrb_cli.options import SolveOptions, prepared
 from fccgrb_cli.perturb import perturb
 from fccgrb_cli.run import Run
+from fccgrb_cli.smoothing import Smoothing, smoothed_or_warned
 from fccgrb_cli.solvers import KinematicResult, solve_ad
 from fccgrb_cli.solvers.ad.baseline import solve_baseline
 from fccgrb_cli.solvers.ad.solve import stacked_drives
@@ -67,15 +68,26 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
         which = [(tp.body, tp.point) for tp in model.tracked_points]
         points = points_along(system, result.q, which)
         result = assessed(result, points, inputs)
+        warnings: list[str] = [*trial.warnings, *_quality_advice(result)]
+        notes: list[str] = []
+        smoothing = smoothed_or_warned(model, result, inputs, options, warnings)
+        if smoothing is not None:
+            result = smoothing.result
+            points = points_along(system, result.q, which)
         ed, ed_input = (store.keep(key, distances(points, markers)) for key, markers in
                         (("ed", reference), ("ed_input", inputs)))
         reference, inputs, points = (store.keep(key, values) for key, values in
                                      (("reference", reference), ("markers_input", inputs),
                                       ("model_points", points)))
-        warnings: list[str] = [*trial.warnings, *_quality_advice(result)]
-        notes: list[str] = []
         stance: dict[str, np.ndarray] = {}
-        solved_dynamics = _dynamics(model, trial, system, result, options, warnings, notes, stance)
+        solved_dynamics = _dynamics(model, trial, system, result, options,
+                                    _Notes(warnings, notes, stance), smoothing)
+        uncertainty = None
+        if smoothing is not None:
+            uncertainty = smoothing.uncertainty(
+                None if solved_dynamics is None else solved_dynamics.kinematics.q,
+                () if solved_dynamics is None else solved_dynamics.loads)
+            notes.append(uncertainty.describe())
         result = store.coordinates(result)
         solved_dynamics = store.dynamics(solved_dynamics)
         clinical = clinical_results(
@@ -93,7 +105,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
             form=",".join(sorted({b.form for b in model.bodies})),
             model_text=model.text, trial_path=trial.path,
             dynamics=solved_dynamics, warnings=tuple(warnings), notes=tuple(notes),
-            clinical=clinical, gait=gait)
+            clinical=clinical, gait=gait, uncertainty=uncertainty)
 
 
 class _Store:
@@ -202,12 +214,24 @@ def _kinematics(model: Model, trial: Trial, inputs: np.ndarray, options: SolveOp
                                       progress)
 
 
+@dataclass(frozen=True)
+class _Notes:
+    """Where the dynamics stage reports: warnings, notes, and each foot's stance frames."""
+
+    warnings: list[str]
+    notes: list[str]
+    stance: dict[str, np.ndarray]
+
+
 def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResult,
-              options: SolveOptions, warnings: list[str], notes: list[str],
-              stance: dict[str, np.ndarray]) -> Dynamics | None:
+              options: SolveOptions, report: _Notes,
+              smoothing: Smoothing | None = None) -> Dynamics | None:
     """The inverse dynamics of the classical model driven by the run's angles (FORMULATION §4),
-    with the trial's force plates; None, with a warning, when it cannot or need not run."""
-    failed = len(result.failed_frames)
+    with the trial's force plates; None, with a warning, when it cannot or need not run. With
+    ``smoothing`` the model is driven by the smoothed rates and the plates are smoothed alike
+    (smoothing.py)."""
+    warnings, notes, stance = report.warnings, report.notes, report.stance
+    failed = len(result.failed_frames) if smoothing is None else 0
     if options.dynamics is None and not model.has_inertia:
         warnings.append(f"{model.source}: no mass and inertia on every body; inverse dynamics "
                         "skipped")
@@ -231,6 +255,10 @@ def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResul
         on = np.abs(load.force).any(axis=1)
         stance[load.body] = stance.get(load.body, np.zeros_like(on)) | on
     cutoff = options.filter_cutoff
+    if smoothing is not None:
+        loads = smoothing.smoothed_loads(loads, trial.rate)
+        return classical_dynamics(model, result, loads=loads, tol=options.tol,
+                                  engine=options.engine, drives=smoothing.drives)
     if cutoff is not None:
         loads = [load.lowpassed(trial.rate, cutoff, options.filter_order) for load in loads]
     return classical_dynamics(model, result, cutoff=None if baseline else cutoff,

@@ -17,6 +17,7 @@ from fccgrb_cli.io.gait_results import read_gait
 from fccgrb_cli.io.results import FORMAT_VERSION
 from fccgrb_cli.options import SolveOptions
 from fccgrb_cli.run import Run
+from fccgrb_cli.smoothing import Uncertainty
 from fccgrb_cli.solvers.result import KinematicResult
 
 
@@ -67,7 +68,20 @@ def _read_run(name: str, g) -> Run:
         dynamics=_read_dynamics(g, names, time) if "joint_moments" in g else None,
         warnings=warnings, notes=_strings(a["notes"]),
         clinical=_read_clinical(g["clinical"]) if "clinical" in g else None,
-        gait=read_gait(g["gait"]) if "gait" in g else None)
+        gait=read_gait(g["gait"]) if "gait" in g else None,
+        uncertainty=_read_uncertainty(g["uncertainty"]) if "uncertainty" in g else None)
+
+
+def _read_uncertainty(u) -> Uncertainty:
+    a = u.attrs
+    return Uncertainty(
+        theta_sd=u["theta_sd"][()], theta_d_sd=u["theta_d_sd"][()],
+        theta_dd_sd=u["theta_dd_sd"][()],
+        moments_sd=u["moments_sd"][()] if "moments_sd" in u else None,
+        noise_m=float(a["noise_m"]), coordinates=_strings(a["coordinates"]),
+        cutoffs_hz=np.asarray(a["cutoffs_hz"], dtype=float),
+        extra_sd=np.asarray(a["extra_sd"], dtype=float), estimated=bool(a["estimated"]),
+        seconds=float(a["seconds"]))
 
 
 def _read_dynamics(g, names: tuple[str, ...], time: np.ndarray) -> Dynamics:

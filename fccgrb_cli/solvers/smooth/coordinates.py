@@ -17,13 +17,13 @@ present (a marker missing in the frame, or a frame not used, contributes nothing
 
 from __future__ import annotations
 
-import weakref
 from dataclasses import dataclass
 
 import numpy as np
 
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.solvers.batched import Drives, Stacked, factor, newton_stacked
+from fccgrb_cli.solvers.smooth.arrays import Drivers, Linearization, Points
 from fccgrb_cli.solvers.smooth.rotation import (
     exp_map,
     jacobian_rate,
@@ -33,6 +33,7 @@ from fccgrb_cli.solvers.smooth.rotation import (
     unwrapped,
 )
 from fccgrb_cli.system import System
+from fccgrb_cli.system.sparse import sparse_of
 
 POSITION_TOL = 1e-12  # Newton's tolerance on ‖Δq‖∞ for the positions at d
 POSITION_ITER = 20
@@ -194,11 +195,10 @@ class Coordinates:
         stacked = Stacked(system)
         n_frames, n = len(d), self.n
         rhs = np.zeros((n_frames, system.n_rows, n))
-        unit = np.zeros((n_frames, n))
-        for k in range(n):
-            unit[:, k] = 1.0
-            rhs[:, :, k] = stacked.nu(self.drives(d, unit))
-            unit[:, k] = 0.0
+        unit = np.zeros((n, n_frames, n))
+        unit[np.arange(n), :, np.arange(n)] = 1.0
+        nu = stacked.nu(self.drives(np.tile(d, (n, 1)), unit.reshape(n * n_frames, n)))
+        rhs[:] = nu.reshape(n, n_frames, -1).transpose(1, 2, 0)
         J = stacked.jacobian(q)
         return solve_many(J, rhs)
 
@@ -228,13 +228,14 @@ class Coordinates:
         """The floating bases' features' rates for a unit rate of each base coordinate
         (frames × 6 bases × slots × 3)."""
         n_frames, na = len(d), self.n_angles
-        out = np.zeros((n_frames, 6 * len(self.bases), self.system.n_base_slots, 3))
-        unit = np.zeros_like(d)
-        for j in range(6 * len(self.bases)):
-            unit[:, na + j] = 1.0
-            out[:, j] = self.drives(d, unit).ref_d
-            unit[:, na + j] = 0.0
-        return out
+        m = 6 * len(self.bases)
+        slots = self.system.n_base_slots
+        if not m:
+            return np.zeros((n_frames, 0, slots, 3))
+        unit = np.zeros((m, n_frames, self.n))
+        unit[np.arange(m), :, na + np.arange(m)] = 1.0
+        rates = self.drives(np.tile(d, (m, 1)), unit.reshape(m * n_frames, self.n)).ref_d
+        return np.ascontiguousarray(rates.reshape(m, n_frames, slots, 3).transpose(1, 0, 2, 3))
 
     def linearize(self, d: np.ndarray, guesses: np.ndarray, compiled: bool = False
                   ) -> Linearized:
@@ -247,12 +248,7 @@ class Coordinates:
         return Linearized(q, S, self.markers(q), self.marker_jacobian(q, S))
 
     def _compiled(self, d: np.ndarray, guesses: np.ndarray) -> Linearized:
-        from fccgrb_cli.solvers.smooth.model_kernels import (
-            Drivers,
-            Linearization,
-            Points,
-            linearize_frames,
-        )
+        from fccgrb_cli.solvers.smooth.model_kernels import linearize_frames
 
         n_frames, nq, n = len(d), self.system.nq, self.n
         k = len(self.point_offset)
@@ -260,7 +256,7 @@ class Coordinates:
         q, S = np.full((n_frames, nq), np.nan), np.zeros((n_frames, nq, n))
         points, H = np.empty((n_frames, k, 3)), np.empty((n_frames, 3 * k, n))
         converged = np.zeros(n_frames, dtype=bool)
-        linearize_frames(_sparse(self.system),
+        linearize_frames(sparse_of(self.system),
                          Drivers(np.ascontiguousarray(guesses),
                                  np.ascontiguousarray(drives.theta),
                                  np.ascontiguousarray(drives.ref), self.base_units(d)),
@@ -271,18 +267,6 @@ class Coordinates:
             again = self.linearize(d[redo], guesses[redo])
             q[redo], S[redo], points[redo], H[redo] = again.q, again.S, again.points, again.H
         return Linearized(q, S, points, H)
-
-
-_SPARSE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-
-
-def _sparse(system: System):
-    """The classical system's sparse arrays for the kernels, built once per system."""
-    from fccgrb_cli.system.sparse import sparse_system
-
-    if system not in _SPARSE:
-        _SPARSE[system] = sparse_system(system)
-    return _SPARSE[system]
 
 
 def solve_many(J: np.ndarray, rhs: np.ndarray) -> np.ndarray:

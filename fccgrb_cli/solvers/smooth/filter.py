@@ -39,6 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fccgrb_cli.solvers.smooth.arrays import ChainArrays
 from fccgrb_cli.solvers.smooth.prior import DERIVATIVES, noise_shape, transition
 
 
@@ -75,8 +76,6 @@ class Chains:
 
     def arrays(self):
         """The kernels' ChainArrays (kernels.py)."""
-        from fccgrb_cli.solvers.smooth.kernels import ChainArrays
-
         return ChainArrays(self.F, self.Q, np.ascontiguousarray(self.mean0.ravel()), self.cov0)
 
     def unscale(self) -> np.ndarray:

@@ -12,20 +12,10 @@ I − P⁻Ω once the backward pass has used them), U, M, N, ν and P⁻ Γ P⁻
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
 from numba import njit
 
-
-class ChainArrays(NamedTuple):
-    """The prior as the kernels take it (filter.Chains's arrays): F and Q (n × p × p), the
-    first frame's mean (np) and covariance blocks (n × p × p)."""
-
-    F: np.ndarray
-    Q: np.ndarray
-    mean0: np.ndarray
-    cov0: np.ndarray
+from fccgrb_cli.solvers.smooth.arrays import ChainArrays
 
 
 @njit(cache=True)

@@ -10,43 +10,12 @@ H = C S. The numpy path (coordinates.Coordinates.linearize) is the reference; th
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
 from numba import njit
 
 from fccgrb_cli.solvers.kernels import cholesky, jacobian, normal_equations, residual, substitute
+from fccgrb_cli.solvers.smooth.arrays import Drivers, Linearization, Points
 from fccgrb_cli.system.sparse import SparseSystem
-
-
-class Drivers(NamedTuple):
-    """Every frame's guess (frames × nq), driven angles (frames × angles), floating bases'
-    features (frames × slots × 3) and those features' rates for a unit rate of each base
-    coordinate (frames × base coordinates × slots × 3)."""
-
-    guesses: np.ndarray
-    theta: np.ndarray
-    ref: np.ndarray
-    base_units: np.ndarray
-
-
-class Points(NamedTuple):
-    """The tracked points: each one's body's first column in q and its local a, b, c."""
-
-    offsets: np.ndarray
-    local: np.ndarray
-
-
-class Linearization(NamedTuple):
-    """What linearize_frames writes: q, S = ∂q/∂d, the points, H, and which frames
-    converged."""
-
-    q: np.ndarray
-    S: np.ndarray
-    points: np.ndarray
-    H: np.ndarray
-    converged: np.ndarray
-
 
 RESIDUAL = 1e-13  # max |Φ| (m, or unit-vector components) that ends a frame's iteration
 CHORD_RATE = 0.1  # a chord step must shrink the step before it this much, else factor afresh
