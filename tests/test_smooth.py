@@ -278,7 +278,7 @@ def test_smoothed_five_bar_keeps_the_constraints_and_finds_the_noise() -> None:
     model, synth = _five_bar()
     rng = np.random.default_rng(0)
     markers = synth.markers + rng.normal(scale=1e-3, size=synth.markers.shape)
-    from fccgrb_cli.solvers.nrm import NrmSettings, solve_nrm
+    from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
 
     mixed = compile_system(model, angles="coordinate", track=True)
     time = synth.result.time

@@ -79,12 +79,20 @@ def marker_noise(residuals: np.ndarray, leverage: np.ndarray) -> float:
 
 @dataclass(frozen=True)
 class Strength:
-    """One coordinate's smoothing strength: the equivalent cutoff (Hz) of its prior and the
+    """One coordinate's smoothing strength: the equivalent cutoff (Hz) of its prior, the
     variance of the noise its frames' estimates carry beyond the markers' white noise (its
-    unit², 0 where there is none)."""
+    unit², 0 where there is none), and the median variance of its frames' estimates from the
+    markers' noise, at which the cutoff holds (the prior's spectral density is
+    ``prior.density(cutoff, variance + extra)``, fixed for the trial)."""
 
     cutoff: float
     extra: float
+    variance: float
+
+    @property
+    def total_variance(self) -> float:
+        """The variance the cutoff holds at: the markers' part and the coordinate's own."""
+        return self.variance + self.extra
 
 
 class _Likelihood:
@@ -176,4 +184,4 @@ def strength(time: np.ndarray, z: np.ndarray, variance: np.ndarray, likelihood: 
     if x != -np.inf:
         x = _golden(lambda v: log_l(f, extra_of(v)), x - 2.0, x + 2.0, 0.05)[0]
         f = refine_cutoff(f, x)
-    return Strength(float(np.exp(f)), extra_of(x))
+    return Strength(float(np.exp(f)), extra_of(x), log_l.r)

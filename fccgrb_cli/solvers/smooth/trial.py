@@ -21,19 +21,27 @@ states), the covariance the marker noise gives them, and q with the topology to 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.solvers.smooth import filter as reference
 from fccgrb_cli.solvers.smooth.coordinates import Coordinates
-from fccgrb_cli.solvers.smooth.noise import FrameEstimates, Strength, marker_noise, strength
+from fccgrb_cli.solvers.smooth.noise import (
+    ESTIMATE_FRAMES,
+    FrameEstimates,
+    Strength,
+    marker_noise,
+    strength,
+)
 from fccgrb_cli.solvers.smooth.prior import DERIVATIVES, ORDER, density
 from fccgrb_cli.solvers.smooth.start import WINDOW, initial_state
 from fccgrb_cli.system import System
 from fccgrb_cli.system.sparse import compilable
 
+SPAN = 4000  # frames smoothed at once in a long trial
+DECAY = 20.0  # e-folds of the smoother's influence a span's overlap covers
 STEP = 1e-6  # rad or m: Gauss–Newton stops when d moves less (its next step is ~1e-8)
 ITERATIONS = 8
 
@@ -87,12 +95,41 @@ class Motion:
         return np.sqrt(np.maximum(var, 0.0)).reshape(len(var), DERIVATIVES, n)
 
 
+@dataclass(frozen=True)
+class _Data:
+    """What every span of the trial reads: the coordinates, the frame times, the markers
+    (frames × 3 markers, 0 where missing) and their weights W (1 present, 0 not), and the
+    passes' engine."""
+
+    coordinates: Coordinates
+    time: np.ndarray
+    y: np.ndarray
+    W: np.ndarray
+    passes: _Passes
+    compiled: bool
+
+
+@dataclass(frozen=True)
+class _Strength:
+    """The markers' noise σ (m) and each coordinate's strength."""
+
+    noise: float
+    strengths: tuple[Strength, ...]
+
+
 def smooth_motion(system: System, time: np.ndarray, markers: np.ndarray, use: np.ndarray,
                   mixed_q: np.ndarray, settings: SmoothSettings = SmoothSettings()) -> Motion:
     """Smooth a trial: ``system`` the classical model (angles='driver'), ``markers`` the
     tracked points' targets (frames × markers × 3, NaN where missing), ``use`` the frames
     whose markers may be used, ``mixed_q`` each frame's mixed-coordinate solution (NaN where
-    unsolved): the start of the iteration."""
+    unsolved): the start of the iteration.
+
+    A trial longer than ``SPAN`` frames plus twice the overlap is smoothed span by span, each
+    with ``overlap`` frames of the neighbouring spans on either side that it computes and
+    discards: the smoother's influence decays as e^(−ω_c sin(π/2p) |t|), so an overlap of
+    ``DECAY`` / (ω_c sin(π/2p)) for the lowest cutoff leaves each span's answer within e^−20 of
+    the whole trial's, with memory and linear algebra of one span at a time. The noise and the
+    strengths are then estimated once, on the trial's middle ``noise.ESTIMATE_FRAMES``."""
     solved = np.isfinite(mixed_q).all(axis=1)
     usable = use & solved
     need = WINDOW * ORDER
@@ -104,37 +141,93 @@ def smooth_motion(system: System, time: np.ndarray, markers: np.ndarray, use: np
                  solved)
     q = _nearest(mixed_q[:, :system.layout.n_body_q], solved)
     present = np.isfinite(markers).all(axis=2) & usable[:, None]
-    y = np.where(present[..., None], markers, 0.0)
-    W = np.repeat(present, 3, axis=1).astype(float)
     passes = _passes(settings.engine)
+    data = _Data(coordinates, time, np.where(present[..., None], markers, 0.0),
+                 np.repeat(present, 3, axis=1).astype(float), passes,
+                 passes.compiled and compilable(system))
+    n = len(time)
+    middle = _middle(n, min(n, ESTIMATE_FRAMES))
+    strength = _estimate(data, middle, d[middle], q[middle], settings)
+    overlap = _overlap(strength.strengths, float(time[1] - time[0]))
+    if n <= SPAN + 2 * overlap:
+        out = _span(data, slice(0, n), d, q, strength)
+        return replace(out, used=usable, estimated=settings.cutoff is None)
+    parts = []
+    for start in range(0, n, SPAN):
+        stop = min(n, start + SPAN)
+        part = slice(max(0, start - overlap), min(n, stop + overlap))
+        keep = slice(start - part.start, stop - part.start)
+        parts.append((_span(data, part, d[part], q[part], strength), keep))
+    return Motion(coordinates, *(np.concatenate([getattr(m, key)[keep] for m, keep in parts])
+                                 for key in ("d", "d_d", "d_dd", "covariance", "q")),
+                  usable, strength.noise, strength.strengths, settings.cutoff is None,
+                  max(m.iterations for m, _ in parts))
+
+
+def _middle(n: int, frames: int) -> slice:
+    start = max(0, (n - frames) // 2)
+    return slice(start, start + frames)
+
+
+def _overlap(strengths: tuple[Strength, ...], dt: float) -> int:
+    """Frames a span shares with each neighbour (see smooth_motion)."""
+    decay = min(2.0 * np.pi * s.cutoff for s in strengths) * np.sin(np.pi / (2 * ORDER))
+    return int(np.ceil(DECAY / decay / dt))
+
+
+def _linearized(data: _Data, part: slice, d: np.ndarray, q: np.ndarray, noise: float
+                ) -> tuple:
+    """The frames' measurement model at d: the linearization and the information A, b
+    (unscaled by σ² where ``noise`` is 1)."""
+    lin = data.coordinates.linearize(d, q, data.compiled)
+    W = data.W[part]
+    r = (data.y[part] - lin.points).reshape(len(d), -1) * W
+    HW = lin.H * W[:, :, None]
+    A = np.einsum("fri,frj->fij", HW, lin.H)
+    b = np.einsum("fri,fr->fi", HW, r) + np.einsum("fij,fj->fi", A, d)
+    return lin, A / noise**2, b / noise**2, r
+
+
+def _estimate(data: _Data, part: slice, d: np.ndarray, q: np.ndarray,
+              settings: SmoothSettings) -> _Strength:
+    """σ (given, or from the residuals) and the strengths (the cutoff given or estimated) on
+    the frames ``part``, at the frames' own solutions."""
+    lin, A, b, r = _linearized(data, part, d, q, 1.0)
+    noise = settings.noise if settings.noise is not None else \
+        _noise(A, b, d, lin.H, r, data.W[part])
+    est = FrameEstimates.of(A / noise**2, b / noise**2)
+    strengths = tuple(strength(data.time[part], est.z[:, k], est.variance[:, k],
+                               data.passes.log_likelihood, settings.cutoff)
+                      for k in range(data.coordinates.n))
+    return _Strength(float(noise), strengths)
+
+
+def _span(data: _Data, part: slice, d: np.ndarray, q: np.ndarray, strength: _Strength
+          ) -> Motion:
+    """Gauss–Newton over the frames ``part`` (see the module's docstring)."""
+    time = data.time[part]
+    extra = np.array([s.extra for s in strength.strengths])
     chains = None
-    noise = settings.noise
     for iteration in range(ITERATIONS + 1):
-        lin = coordinates.linearize(d, q, passes.compiled and compilable(system))
-        r = (y - lin.points).reshape(len(d), -1) * W
-        HW = lin.H * W[:, :, None]
-        A = np.einsum("fri,frj->fij", HW, lin.H)
-        b = np.einsum("fri,fr->fi", HW, r) + np.einsum("fij,fj->fi", A, d)
+        lin, A, b, _ = _linearized(data, part, d, q, strength.noise)
         if chains is None:
-            noise = noise if noise is not None else _noise(A, b, d, lin.H, r, W)
-            chains, strengths = _chains(time, A / noise**2, b / noise**2, coordinates,
-                                        settings, passes)
-            extra = np.array([s.extra for s in strengths])
-        A_info, b_info = with_extra_noise(A / noise**2, b / noise**2, extra)
+            chains = _chains(time, A, b, strength.strengths)
+        A_info, b_info = with_extra_noise(A, b, extra)
         last = iteration == ITERATIONS
-        values, cov = passes(chains, A_info, b_info, last)
+        values, cov = data.passes(chains, A_info, b_info, last)
         step = float(np.abs(values[:, 0] - d).max())
         q = lin.q + np.einsum("fqk,fk->fq", lin.S, values[:, 0] - d)  # the next guesses
         d = values[:, 0]
         if last:
             break
         if step < STEP:  # one more pass at this linearization, with the covariance
-            values, cov = passes(chains, A_info, b_info, True)
+            values, cov = data.passes(chains, A_info, b_info, True)
             d = values[:, 0]
             break
-    q = coordinates.linearize(d, q, passes.compiled and compilable(system)).q
-    return Motion(coordinates, d, values[:, 1], values[:, 2], cov, q, usable, float(noise),
-                  strengths, settings.cutoff is None, iteration + 1)
+    q = data.coordinates.linearize(d, q, data.compiled).q
+    return Motion(data.coordinates, d, values[:, 1], values[:, 2], cov, q,
+                  np.ones(len(d), bool), strength.noise, strength.strengths, True,
+                  iteration + 1)
 
 
 def _noise(A: np.ndarray, b: np.ndarray, d: np.ndarray, H: np.ndarray, r: np.ndarray,
@@ -163,27 +256,24 @@ def with_extra_noise(A: np.ndarray, b: np.ndarray, extra: np.ndarray
     return 0.5 * (A_new + A_new.transpose(0, 2, 1)), np.linalg.solve(G, b[..., None])[..., 0]
 
 
-def _chains(time: np.ndarray, A: np.ndarray, b: np.ndarray, coordinates: Coordinates,
-            settings: SmoothSettings, passes) -> tuple[reference.Chains, tuple[Strength, ...]]:
-    """Each coordinate's prior: its strength (estimated by maximum likelihood, the cutoff
-    given where it is), its spectral density at its frames' median variance, and its first
-    frame's prior."""
+def _chains(time: np.ndarray, A: np.ndarray, b: np.ndarray, strengths: tuple[Strength, ...]
+            ) -> reference.Chains:
+    """Each coordinate's prior: its strength's cutoff and spectral density (the trial's, one
+    for every span), and its first frame's prior from these frames."""
     est = FrameEstimates.of(A, b)
     dt = float(time[1] - time[0])
-    n = coordinates.n
-    strengths = tuple(strength(time, est.z[:, k], est.variance[:, k], passes.log_likelihood,
-                               settings.cutoff) for k in range(n))
+    n = b.shape[1]
     extra = np.array([s.extra for s in strengths])
     cutoffs = np.array([s.cutoff for s in strengths])
     seen = np.isfinite(est.variance)
     variance = est.variance + extra
-    r = np.array([np.median(variance[seen[:, k], k]) for k in range(n)])
+    r = np.array([s.total_variance for s in strengths])
     scale = 2.0 * np.pi * cutoffs
     means, covs = zip(*(initial_state(time, np.where(seen[:, k], est.z[:, k], 0.0),
                                       variance[:, k], ORDER, scale[k]) for k in range(n)),
                       strict=True)
     return reference.Chains.build(ORDER, dt, scale, density(cutoffs, r, dt), np.array(means),
-                                  np.array(covs)), strengths
+                                  np.array(covs))
 
 
 class _Passes:
