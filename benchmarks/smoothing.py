@@ -1,13 +1,15 @@
 """Joint moments with the whole-trial smoother (issue 23) against central differences and the
 Butterworth filter, on the five-bar synthesized at 200 Hz for 3 s.
 
-    python benchmarks/smoothing.py [--monte-carlo 100] [--cost 10000] [--figure docs/x.png]
+    python benchmarks/smoothing.py [--orders] [--monte-carlo 100] [--cost 10000]
+                                   [--figure docs/x.png] [--no-table]
 
 The reference is the truth-driven inverse dynamics (``--method ad --ad-drivers truth``); the
 runs solve NRM-WLS on the truth's markers (double precision) with white noise added (seeded,
 per coordinate), and the 7.5 mm soft-tissue artefact of ``--perturb 7.5`` where named. Errors
 are the moments' RMS / max (N·m) over frames 10…590 and over every frame.
 
+``--orders``: the same at white 1 mm with priors of order 3 to 6.
 ``--monte-carlo N``: N noise seeds at white 1 mm; per angle, the smoother's predicted standard
 deviation of the angle, its rate, its acceleration and its joint moment against the empirical
 one (the RMS error over the seeds; the median over frames of predicted / empirical), and how
@@ -142,6 +144,23 @@ def monte_carlo(bar: FiveBar, seeds: int) -> None:
               f"{100 * covers.min():.1f}–{100 * covers.max():.1f} %")
 
 
+def orders(bar: FiveBar) -> None:
+    """The moments' errors at white 1 mm with priors of order 3 to 6 (the smoother's ORDER)."""
+    from fccgrb_cli.solvers.smooth import trial
+
+    print("\nthe prior's order, white 1 mm (RMS / max N·m, frames 10…590 | every frame):")
+    kept = trial.ORDER
+    try:
+        for order in (3, 4, 5, 6):
+            trial.ORDER = order
+            run = bar.solve(1.0, 0.0)
+            r, m, ra, ma = errors(np.asarray(run.dynamics.inverse.joint_moments), bar.tau)
+            print(f"  order {order}: {r:.3f}/{m:.2f} | {ra:.3f}/{ma:.2f}"
+                  + ("  (the smoother's)" if order == kept else ""), flush=True)
+    finally:
+        trial.ORDER = kept
+
+
 def cost(frames: int) -> None:
     from fccgrb_cli.dynamics.uncertainty import moment_uncertainty
     from fccgrb_cli.smoothing import smooth, settings_of
@@ -231,15 +250,18 @@ def main() -> None:
     parser.add_argument("--monte-carlo", type=int, default=0, metavar="SEEDS")
     parser.add_argument("--cost", type=int, default=0, metavar="FRAMES")
     parser.add_argument("--figure", type=Path, default=None)
+    parser.add_argument("--orders", action="store_true")
     parser.add_argument("--no-table", action="store_true")
     args = parser.parse_args()
     if args.figure is not None:
         figure(args.figure)
-    if not (args.no_table and not args.monte_carlo):
+    if not (args.no_table and not args.monte_carlo and not args.orders):
         with tempfile.TemporaryDirectory(prefix="fccgrb-smoothing-") as folder:
             bar = FiveBar(Path(folder))
             if not args.no_table:
                 table(bar)
+            if args.orders:
+                orders(bar)
             if args.monte_carlo:
                 monte_carlo(bar, args.monte_carlo)
     if args.cost:

@@ -159,29 +159,34 @@ def strength(time: np.ndarray, z: np.ndarray, variance: np.ndarray, likelihood: 
     variance), then coordinate ascent from its best point by golden sections: the cutoff, the
     noise's log-ratio, the cutoff again. (Ascent from the best cutoff without extra noise alone
     stops on a ridge: on the Qualisys trial at 23–47 Hz, where the joint optimum lies at
-    13–28 Hz with noise 7–20 times the markers'.)"""
+    13–28 Hz with noise 7–20 times the markers'.) The extra noise is kept where it raises the
+    log-likelihood over the best without it by more than ½ log(frames) (Schwarz's criterion
+    for one more parameter): on the five-bar with white noise alone, plain maximum likelihood
+    found some in 29 % of the coordinates, which kept their errors from cancelling in the
+    moments' predicted spread (27 % too wide)."""
     log_l = _Likelihood(time, z, variance, likelihood, order)
     low, high = np.log(LOWEST), np.log(HIGHEST / log_l.dt)
     fixed = cutoff_hz is not None
     cutoffs = np.array([np.log(cutoff_hz)]) if fixed else np.linspace(low, high, COARSE)
-    ratios = np.array([-np.inf, *np.arange(-3.0, 6.0, 2.0)])  # log(τ²/r); −inf: none
-
-    def extra_of(x: float) -> float:
-        return 0.0 if x == -np.inf else log_l.r * float(np.exp(x))
-
-    scores = np.array([[log_l(f, extra_of(x)) for x in ratios] for f in cutoffs])
-    i, j = np.unravel_index(int(np.argmax(scores)), scores.shape)
-    f, x = cutoffs[i], ratios[j]
+    ratios = np.arange(-3.0, 6.0, 2.0)  # log(τ²/r)
     step = (high - low) / (COARSE - 1)
 
-    def refine_cutoff(f: float, x: float) -> float:
-        if fixed:
-            return f
-        return _golden(lambda v: log_l(v, extra_of(x)), max(low, f - step),
-                       min(high, f + step), PRECISION)[0]
+    def extra_of(x: float | None) -> float:
+        return 0.0 if x is None else log_l.r * float(np.exp(x))
 
-    f = refine_cutoff(f, x)
-    if x != -np.inf:
-        x = _golden(lambda v: log_l(f, extra_of(v)), x - 2.0, x + 2.0, 0.05)[0]
-        f = refine_cutoff(f, x)
-    return Strength(float(np.exp(f)), extra_of(x), log_l.r)
+    def refine_cutoff(f: float, x: float | None) -> tuple[float, float]:
+        if fixed:
+            return f, log_l(f, extra_of(x))
+        return _golden(lambda v: log_l(v, extra_of(x)), max(low, f - step),
+                       min(high, f + step), PRECISION)
+
+    plain = [log_l(f, 0.0) for f in cutoffs]
+    f0, l0 = refine_cutoff(cutoffs[int(np.argmax(plain))], None)
+    scores = np.array([[log_l(f, extra_of(x)) for x in ratios] for f in cutoffs])
+    i, j = np.unravel_index(int(np.argmax(scores)), scores.shape)
+    f1, _ = refine_cutoff(cutoffs[i], ratios[j])
+    x1, _ = _golden(lambda v: log_l(f1, extra_of(v)), ratios[j] - 2.0, ratios[j] + 2.0, 0.05)
+    f1, l1 = refine_cutoff(f1, x1)
+    if l1 - l0 > 0.5 * np.log(np.isfinite(log_l.variance).sum()):
+        return Strength(float(np.exp(f1)), extra_of(x1), log_l.r)
+    return Strength(float(np.exp(f0)), 0.0, log_l.r)

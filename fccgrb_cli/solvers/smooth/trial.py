@@ -197,7 +197,7 @@ def _estimate(data: _Data, part: slice, d: np.ndarray, q: np.ndarray,
         _noise(A, b, d, lin.H, r, data.W[part])
     est = FrameEstimates.of(A / noise**2, b / noise**2)
     strengths = tuple(strength(data.time[part], est.z[:, k], est.variance[:, k],
-                               data.passes.log_likelihood, settings.cutoff)
+                               data.passes.log_likelihood, settings.cutoff, ORDER)
                       for k in range(data.coordinates.n))
     return _Strength(float(noise), strengths)
 
