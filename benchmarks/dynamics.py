@@ -49,7 +49,8 @@ def stage_ms(model: Model, trial, options: SolveOptions, repeat: int, batched: b
     with mock.patch.object(pipeline, "classical_dynamics", path):
         for _ in range(repeat + 1):
             started = time.perf_counter()
-            dyn = pipeline._dynamics(model, trial, system, run.result, options, [], [], {})
+            dyn = pipeline._dynamics(model, trial, system, run.result, options,
+                                     pipeline._Notes([], [], {}))
             best = min(best, time.perf_counter() - started) if _ else best
             tau = float(np.abs(dyn.inverse.joint_moments).max())
     return 1e3 * best / trial.n_frames, tau

@@ -23,8 +23,9 @@ Parts and their blocks:
 * ``benchmarks`` (minutes): ``bench-kinematics``, ``bench-optimization``, ``bench-gait``,
   ``bench-dynamics``, ``bench-peers`` (OpenSim's IK beside ours where ``opensim`` is
   installed), ``bench-long`` (a 10-minute trial under /usr/bin/time -v), ``bench-startup``
-  (whole commands in fresh processes), ``bench-batch`` (a 50-trial study on this machine): the
-  performance tables from benchmarks/*.py.
+  (whole commands in fresh processes), ``bench-batch`` (a 50-trial study on this machine),
+  ``bench-smoothing`` (the smoother's table, calibration over 100 seeds and cost, and
+  docs/smoothing_qualisys.png; about an hour): the performance tables from benchmarks/*.py.
 * ``study`` (a minute; the shared data and a chromium binary): ``study`` (``fccgrb batch
   configs/studies/shared.yaml`` and its clinical report, with norms from a stand-in control
   group of perturbed copies of the adult's walk; docs/report_subject.png, the adult's page in
@@ -560,6 +561,18 @@ def bench_startup(ws: Workspace) -> list[Artifact]:
 def clean_margins(ws: Workspace) -> list[Artifact]:
     _need_gait_trial()
     return _bench_console(ws, "clean-margins", "clean_margins.py")
+def bench_smoothing(ws: Workspace) -> list[Artifact]:
+    """The smoother's table, its order, its calibration over 100 seeds, its cost on 10,000
+    frames, and the Qualisys figure (docs/smoothing_qualisys.png)."""
+    _need_gait_trial()
+    figure = ws.dir / "docs" / "smoothing_qualisys.png"
+    figure.parent.mkdir(parents=True, exist_ok=True)
+    script = ("smoothing.py --orders --monte-carlo 100 --cost 10000 "
+              f"--figure {figure}")
+    blocks = _bench_console(ws, "bench-smoothing", script)
+    text = blocks[0].text.replace(f"--figure {figure}", "--figure docs/smoothing_qualisys.png")
+    text = text.replace(f"wrote {figure}", "wrote docs/smoothing_qualisys.png")
+    return [ReadmeBlock("bench-smoothing", text), Image.made("docs/smoothing_qualisys.png", ws)]
 
 
 @dataclass(frozen=True)
@@ -588,6 +601,8 @@ BLOCKS = {b.name: b for b in (
     Block("bench-startup", "benchmarks", bench_startup, "README: whole commands' wall time"),
     Block("bench-batch", "benchmarks", bench_batch, "README: a 50-trial study"),
     Block("study", "study", study, "README and docs/report_subject.png: a study, its report"),
+    Block("bench-smoothing", "benchmarks", bench_smoothing,
+          "README: the smoother's table, calibration, cost and docs/smoothing_qualisys.png"),
     Block("figures", "figures", figures, "docs/*.png of the Figure 8 case and their commands"),
     Block("figure8-seeds", "figures", figure8_seeds, "README: P6's distance over seeds"),
 )}

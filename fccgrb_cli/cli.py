@@ -663,6 +663,23 @@ def batch(study: str, output: str | None, workers: int, scheduler: str | None, f
         sys.exit(1)
 
 
+def _cycle_bands(results: str, names: tuple[str, ...]
+                 ) -> dict[str, tuple[np.ndarray, dict[str, np.ndarray]]]:
+    """Each run's frame times and its clinical curves' standard deviations (``--smooth
+    auto``), for the cycles' bands."""
+    from fccgrb_cli.gait.analysis import curve_sd
+    from fccgrb_cli.io.runs import read_runs
+
+    out = {}
+    for name, run in read_runs(results).items():
+        sd = run.clinical_sd if name in names else None
+        if sd is not None:
+            angles, moments = sd
+            out[name] = (run.result.time, curve_sd(angles.names, angles.values,
+                                                   None if moments is None else moments.values))
+    return out
+
+
 @main.command()
 @click.argument("results")
 @click.option("--format", "fmt", type=click.Choice(["text", "csv", "markdown"]), default="text",
@@ -775,7 +792,8 @@ def plot(results: str, kind: str, marker: str | None, angle: str | None,
         gaits = {k: g for k, g in read_all_gait(results).items()
                  if not wanted or k in wanted}
         save(draw_cycles(gaits, tuple(a for a in (angle or "").split(",") if a),
-                         read_norms(normative).curves if normative else None), output)
+                         read_norms(normative).curves if normative else None,
+                         _cycle_bands(results, tuple(gaits))), output)
         click.echo(f"wrote {output}: cycles for {len(gaits)} runs")
         return
     series = load_series(Path(results), _split(runs))

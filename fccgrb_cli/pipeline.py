@@ -8,7 +8,7 @@ What the stages use lives in their layers: the trial's labels each marker follow
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +35,7 @@ from fccgrb_cli.model import Model
 from fccgrb_cli.options import SolveOptions, prepared
 from fccgrb_cli.perturb import perturb
 from fccgrb_cli.run import Run
+from fccgrb_cli.smoothing import Smoothing, smoothed_or_warned
 from fccgrb_cli.solvers import KinematicResult, solve_ad
 from fccgrb_cli.solvers.ad.baseline import solve_baseline
 from fccgrb_cli.solvers.ad.solve import stacked_drives
@@ -87,17 +88,29 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
         found = kinematic_findings(model, result, fit, options, truth is not None)
         found[NO_DATA] = no_data
         result = assessed(result, points, inputs, found)
+        warnings: list[str] = [*trial.warnings, *axes.warnings, *_quality_advice(result)]
+        notes: list[str] = [axes.note()] if axes.chosen_by != "ground" else []
+        smoothing = smoothed_or_warned(model, result, inputs, options, warnings)
+        if smoothing is not None:
+            result = smoothing.result
+            points = points_along(system, result.q, which)
+            fit = distances(points, inputs)
         ed, ed_input = (store.keep(key, values) for key, values in
                         (("ed", distances(points, reference)), ("ed_input", fit)))
         reference, inputs, points = (store.keep(key, values) for key, values in
                                      (("reference", reference), ("markers_input", inputs),
                                       ("model_points", points)))
-        warnings: list[str] = [*trial.warnings, *axes.warnings, *_quality_advice(result)]
-        notes: list[str] = [axes.note()] if axes.chosen_by != "ground" else []
         stance: dict[str, np.ndarray] = {}
-        solved_dynamics = _dynamics(model, trial, system, result, options, warnings, notes, stance)
+        solved_dynamics = _dynamics(model, trial, system, result, options,
+                                    _Notes(warnings, notes, stance), smoothing)
         if solved_dynamics is not None:
             result = with_findings(result, dynamic_findings(model, solved_dynamics))
+        uncertainty = None
+        if smoothing is not None:
+            uncertainty = smoothing.uncertainty(
+                None if solved_dynamics is None else solved_dynamics.kinematics.q,
+                () if solved_dynamics is None else solved_dynamics.loads)
+            notes.append(uncertainty.describe())
         result = store.coordinates(result)
         solved_dynamics = store.dynamics(solved_dynamics)
         clinical = clinical_results(
@@ -126,7 +139,8 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
             form=",".join(sorted({b.form for b in model.bodies})),
             model_text=model.text, trial_path=trial.path,
             dynamics=solved_dynamics, warnings=tuple(warnings), notes=tuple(notes),
-            clinical=clinical, gait=gait, moment_flags=moments, axes=axes)
+            clinical=clinical, gait=gait, moment_flags=moments, axes=axes,
+            uncertainty=uncertainty)
 
 
 class _Store:
@@ -293,13 +307,26 @@ def _unsolved(system: System, time: np.ndarray, options: SolveOptions) -> Kinema
         phi_top_max=np.full(n, np.nan), converged=np.zeros(n, dtype=bool))
 
 
+@dataclass(frozen=True)
+class _Notes:
+    """Where the dynamics stage reports: warnings, notes, and each foot's stance frames."""
+
+    warnings: list[str]
+    notes: list[str]
+    stance: dict[str, np.ndarray]
+
+
 def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResult,
-              options: SolveOptions, warnings: list[str], notes: list[str],
-              stance: dict[str, np.ndarray]) -> Dynamics | None:
+              options: SolveOptions, report: _Notes,
+              smoothing: Smoothing | None = None) -> Dynamics | None:
     """The inverse dynamics of the classical model driven by the run's angles (FORMULATION §4),
     with the trial's force plates, on every stretch of solved frames long enough for its rates
     (``stretches.shortest``): θ̇, θ̈ and the filter within each stretch, never across a gap;
-    None, with a warning, when it cannot or need not run, or no stretch is long enough."""
+    None, with a warning, when it cannot or need not run, or no stretch is long enough. With
+    ``smoothing`` the model is driven by the smoothed rates over the whole trial (the smoother
+    bridged its gaps with the model; their frames stay untrusted and so do their moments) and the
+    plates are smoothed alike (smoothing.py)."""
+    warnings, notes, stance = report.warnings, report.notes, report.stance
     if options.dynamics is None and not model.has_inertia:
         warnings.append(f"{model.source}: no mass and inertia on every body; inverse dynamics "
                         "skipped")
@@ -315,7 +342,9 @@ def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResul
             raise InputError(tiny)
         warnings.append(f"{tiny}; skipped")
         return None
-    solved = result.converged & np.isfinite(result.q).all(axis=1)
+    solved = np.isfinite(result.q).all(axis=1)
+    if smoothing is None:
+        solved &= result.converged
     parts = runs(solved, least)
     covered = np.zeros(n, dtype=bool)
     for a, b in parts:
@@ -339,6 +368,10 @@ def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResul
         on = np.abs(load.force).any(axis=1)
         stance[load.body] = stance.get(load.body, np.zeros_like(on)) | on
     cutoff = options.filter_cutoff
+    if smoothing is not None and parts == [(0, n)]:
+        loads = smoothing.smoothed_loads(loads, trial.rate)
+        return classical_dynamics(model, result, loads=loads, tol=options.tol,
+                                  engine=options.engine, drives=smoothing.drives)
     pieces = []
     for a, b in parts:
         part = slice(a, b)

@@ -29,12 +29,14 @@ class Series:
     angle_names: tuple[str, ...]
     truth: np.ndarray | None
     clinical: Clinical | None = None
+    theta_sd: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
 class Clinical:
     """A run's clinical angles (deg) and moments (per kg when known), and per angle the frames
-    in which a force plate loads the foot beyond the joint (None: no contact body)."""
+    in which a force plate loads the foot beyond the joint (None: no contact body); with the
+    smoother, their standard deviations (the same units)."""
 
     names: tuple[str, ...]
     angles: np.ndarray
@@ -42,6 +44,8 @@ class Clinical:
     moment_unit: str
     stance: tuple[np.ndarray | None, ...]
     trusted: np.ndarray | None = None
+    angles_sd: np.ndarray | None = None
+    moments_sd: np.ndarray | None = None
 
 
 def _clinical(run) -> Clinical | None:
@@ -53,8 +57,18 @@ def _clinical(run) -> Clinical | None:
     stance = tuple(c["stance"][body][()] if body in c["stance"] else None
                    for body in (str(b) for b in c["angles"].attrs["contact"]))
     trusted = c["moments_trusted"][()] if "moments_trusted" in c else None
-    return Clinical(tuple(str(x) for x in c["angles"].attrs["names"]), c["angles"][()],
-                    moments, "N·m/kg" if key == "moments_per_kg" else "N·m", stance, trusted)
+    names = tuple(str(x) for x in c["angles"].attrs["names"])
+    angles_sd = moments_sd = None
+    if "uncertainty" in run:  # a clinical curve is ±(θ − 90°), its moment ±τ (per kg)
+        u = run["uncertainty"]
+        index = [[str(x) for x in run["theta"].attrs["names"]].index(n) for n in names]
+        angles_sd = np.degrees(u["theta_sd"][()][:, index])
+        if "moments_sd" in u and moments is not None:
+            per_kg = c["moments_per_kg"].attrs["mass"] if key == "moments_per_kg" else 1.0
+            moments_sd = u["moments_sd"][()][:, index] / per_kg
+    return Clinical(names, c["angles"][()], moments,
+                    "N·m/kg" if key == "moments_per_kg" else "N·m", stance, trusted, angles_sd,
+                    moments_sd)
 
 
 def _series(h5, name: str, run, top) -> Series:
@@ -62,9 +76,11 @@ def _series(h5, name: str, run, top) -> Series:
     rate = float(ref.attrs["rate"])
     truth = top["truth/theta"][()] if "truth" in top else None
     n = run["model_points"].shape[0]
+    sd = run["uncertainty/theta_sd"][()] if "uncertainty" in run else None
     return Series(name, np.arange(n) / rate, run["model_points"][()], ref[()],
                   tuple(str(x) for x in ref.attrs["labels"]), run["theta"][()],
-                  tuple(str(x) for x in run["theta"].attrs["names"]), truth, _clinical(run))
+                  tuple(str(x) for x in run["theta"].attrs["names"]), truth, _clinical(run),
+                  sd)
 
 
 def load_series(path: Path, wanted: tuple[str, ...]) -> list[Series]:
@@ -111,6 +127,12 @@ def _sided(names: tuple[str, ...], wanted: tuple[str, ...]) -> list[str]:
     return stems
 
 
+def _band(ax, time: np.ndarray, values: np.ndarray, sd: np.ndarray, colour) -> None:
+    """The smoother's 95 % band, ±1.96 standard deviations."""
+    ax.fill_between(time, values - 1.96 * sd, values + 1.96 * sd, color=colour, alpha=0.25,
+                    lw=0)
+
+
 def draw_clinical(series: list[Series], wanted: tuple[str, ...] = ()):
     """Clinical angles (left column) and moments (right) of both legs, one row per joint;
     shaded where a force plate loads that leg's foot (moments off the plates in stance lack
@@ -146,17 +168,21 @@ def draw_clinical(series: list[Series], wanted: tuple[str, ...] = ()):
                                     transform=ax.get_xaxis_transform(), lw=0)
             for i, s in enumerate(runs):
                 label = f"{word} ({s.name})" if len(runs) > 1 else word
-                axes[row, 0].plot(s.time, s.clinical.angles[:, k], STYLES[i % 4],
-                                  color=colour, lw=1.3, label=label)
+                c = s.clinical
+                curves = [(c.angles, c.angles_sd)]
                 if columns == 2:
-                    moment = s.clinical.moments[:, k]
-                    trusted = np.ones(len(moment), dtype=bool) if s.clinical.trusted is None \
-                        else s.clinical.trusted[:, k]
-                    axes[row, 1].plot(s.time, np.where(trusted, moment, np.nan), STYLES[i % 4],
-                                      color=colour, lw=1.3, label=label)
+                    moment = c.moments[:, k]
+                    trusted = np.ones(len(moment), dtype=bool) if c.trusted is None \
+                        else c.trusted[:, k]
+                    curves.append((np.where(trusted[:, None], c.moments, np.nan), c.moments_sd))
                     if not trusted.all():
                         axes[row, 1].plot(s.time, np.where(trusted, np.nan, moment), ":",
                                           color=colour, lw=0.8, alpha=0.4)
+                for ax, (values, sd) in zip(axes[row], curves, strict=False):
+                    ax.plot(s.time, values[:, k], STYLES[i % 4], color=colour, lw=1.3,
+                            label=label)
+                    if sd is not None:
+                        _band(ax, s.time, values[:, k], sd[:, k], colour)
         axes[row, 0].set_ylabel(f"{stem.replace('_', ' ')} (deg)")
         if columns == 2:
             axes[row, 1].set_ylabel(c0.moment_unit)
@@ -170,7 +196,9 @@ def draw_clinical(series: list[Series], wanted: tuple[str, ...] = ()):
     if columns == 2:
         axes[0, 1].set_title("internal joint moment (positive towards a positive angle)",
                              fontsize=10)
-    fig.suptitle("Shaded: a force plate loads that side's foot", fontsize=9)
+    banded = any(s.clinical.angles_sd is not None for s in runs)
+    fig.suptitle("Shaded: a force plate loads that side's foot"
+                 + ("; bands: the smoother's 95 % (±1.96 SD)" if banded else ""), fontsize=9)
     fig.tight_layout()
     return fig
 
@@ -230,7 +258,11 @@ def draw(series: list[Series], kind: str, marker: str | None, angle: str | None,
             ax.plot(first.time, np.degrees(first.truth[:, j]), color="k", lw=2.5, alpha=0.35,
                     label="truth")
         for i, s in enumerate(series):
-            ax.plot(s.time, np.degrees(s.theta[:, j]), STYLES[i % 4], lw=1.2, label=s.name)
+            line, = ax.plot(s.time, np.degrees(s.theta[:, j]), STYLES[i % 4], lw=1.2,
+                            label=s.name)
+            if s.theta_sd is not None:
+                _band(ax, s.time, np.degrees(s.theta[:, j]), np.degrees(s.theta_sd[:, j]),
+                      line.get_color())
         ax.set_ylabel(f"angle {name} (deg)")
         ax.set_title(f"Joint angle {name}")
         axes = [ax]

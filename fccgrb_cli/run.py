@@ -17,6 +17,7 @@ from fccgrb_cli.io.lab_axes import LabAxes
 from fccgrb_cli.model import Model
 from fccgrb_cli.named import NamedArray
 from fccgrb_cli.options import SolveOptions
+from fccgrb_cli.smoothing import Uncertainty
 from fccgrb_cli.solvers.result import KinematicResult
 
 __all__ = ["Run", "mean_jump", "summary"]
@@ -48,6 +49,7 @@ class Run:
     gait: GaitResults | None = None
     moment_flags: np.ndarray | None = None
     axes: LabAxes | None = None
+    uncertainty: Uncertainty | None = None
 
     def __repr__(self) -> str:
         r = self.result
@@ -177,6 +179,41 @@ class Run:
         per_kg = c.moments_per_kg
         values, unit = (per_kg, "N·m/kg") if per_kg is not None else (c.moments, "N·m")
         return self._named(values, c.names, (unit,) * len(c.names))
+
+    @property
+    def angle_sd(self) -> NamedArray | None:
+        """The smoother's standard deviation of every angle (rad; m for distances), None
+        without ``--smooth auto``."""
+        u = self.uncertainty
+        return None if u is None else self._named(u.theta_sd, self.result.angle_names,
+                                                  self._angle_units)
+
+    @property
+    def moment_sd(self) -> NamedArray | None:
+        """The joint moments' standard deviations (N·m; N for distances), None without the
+        smoother or the dynamics."""
+        u = self.uncertainty
+        if u is None or u.moments_sd is None:
+            return None
+        return self._named(u.moments_sd, self.result.angle_names,
+                           tuple("N" if unit == "m" else "N·m" for unit in self._angle_units))
+
+    @property
+    def clinical_sd(self) -> tuple[NamedArray, NamedArray | None] | None:
+        """The clinical angles' standard deviations (deg) and their moments' (N·m/kg when the
+        subject's mass is known, else N·m; None without the dynamics): the angles' own, as
+        a clinical curve is ±(θ − 90°) and its moment ±τ."""
+        c, u = self.clinical, self.uncertainty
+        if c is None or u is None:
+            return None
+        index = [self.result.angle_names.index(name) for name in c.names]
+        angles = self._named(np.degrees(u.theta_sd[:, index]), c.names, ("deg",) * len(index))
+        if u.moments_sd is None:
+            return angles, None
+        per_kg = c.mass is not None
+        values = u.moments_sd[:, index] / (c.mass if per_kg else 1.0)
+        unit = "N·m/kg" if per_kg else "N·m"
+        return angles, self._named(values, c.names, (unit,) * len(index))
 
     @property
     def trusted(self) -> np.ndarray:

@@ -12,7 +12,7 @@ from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.model import Model
 from fccgrb_cli.solvers.ad.baseline import drivers_from
 from fccgrb_cli.solvers.ad.solve import solve_ad, solve_ad_batched
-from fccgrb_cli.solvers.batched import Stacked
+from fccgrb_cli.solvers.batched import Drives, Stacked
 from fccgrb_cli.solvers.result import KinematicResult
 from fccgrb_cli.system import System, compile_system
 
@@ -30,7 +30,7 @@ class Dynamics:
 def classical_dynamics(model: Model, result: KinematicResult, *, cutoff: float | None = None,
                        order: int = 2, loads: Sequence[ExternalLoad] = (),
                        tol: float = 1e-10, batched: bool | None = None,
-                       engine: str = "numpy") -> Dynamics:
+                       engine: str = "numpy", drives: Drives | None = None) -> Dynamics:
     """Drive the classical model with the run's angles and solve its inverse dynamics.
 
     ``batched`` True: every frame at once, each starting from the run's own body coordinates
@@ -46,7 +46,8 @@ def classical_dynamics(model: Model, result: KinematicResult, *, cutoff: float |
     lower-limb gait trial: 4 per frame against 2.8), so it stays frame by frame. ``engine``
     ('numpy', 'compiled' or 'auto', as SolveOptions.engine): the compiled kernels solve the
     batch frame by frame in machine code (any Φ_q of full column rank) where they take the
-    model."""
+    model. ``drives``: the classical model's θ*, θ̇*, θ̈* and base features with their rates
+    as given (the smoother's, ``smoothing.py``) instead of the run's θ differenced."""
     system = compile_system(model, angles="driver")
     compiled = kernels_for(system, engine)
     if batched is None:
@@ -57,7 +58,8 @@ def classical_dynamics(model: Model, result: KinematicResult, *, cutoff: float |
     compiled = compiled and batched
     # the kernels solve the multipliers on the factor the drive leaves at each frame
     solved = KernelInverse.prepare(system, loads, len(body_q)) if compiled else None
-    drives = drivers_from(system, result.time, result.theta, base, cutoff, order)
+    if drives is None:
+        drives = drivers_from(system, result.time, result.theta, base, cutoff, order)
     if batched:
         kinematics = solve_ad_batched(system, result.time, drives, body_q, tol=tol,
                                       compiled=compiled,

@@ -8,6 +8,7 @@ its global position.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -49,12 +50,16 @@ class ExternalLoad:
     def lowpassed(self, rate: float, cutoff: float, order: int = 2) -> ExternalLoad:
         """The load with force and moment low-passed like the kinematics (the same cutoff keeps
         impact transients of the ground reaction from meeting smoothed accelerations:
-        Kristianslund et al. 2012, J Biomech 45:666). The point keeps its loaded values and
-        holds the nearest loaded one where the filter spreads the force beyond contact."""
+        Kristianslund et al. 2012, J Biomech 45:666)."""
+        return self.filtered(lambda signal: lowpass(signal, rate, cutoff, order))
+
+    def filtered(self, filter_: Callable[[np.ndarray], np.ndarray]) -> ExternalLoad:
+        """The load with ``filter_`` (frames × 3 → frames × 3) applied to its force and free
+        moment. The point keeps its loaded values and holds the nearest loaded one where the
+        filter spreads the force beyond contact."""
         loaded = np.flatnonzero(np.abs(self.force).any(axis=1))
         if loaded.size == 0:
             return self
         nearest = loaded[np.abs(np.arange(len(self.force))[:, None] - loaded).argmin(axis=1)]
-        return replace(self, force=lowpass(self.force, rate, cutoff, order),
-                       moment=lowpass(self.moment, rate, cutoff, order),
+        return replace(self, force=filter_(self.force), moment=filter_(self.moment),
                        point=self.point[nearest])

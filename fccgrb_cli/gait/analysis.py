@@ -93,6 +93,16 @@ def _curves(clinical: ClinicalResults) -> tuple[tuple[str, ...], tuple[str, ...]
     return tuple(names), tuple(units), np.column_stack(columns)
 
 
+def curve_sd(names: tuple[str, ...], angles_sd: np.ndarray, moments_sd: np.ndarray | None
+             ) -> dict[str, np.ndarray]:
+    """The smoother's standard deviation of every curve ``_curves`` gives (frames each): the
+    clinical angles' (deg) and their moments' (in the moments' unit), by the curves' names."""
+    out = {name: angles_sd[:, k] for k, name in enumerate(names)}
+    if moments_sd is not None:
+        out |= {_moment_name(name): moments_sd[:, k] for k, name in enumerate(names)}
+    return out
+
+
 def _moment_name(name: str) -> str:
     for suffix in SUFFIX.values():
         if name.endswith(suffix):

@@ -8,6 +8,7 @@ import numpy as np
 
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.gait.analysis import GaitResults
+from fccgrb_cli.gait.cycles import normalized
 
 COLOURS = {"left": "tab:blue", "right": "tab:red"}
 
@@ -16,10 +17,21 @@ def _stem(name: str) -> str:
     return name[:-2] if name.endswith(("_r", "_l")) else name
 
 
+def _cycle_sd(c, time: np.ndarray, sd: np.ndarray) -> np.ndarray:
+    """A frames' standard deviation over one side's trusted strides, time-normalized like the
+    curves (101 samples): each stride's, then their root mean square."""
+    strides = [normalized(time, sd[:, None], a, b)[:, 0]
+               for a, b, ok in zip(c.start, c.stop, c.trusted, strict=True) if ok]
+    return np.sqrt(np.mean(np.square(strides), axis=0))
+
+
 def draw_cycles(gaits: dict[str, GaitResults], wanted: tuple[str, ...] = (),
-                normative: dict[str, np.ndarray] | None = None):
+                normative: dict[str, np.ndarray] | None = None,
+                bands: dict[str, tuple[np.ndarray, dict[str, np.ndarray]]] | None = None):
     """One panel per clinical variable whose name contains one of ``wanted`` (default the
-    sagittal angles and moments: names holding 'flexion'), both sides' mean ± SD."""
+    sagittal angles and moments: names holding 'flexion'), both sides' mean ± SD; ``bands``
+    (run → its frame times and each curve's standard deviation from the smoother, by name):
+    the mean's 95 % band from the marker noise, outlined."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -65,6 +77,11 @@ def draw_cycles(gaits: dict[str, GaitResults], wanted: tuple[str, ...] = (),
                 if np.isfinite(sd).all():
                     ax.fill_between(percent, mean - sd, mean + sd, color=COLOURS.get(side, "k"),
                                     alpha=0.18, lw=0)
+                if bands and name in bands and c.names[j] in bands[name][1]:
+                    time, curves = bands[name]
+                    half = 1.96 * _cycle_sd(c, time, curves[c.names[j]])
+                    for edge in (mean - half, mean + half):
+                        ax.plot(percent, edge, color=COLOURS.get(side, "k"), lw=0.6, ls=":")
                 stance = c.parameter("stance")[c.trusted]
                 if np.isfinite(stance).any():
                     ax.axvline(float(np.nanmean(stance)), color=COLOURS.get(side, "k"), lw=0.8,
@@ -78,6 +95,9 @@ def draw_cycles(gaits: dict[str, GaitResults], wanted: tuple[str, ...] = (),
     for ax in axes.ravel()[len(stems):]:
         ax.set_visible(False)
     axes[0, 0].legend(fontsize=7, loc="best")
-    fig.suptitle("Mean ± SD per side over trusted strides; dashed: mean toe-off", fontsize=9)
+    title = "Mean ± SD per side over trusted strides; dashed: mean toe-off"
+    if bands:
+        title += "; dotted: the smoother's 95 % band"
+    fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     return fig

@@ -17,7 +17,7 @@ trusted.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -108,15 +108,41 @@ def write_sto(run: Run, path: str | Path) -> None:
                                     moments_trusted(run)))
 
 
+def sd_curves(run: Run) -> list[Curves]:
+    """The smoother's standard deviations of the exported curves (``name sd``, same units),
+    [] without ``--smooth auto``."""
+    angles = angle_curves(run)
+    moments = moment_curves(run)
+    if run.clinical is not None:
+        clinical = run.clinical_sd
+        if clinical is None:
+            return []
+        a_sd, m_sd = clinical
+        if m_sd is not None and moments is not None and run.clinical.mass is not None:
+            m_sd = replace(m_sd, values=m_sd.values * run.clinical.mass)  # the export's N·m
+        per = [(angles, a_sd.values), (moments, None if m_sd is None else m_sd.values)]
+    else:
+        if run.angle_sd is None:
+            return []
+        a = run.angle_sd
+        degrees = np.array([u == "rad" for u in a.units])
+        per = [(angles, np.where(degrees, np.degrees(a.values), a.values)),
+               (moments, None if run.moment_sd is None else run.moment_sd.values)]
+    return [Curves(tuple(f"{n} sd" for n in curves.names), curves.units, values)
+            for curves, values in per if curves is not None and values is not None]
+
+
 def write_csv(run: Run, path: str | Path) -> None:
     """One row per frame: ``time [s]``, ``trusted``, ``moments trusted`` (with moments: the frame
-    and every moment in the row trusted), then every angle and moment as ``name [unit]``;
+    and every moment in the row trusted), then every angle and moment as ``name [unit]`` and,
+    with ``--smooth auto``, each one's standard deviation as ``name sd [unit]``;
     ``pandas.read_csv(path)`` reads it in one call."""
     parts = [angle_curves(run)]
     moments = moment_curves(run)
     if moments is not None:
         parts.append(moments)
     flags = [run.trusted] + ([moments_trusted(run)] if moments is not None else [])
+    parts += sd_curves(run)
     header = ["time [s]", "trusted"] + (["moments trusted"] if moments is not None else []) + [
         f"{n} [{u}]" for c in parts for n, u in zip(c.names, c.units, strict=True)]
     values = np.column_stack([c.values for c in parts])

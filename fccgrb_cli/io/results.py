@@ -268,6 +268,8 @@ def _write_run(h5, run: Run, command: str, cell: dict | None) -> None:
         _write_dynamics(g, run)
     if run.clinical is not None:
         _write_clinical(g, run.clinical)
+    if run.uncertainty is not None:
+        _write_uncertainty(g, run)
     if run.gait is not None:
         write_gait(g, run.gait)
 
@@ -314,6 +316,30 @@ def _write_clinical(g, c: ClinicalResults) -> None:
     stance = out.create_group("stance")
     for body, frames in c.stance.items():
         put(stance, body, frames)
+
+
+def _write_uncertainty(g, run: Run) -> None:
+    """/runs/<name>/uncertainty: the standard deviations of every angle, its rate and
+    acceleration and its joint moment (frames × angles), and how the smoother was set."""
+    import h5py
+
+    u = run.uncertainty
+    text = h5py.string_dtype(encoding="utf-8")
+    out = g.create_group("uncertainty")
+    out.attrs.update({"noise_m": u.noise_m, "estimated": u.estimated,
+                      "seconds": u.seconds, "cutoffs_hz": u.cutoffs_hz,
+                      "extra_sd": u.extra_sd})
+    out.attrs.create("coordinates", list(u.coordinates), dtype=text)
+    units = run._angle_units
+    forces = ["N" if unit == "m" else "N·m" for unit in units]
+    for key, per in (("theta_sd", list(units)), ("theta_d_sd", [f"{u_}/s" for u_ in units]),
+                     ("theta_dd_sd", [f"{u_}/s²" for u_ in units]), ("moments_sd", forces)):
+        values = getattr(u, key)
+        if values is None:
+            continue
+        put(out, key, values)
+        out[key].attrs["names"] = list(run.result.angle_names)
+        out[key].attrs.create("units", per, dtype=text)
 
 
 def _write_dynamics(g, run: Run) -> None:

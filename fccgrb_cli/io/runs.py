@@ -18,6 +18,7 @@ from fccgrb_cli.io.lab_axes import LabAxes
 from fccgrb_cli.io.results_format import check_run, reading, runs_group
 from fccgrb_cli.options import SolveOptions
 from fccgrb_cli.run import Run
+from fccgrb_cli.smoothing import Uncertainty
 from fccgrb_cli.solvers.quality import FLAG_DTYPE
 from fccgrb_cli.solvers.result import KinematicResult
 
@@ -72,7 +73,8 @@ def _read_run(name: str, g) -> Run:
         clinical=_read_clinical(g["clinical"]) if "clinical" in g else None,
         gait=read_gait(g["gait"]) if "gait" in g else None,
         moment_flags=g["moment_flags"][()] if "moment_flags" in g else None,
-        axes=_read_axes(a))
+        axes=_read_axes(a),
+        uncertainty=_read_uncertainty(g["uncertainty"]) if "uncertainty" in g else None)
 
 
 def _read_axes(a: dict) -> LabAxes | None:
@@ -83,6 +85,18 @@ def _read_axes(a: dict) -> LabAxes | None:
     return LabAxes(str(a["vertical"]), np.asarray(a["up"], dtype=float),
                    tuple(float(x) for x in a["gravity"]), str(a["vertical_chosen_by"]),
                    str(a["vertical_why"]), None if np.isnan(walking).any() else walking)
+
+
+def _read_uncertainty(u) -> Uncertainty:
+    a = u.attrs
+    return Uncertainty(
+        theta_sd=u["theta_sd"][()], theta_d_sd=u["theta_d_sd"][()],
+        theta_dd_sd=u["theta_dd_sd"][()],
+        moments_sd=u["moments_sd"][()] if "moments_sd" in u else None,
+        noise_m=float(a["noise_m"]), coordinates=_strings(a["coordinates"]),
+        cutoffs_hz=np.asarray(a["cutoffs_hz"], dtype=float),
+        extra_sd=np.asarray(a["extra_sd"], dtype=float), estimated=bool(a["estimated"]),
+        seconds=float(a["seconds"]))
 
 
 def _read_dynamics(g, names: tuple[str, ...], time: np.ndarray) -> Dynamics:

@@ -1,0 +1,235 @@
+"""The smoothing stage of a solve (``--smooth auto``, issue 23): the whole trial's driver
+coordinates and their rates from every frame's markers at once (``solvers/smooth``), the run's
+kinematics replaced by them, the classical model driven by them, and the uncertainty of every
+angle, rate and joint moment.
+
+What the stage hands on:
+
+* the smoothed kinematic result: q from the topological equations at the smoothed coordinates
+  (so every constraint holds to rounding on every frame), q̇ and q̈ from Φ_q q̇ = ν and
+  Φ_q q̈ = γ with the smoothed θ̇, θ̈ (and a floating base's rates), ‖Φ‖ and max |Φ_top|
+  evaluated there; each frame's iterations, time and quality flags stay the per-frame solve's
+  (a frame not solved or flagged gave the smoother no data and stays flagged: the prior
+  bridged it);
+* the drives of the classical model (the smoothed θ, θ̇, θ̈ and base features with their rates),
+  which the inverse dynamics takes instead of differencing θ;
+* each force plate's cutoff: the smoother's own filter (``solvers/smooth/signal.py``) at the
+  median of the equivalent cutoffs of the coordinates between the root (the ground or the
+  floating base) and the body it loads, so that the ground reaction and the accelerations that
+  balance it are smoothed alike (Bisseling & Hof 2006; Kristianslund et al. 2012);
+* the standard deviations (``Uncertainty``) of θ, θ̇, θ̈ from the smoother's covariance and of
+  the joint moments through the inverse dynamics linearized at each frame
+  (``dynamics/uncertainty.py``).
+"""
+
+from __future__ import annotations
+
+import time as clock
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from itertools import pairwise
+
+import numpy as np
+
+from fccgrb_cli.dynamics.loads import ExternalLoad
+from fccgrb_cli.dynamics.uncertainty import moment_uncertainty
+from fccgrb_cli.errors import InputError
+from fccgrb_cli.model import Model
+from fccgrb_cli.solvers.batched import Drives, Stacked, factor
+from fccgrb_cli.solvers.result import KinematicResult
+from fccgrb_cli.solvers.smooth import Motion, SmoothSettings, smooth_motion
+from fccgrb_cli.solvers.smooth.signal import smoothed_signal
+from fccgrb_cli.system import Drive, System, compile_system
+from fccgrb_cli.system.constraints import joint_neighbours
+
+
+@dataclass(frozen=True)
+class Uncertainty:
+    """Per frame the standard deviation of every angle (rad; m for a distance), its rate and
+    acceleration, and its joint moment (N·m; N for a distance; None without the dynamics), as
+    the marker noise makes them scatter; and how the smoother was set: the markers' white noise
+    σ (m), and for every smoothed coordinate (the angles, then a floating base's origin and
+    rotation vector) its equivalent cutoff (Hz) and its own noise beyond the markers' (rad or
+    m), whether these were estimated from the data, and the smoother's wall time (s)."""
+
+    theta_sd: np.ndarray
+    theta_d_sd: np.ndarray
+    theta_dd_sd: np.ndarray
+    moments_sd: np.ndarray | None
+    noise_m: float
+    coordinates: tuple[str, ...]
+    cutoffs_hz: np.ndarray
+    extra_sd: np.ndarray
+    estimated: bool
+    seconds: float = float("nan")
+
+    def describe(self) -> str:
+        """The note a solve prints: the noise found and the cutoffs' range."""
+        how = "maximum likelihood" if self.estimated else "as given"
+        extra = float(np.max(self.extra_sd, initial=0.0))
+        own = (f", the coordinates' own noise up to {np.degrees(extra):.2g} deg"
+               if extra > 0 else "")
+        return (f"smoothed (--smooth auto): marker noise {1e3 * self.noise_m:.3g} mm "
+                f"(from the residuals){own}; equivalent cutoffs "
+                f"{self.cutoffs_hz.min():.3g}–{self.cutoffs_hz.max():.3g} Hz ({how})")
+
+
+@dataclass(frozen=True)
+class Smoothing:
+    """The stage's answer: the smoothed motion, the kinematic result made of it, the classical
+    model's drives and the classical system."""
+
+    motion: Motion
+    result: KinematicResult
+    drives: Drives
+    system: System
+    seconds: float
+
+    def plate_cutoff(self, body: str) -> float:
+        """The cutoff (Hz) for a load on ``body`` (see the module's docstring)."""
+        chain = chain_coordinates(self.system.model, body, self.motion.coordinates.names)
+        return float(np.median(self.motion.cutoffs[chain]))
+
+    def smoothed_loads(self, loads: Sequence[ExternalLoad], rate: float
+                       ) -> list[ExternalLoad]:
+        """Each load's force and free moment through the smoother's filter at its cutoff."""
+        out = []
+        for load in loads:
+            cutoff = self.plate_cutoff(load.body)
+            out.append(load.filtered(lambda s, c=cutoff: smoothed_signal(s, rate, c)))
+        return out
+
+    def uncertainty(self, q: np.ndarray | None, loads: Sequence[ExternalLoad]) -> Uncertainty:
+        """The standard deviations, the moments' at the classical model's positions ``q``
+        (None: no dynamics)."""
+        motion = self.motion
+        na = len(self.system.angle_rows)
+        sd = motion.sd
+        moments = None
+        if q is not None:
+            co = motion.coordinates
+            lin = co.linearize(motion.d, q)
+            moments = moment_uncertainty(co, lin.q, lin.S, motion.d, motion.d_d, motion.d_dd,
+                                         motion.covariance, loads).sd
+        return Uncertainty(sd[:, 0, :na], sd[:, 1, :na], sd[:, 2, :na], moments, motion.noise,
+                           motion.coordinates.names, motion.cutoffs, motion.extra_sd,
+                           motion.estimated, self.seconds)
+
+
+def chain_coordinates(model: Model, body: str, names: tuple[str, ...]) -> np.ndarray:
+    """Indices of the coordinates (among ``names``) that move ``body``: the angles and
+    distances between consecutive bodies on its path from the root (the ground or its floating
+    base) and that base's own coordinates; every coordinate where none is found."""
+    neighbours = joint_neighbours(model)
+    roots = ["ground", *model.floating_bases]
+    path: list[str] = []
+    for root in roots:
+        found = _path(neighbours, root, body)
+        if found:
+            path = found
+            break
+    pairs = {frozenset(p) for p in pairwise(path)}
+    picked = [k for k, a in enumerate(model.angles) if frozenset((a.body1, a.body2)) in pairs]
+    if path and path[0] != "ground":
+        picked += [k for k, name in enumerate(names) if name.startswith(f"{path[0]}.")]
+    return np.array(picked if picked else range(len(names)), dtype=int)
+
+
+def _path(neighbours: dict[str, set[str]], start: str, goal: str) -> list[str]:
+    """A path of joined bodies from ``start`` to ``goal`` (breadth first), [] if none."""
+    previous = {start: ""}
+    frontier = [start]
+    while frontier:
+        following = []
+        for node in frontier:
+            for other in sorted(neighbours.get(node, ())):
+                if other not in previous:
+                    previous[other] = node
+                    following.append(other)
+        frontier = following
+    if goal not in previous:
+        return []
+    out = [goal]
+    while out[-1] != start:
+        out.append(previous[out[-1]])
+    return out[::-1]
+
+
+def smooth(model: Model, result: KinematicResult, markers: np.ndarray,
+           settings: SmoothSettings) -> Smoothing:
+    """The stage on a mixed-coordinate ``result`` whose frames followed ``markers`` (frames ×
+    tracked points × 3, NaN where missing): frames not trusted give no data."""
+    started = clock.perf_counter()
+    system = compile_system(model, angles="driver")
+    use = result.trusted & np.isfinite(result.q).all(axis=1)
+    motion = smooth_motion(system, result.time, markers, use, result.q, settings)
+    seconds = clock.perf_counter() - started
+    co = motion.coordinates
+    drives = co.drives(motion.d, motion.d_d, motion.d_dd)
+    stacked = Stacked(system)
+    rates = factor(stacked.jacobian(motion.q))
+    qd_b = rates.solve(stacked.nu(drives))
+    qdd_b = rates.solve(stacked.gamma(motion.q, qd_b, drives))
+    na = co.n_angles
+    q = np.concatenate([motion.q, motion.d[:, :na]], axis=1)
+    qd = np.concatenate([qd_b, motion.d_d[:, :na]], axis=1)
+    qdd = np.concatenate([qdd_b, motion.d_dd[:, :na]], axis=1)
+    phi_norm, phi_top = _residuals(model, q, markers)
+    smoothed = replace(result, q=q, qd=qd, qdd=qdd, theta=q[:, -na:] if na else q[:, :0],
+                       theta_d=motion.d_d[:, :na], theta_dd=motion.d_dd[:, :na],
+                       phi_norm=phi_norm, phi_top_max=phi_top)
+    return Smoothing(motion, smoothed, drives, system, seconds)
+
+
+def _residuals(model: Model, q: np.ndarray, markers: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """‖Φ‖ over the rows a frame's markers keep, and max |Φ_top|, of the mixed system at q."""
+    mixed = compile_system(model, angles="coordinate", track=True)
+    top = mixed.masks()["topology"]
+    trk = mixed.masks()["tracking"]
+    norm, top_max = np.empty(len(q)), np.empty(len(q))
+    for f in range(len(q)):
+        present = np.isfinite(markers[f]).all(axis=1)
+        ref = np.where(present[:, None], markers[f], 0.0)
+        phi = mixed.residual(q[f], Drive(ref=ref))
+        keep = top.copy()
+        keep[np.flatnonzero(trk)] = np.repeat(present, 3)
+        norm[f] = np.linalg.norm(phi[keep])
+        top_max[f] = np.abs(phi[top]).max()
+    return norm, top_max
+
+
+def applies(options, model: Model) -> str | None:
+    """Why ``--smooth auto`` does not apply to this solve (None: it does)."""
+    if options.method == "ad":
+        return "the classical AD baseline keeps its own drivers (the paper's)"
+    if options.filter_cutoff is not None:
+        return "--filter-cutoff asks for the Butterworth filter instead"
+    if model.tracked_vectors:
+        return "the model tracks vectors; the smoother takes tracked points only"
+    return None
+
+
+def settings_of(options) -> SmoothSettings:
+    """The smoother's settings from a solve's options."""
+    noise = None if options.smooth_noise is None else 1e-3 * options.smooth_noise
+    engine = "numpy" if options.engine == "numpy" else "compiled"
+    return SmoothSettings(noise=noise, cutoff=options.smooth_cutoff, engine=engine)
+
+
+def smoothed_or_warned(model: Model, result: KinematicResult, markers: np.ndarray,
+                       options, warnings: list[str]) -> Smoothing | None:
+    """The stage where the options ask for it and it applies; a warning where it cannot run
+    (a trial too short, a chart the base leaves), and the per-frame result then goes on."""
+    if options.smooth != "auto":
+        return None
+    why = applies(options, model)
+    if why is not None:
+        if options.method != "ad" and options.filter_cutoff is None:
+            warnings.append(f"--smooth auto not applied: {why}")
+        return None
+    try:
+        return smooth(model, result, markers, settings_of(options))
+    except InputError as error:
+        warnings.append(f"{error}; the rates come from central differences instead")
+        return None
