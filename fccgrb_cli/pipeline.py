@@ -8,7 +8,7 @@ What the stages use lives in their layers: the trial's labels each marker follow
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -87,30 +87,39 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
         fit = distances(points, inputs)
         found = kinematic_findings(model, result, fit, options, truth is not None)
         found[NO_DATA] = no_data
-        result = assessed(result, points, inputs, found)
+        unassessed = result
+        result = assessed(unassessed, points, inputs, found)
         warnings: list[str] = [*trial.warnings, *axes.warnings, *_quality_advice(result)]
         notes: list[str] = [axes.note()] if axes.chosen_by != "ground" else []
         smoothing = smoothed_or_warned(model, result, inputs, options, warnings)
-        if smoothing is not None:
-            result = smoothing.result
-            points = points_along(system, result.q, which)
+        bridged = result
+        if smoothing is not None:  # checked again where the smoother put the model
+            bridged = smoothing.result
+            smoothed = replace(_blank(bridged, _outside_the_data(no_data.frames)),
+                               messages=unassessed.messages)
+            points = points_along(system, smoothed.q, which)
             fit = distances(points, inputs)
+            found = kinematic_findings(model, smoothed, fit, options, truth is not None)
+            found[NO_DATA] = no_data
+            result = assessed(smoothed, points, inputs, found)
         ed, ed_input = (store.keep(key, values) for key, values in
                         (("ed", distances(points, reference)), ("ed_input", fit)))
         reference, inputs, points = (store.keep(key, values) for key, values in
                                      (("reference", reference), ("markers_input", inputs),
                                       ("model_points", points)))
         stance: dict[str, np.ndarray] = {}
-        solved_dynamics = _dynamics(model, trial, system, result, options,
+        solved_dynamics = _dynamics(model, trial, system, bridged, options,
                                     _Notes(warnings, notes, stance), smoothing)
-        if solved_dynamics is not None:
-            result = with_findings(result, dynamic_findings(model, solved_dynamics))
         uncertainty = None
         if smoothing is not None:
-            uncertainty = smoothing.uncertainty(
+            outside = _outside_the_data(no_data.frames)
+            uncertainty = _blank(smoothing.uncertainty(
                 None if solved_dynamics is None else solved_dynamics.kinematics.q,
-                () if solved_dynamics is None else solved_dynamics.loads)
+                () if solved_dynamics is None else solved_dynamics.loads), outside)
             notes.append(uncertainty.describe())
+            solved_dynamics = _blank_frames(solved_dynamics, outside, result.time)
+        if solved_dynamics is not None:
+            result = with_findings(result, dynamic_findings(model, solved_dynamics))
         result = store.coordinates(result)
         solved_dynamics = store.dynamics(solved_dynamics)
         clinical = clinical_results(
@@ -305,6 +314,43 @@ def _unsolved(system: System, time: np.ndarray, options: SolveOptions) -> Kinema
         angle_names=tuple(a.name for a in system.model.angles),
         iterations=np.zeros(n, dtype=int), time_s=np.zeros(n), phi_norm=np.full(n, np.nan),
         phi_top_max=np.full(n, np.nan), converged=np.zeros(n, dtype=bool))
+
+
+def _outside_the_data(no_data: np.ndarray) -> np.ndarray:
+    """The frames before the first and after the last that the markers determine: there the
+    smoother's prior extrapolates from nothing (a gap between determined frames it bridges with
+    the model, and its standard deviation says so; either way the frames stay untrusted)."""
+    known = np.flatnonzero(~no_data)
+    frame = np.arange(len(no_data))
+    if not len(known):
+        return np.ones(len(no_data), dtype=bool)
+    return (frame < known[0]) | (frame > known[-1])
+
+
+def _blank(value, frames: np.ndarray):
+    """A smoothed result or its uncertainty with the float per-frame arrays NaN on ``frames``
+    (outside the data: the smoother's prior there is no answer); flags, counts and the
+    convergence mask as they were."""
+    if not frames.any():
+        return value
+    n = len(frames)
+    return replace(value, **{
+        f.name: np.where(frames.reshape(-1, *[1] * (v.ndim - 1)), np.nan, v)
+        for f in fields(value) if f.init
+        for v in [getattr(value, f.name)]
+        if isinstance(v, np.ndarray) and v.ndim and len(v) == n and v.dtype.kind == "f"})
+
+
+def _blank_frames(dynamics: Dynamics | None, frames: np.ndarray, time: np.ndarray
+                  ) -> Dynamics | None:
+    """The inverse dynamics without the frames the markers did not determine (NaN, False)."""
+    if dynamics is None or not frames.any():
+        return dynamics
+    n = len(frames)
+    keep = runs(~frames)
+    if not keep:
+        return None
+    return merged([(slice(a, b), take(dynamics, slice(a, b), n)) for a, b in keep], n, time)
 
 
 @dataclass(frozen=True)

@@ -9,8 +9,9 @@ What the stage hands on:
   (so every constraint holds to rounding on every frame), q̇ and q̈ from Φ_q q̇ = ν and
   Φ_q q̈ = γ with the smoothed θ̇, θ̈ (and a floating base's rates), ‖Φ‖ and max |Φ_top|
   evaluated there; each frame's iterations, time and quality flags stay the per-frame solve's
-  (a frame not solved or flagged gave the smoother no data and stays flagged: the prior
-  bridged it);
+  (a frame not solved gave the smoother no data and stays flagged: the prior bridged it; a
+  frame solved but flagged, e.g. for a poor fit, still gives its markers: bridging 70 such
+  frames by the prior put a foot 0.8 m from its markers);
 * the drives of the classical model (the smoothed θ, θ̇, θ̈ and base features with their rates),
   which the inverse dynamics takes instead of differencing θ;
 * each force plate's cutoff: the smoother's own filter (``solvers/smooth/signal.py``) at the
@@ -158,10 +159,10 @@ def _path(neighbours: dict[str, set[str]], start: str, goal: str) -> list[str]:
 def smooth(model: Model, result: KinematicResult, markers: np.ndarray,
            settings: SmoothSettings) -> Smoothing:
     """The stage on a mixed-coordinate ``result`` whose frames followed ``markers`` (frames ×
-    tracked points × 3, NaN where missing): frames not trusted give no data."""
+    tracked points × 3, NaN where missing): frames not solved give no data."""
     started = clock.perf_counter()
     system = compile_system(model, angles="driver")
-    use = result.trusted & np.isfinite(result.q).all(axis=1)
+    use = result.converged & np.isfinite(result.q).all(axis=1)
     motion = smooth_motion(system, result.time, markers, use, result.q, settings)
     seconds = clock.perf_counter() - started
     co = motion.coordinates

@@ -116,10 +116,13 @@ def test_frames_without_markers_are_unsolved_by_every_method(method, extra):
     assert run.trusted[35:-5].all(), np.flatnonzero(~run.trusted)
     assert not (r.flags[30:] & NO_DATA).any()
     assert "cannot determine the model" in said(run)
-    # what the data determine does not depend on the blank frames before them
+    # what the data determine does not depend on the blank frames before them (to 1e-6 rad
+    # frame by frame; the whole-trial smoother of the mixed methods bridges the blank second
+    # with its prior, which moves the first solved frames by ~3e-5 rad)
     alone = fc.solve(model, Trial(trial.path, trial.labels, trial.markers[30:], trial.rate),
                      method=method, dynamics=False, **extra)
-    np.testing.assert_allclose(r.theta[30:], alone.result.theta, atol=1e-6)
+    smoothed = run.uncertainty is not None
+    np.testing.assert_allclose(r.theta[30:], alone.result.theta, atol=1e-4 if smoothed else 1e-6)
 
 
 @pytest.mark.parametrize("method", ["nrm-wls", "cno-sqp", "mo-ed", "ad"])
@@ -438,14 +441,17 @@ def test_a_mirrored_angle_is_flagged_as_another_branch():
 def test_unfiltered_real_markers_give_no_trusted_moment():
     """Qualisys without a filter: the double-differentiated marker noise is most of the
     accelerations (the hip moment swings −2.0…3.2 N·m/kg where the 6 Hz run gives −0.6…1.2), so
-    no moment is trusted and the run says to filter; with the filter they are."""
+    no moment is trusted and the run says to filter; with the filter they are, and with the
+    whole-trial smoother (the default) too."""
     trial = fc.read_trial(QUALISYS)
-    raw = fc.solve(qualisys_model(), trial, method="nrm-wls")
+    raw = fc.solve(qualisys_model(), trial, method="nrm-wls", smooth="none")
     assert raw.trusted.all()                   # the kinematics are fine
     assert not raw.moments_trusted.any()
     assert "--filter-cutoff" in said(raw)
     filtered = fc.solve(qualisys_model(), trial, method="nrm-wls", filter_cutoff=6.0)
     assert filtered.moments_trusted.any()
+    smoothed = fc.solve(qualisys_model(), trial, method="nrm-wls")
+    assert smoothed.uncertainty is not None and smoothed.moments_trusted.any()
 
 
 @needs_shared
