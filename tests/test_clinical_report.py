@@ -74,15 +74,14 @@ def _flagged_copy(results: Path, target: Path) -> Path:
             flags[...] = values
             flags.attrs["marker_dropout"] = np.uint16(1 << 14)
             flags.attrs["marker_dropout_means"] = "a marker of the model missing for 50 ms"
-        # a per-joint flag dataset describing its bits in JSON, as issue 21's files do
+        # a per-joint flag dataset describing its bits in JSON, as issue 21's moment_flags do
+        # (one this version does not write, so its meanings can come from nowhere else)
         run = h5["runs"]["A-walk2"]
-        if "moment_flags" in run:  # this version's own, replaced by the test's
-            del run["moment_flags"]
         joints = np.zeros(run["theta"].shape, dtype=np.uint16)
         joints[50:60, 3] |= 4
         joints[55:75, 0] |= 1
         joints[200:203, :] |= 4
-        moment = run.create_dataset("moment_flags", data=joints)
+        moment = run.create_dataset("joint_flags", data=joints)
         moment.attrs.update({"kinematics": np.uint16(1), "contact": np.uint16(4)})
         moment.attrs["bits"] = json.dumps([
             {"name": "kinematics", "value": 1, "meaning": "its frame is flagged",
@@ -292,7 +291,8 @@ def test_report_in_a_browser(report: tuple[Path, Path, Path]) -> None:
             union = {label for found in per_run.values() for label in found}
             assert set(layout["flags"]) == union  # every flag any of its trials declares
             assert {"unconverged", "topology", "jump", "marker_dropout"} <= union
-            assert subject == "B" or "moment_flags:contact" in union
+            assert "moment_flags:contact" in union  # this version's own
+            assert subject == "B" or "joint_flags:contact" in union
             for row, run in zip(layout["quality"], runs, strict=True):
                 counted = {c["flag"]: int(c["value"]) for c in row if "flag" in c}
                 assert counted == {label: per_run[run][label][2] if label in per_run[run] else 0
