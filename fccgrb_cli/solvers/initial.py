@@ -7,10 +7,11 @@ non-collinear points give a least-squares rigid fit (Söderkvist–Wedin, via th
 segment's direction (the smallest rotation from the model pose); one, a translation of the pose.
 A two-point segment's rotation about its own axis is then chosen to satisfy its joints' axis
 equations with the bodies already placed (a universal joint's perpendicular arms, a revolute's
-parallel axes), the closest such roll to the model pose winning ties. Mixed coordinates follow
+parallel axes), the closest such roll to the model pose (relative to the body it is reached
+from) winning ties. Mixed coordinates follow
 from the fitted bodies: θ = acos(s1·s2) from their vectors, d = (r_Q − r_P)·s from their points.
-Only joints whose points coincide (spherical, revolute, universal) share a point: a cylindrical
-or prismatic joint's points only lie on one axis line, some slide apart.
+Only joints whose points coincide (spherical, revolute, universal) share a point: a cylindrical,
+prismatic or line joint's points only lie on one axis line, some slide apart.
 """
 
 from __future__ import annotations
@@ -71,18 +72,31 @@ def best_roll(R: np.ndarray, axis_world: np.ndarray,
     A = np.einsum("ij,ij->i", P, S - np.outer(S @ k, k))
     B = np.einsum("ij,ij->i", P, np.cross(k, S))
     C = (P @ k) * (S @ k)
-    phis = np.linspace(-np.pi, np.pi, 721)
+
+    def residual(phi: float) -> np.ndarray:
+        return A * np.cos(phi) + B * np.sin(phi) + C
+
+    def refine(phi: float) -> float:
+        for _ in range(20):
+            res = residual(phi)
+            d1 = -A * np.sin(phi) + B * np.cos(phi)
+            d2 = -A * np.cos(phi) - B * np.sin(phi)
+            grad, hess = 2 * res @ d1, 2 * (d1 @ d1 + res @ d2)
+            if hess <= 0:
+                break
+            phi -= grad / hess
+        return float(np.angle(np.exp(1j * phi)))
+
+    phis = np.linspace(-np.pi, np.pi, 720, endpoint=False)
     cost = ((np.outer(np.cos(phis), A) + np.outer(np.sin(phis), B) + C) ** 2).sum(axis=1)
-    good = cost <= cost.min() + 1e-9 * max(1.0, cost.min())
-    phi = phis[good][np.argmin(np.abs(phis[good]))]
-    for _ in range(20):
-        res = A * np.cos(phi) + B * np.sin(phi) + C
-        d1 = -A * np.sin(phi) + B * np.cos(phi)
-        d2 = -A * np.cos(phi) - B * np.sin(phi)
-        grad, hess = 2 * res @ d1, 2 * (d1 @ d1 + res @ d2)
-        if hess <= 0:
-            break
-        phi -= grad / hess
+    # every sampled local minimum, refined: equally good rolls (a universal joint's arm and its
+    # opposite) are told apart by their refined cost, not by where the samples fell
+    minima = phis[(cost <= np.roll(cost, 1)) & (cost <= np.roll(cost, -1))]
+    refined = [refine(phi) for phi in minima]
+    costs = np.array([residual(phi) @ residual(phi) for phi in refined])
+    good = [phi for phi, c in zip(refined, costs, strict=True)
+            if c <= costs.min() + 1e-9 * max(1.0, costs.min())]
+    phi = min(good, key=abs)
     return axis_rotation(k, phi) @ R
 
 
@@ -146,7 +160,7 @@ def initial_guess(system: System, targets: np.ndarray) -> np.ndarray:
             tracked[tp.body].append((model.body(tp.body).points[tp.point].local, target))
     placed: dict[str, tuple[np.ndarray, np.ndarray]] = {GROUND: (np.eye(3), np.zeros(3))}
 
-    def place(other: str) -> None:
+    def place(other: str, parent: str | None = None) -> None:
         pairs = list(tracked[other])
         for j in model.joints:
             if other in j.bodies and j.type in COINCIDENT:
@@ -157,6 +171,11 @@ def initial_guess(system: System, targets: np.ndarray) -> np.ndarray:
                                   _global_point(model, placed, neighbour, j.points[1 - k])))
         pose = model.body(other).pose
         R0 = np.column_stack([pose.u, pose.v, pose.w])
+        if parent not in (None, GROUND):
+            # the model pose as seen from the body it is reached from, so that a trial facing
+            # another way than the model's pose keeps a two-point segment's roll
+            seen = model.body(parent).pose
+            R0 = placed[parent][0] @ np.column_stack([seen.u, seen.v, seen.w]).T @ R0
         local = np.array([p for p, _ in pairs]).reshape(-1, 3)
         world = np.array([w for _, w in pairs]).reshape(-1, 3)
         placed[other] = _place(local, world, R0, np.array(pose.r),
@@ -173,7 +192,7 @@ def initial_guess(system: System, targets: np.ndarray) -> np.ndarray:
                 if here in joint.bodies:
                     other = joint.bodies[1 - joint.bodies.index(here)]
                     if other not in placed:
-                        place(other)
+                        place(other, here)
                         order.append(other)
     for name, (R, r) in placed.items():
         if name == GROUND:
