@@ -287,14 +287,23 @@ def _frame_range(text: str | None) -> tuple[int, int] | None:
 @click.option("--mass", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Body mass in kg: scales segment inertia (de Leva 1996) and gives moments "
                    "in N·m/kg. Without it the model has no inertia (kinematics only).")
-@click.option("--knee-width", type=float, default=None, metavar="MM",
-              help="Helen Hayes/Davis templates: the knee's width across the epicondyles, mm "
-                   "(Davis et al. 1991).  [default: 100]")
-@click.option("--ankle-width", type=float, default=None, metavar="MM",
-              help="Helen Hayes/Davis templates: the ankle's width across the malleoli, mm.  "
-                   "[default: 70]")
-@click.option("--marker-diameter", type=float, default=None, metavar="MM",
-              help="Helen Hayes/Davis templates: the markers' diameter, mm.  [default: 14]")
+@click.option("--knee-width", default=None, metavar="MM[,MM]",
+              help="The knee's width across the epicondyles, mm (Davis et al. 1991); Plug-in "
+                   "Gait templates take left,right.  [Helen Hayes default: 100]")
+@click.option("--ankle-width", default=None, metavar="MM[,MM]",
+              help="The ankle's width across the malleoli, mm; Plug-in Gait templates take "
+                   "left,right.  [Helen Hayes default: 70]")
+@click.option("--marker-diameter", default=None, metavar="MM",
+              help="The markers' diameter, mm.  [Helen Hayes default: 14]")
+@click.option("--subject", "subject_files", multiple=True, metavar="FILE",
+              help="Plug-in Gait templates: the subject's measurements from a Vicon .vsk, a "
+                   "C3D's PROCESSING group or a YAML subject: section (repeatable; later files "
+                   "and the width options win). The static TRIAL's own PROCESSING group and "
+                   "the template's subject: section are read first.")
+@click.option("--foot-flat/--no-foot-flat", default=True, show_default=True,
+              help="Plug-in Gait templates: the static's heel-to-toe line taken level (raised "
+                   "at the heel by the sole delta) for the foot offsets, as Plug-in Gait's "
+                   "'foot flat' option does.")
 @click.option("--map", "mapping", multiple=True, metavar="NAME=LABEL|FILE",
               help="The template's label → the trial's, where a lab spells them otherwise "
                    "(repeatable NAME=LABEL, comma-separated pairs, or a YAML file of NAME: "
@@ -302,16 +311,20 @@ def _frame_range(text: str | None) -> tuple[int, int] | None:
 @ACCEPT_TRUNCATED
 @reports_input_errors
 def calibrate(model: str, trial: str, output: str, frames: str | None,
-              mass: float | None, knee_width: float | None, ankle_width: float | None,
-              marker_diameter: float | None, mapping: tuple[str, ...],
-              accept_truncated: bool) -> None:
+              mass: float | None, knee_width: str | None, ankle_width: str | None,
+              marker_diameter: str | None, subject_files: tuple[str, ...], foot_flat: bool,
+              mapping: tuple[str, ...], accept_truncated: bool) -> None:
     """Personalize MODEL (a lower-limb template such as configs/models/lower_limb.yaml or
     helen_hayes.yaml) from TRIAL's markers: ISB segment frames from the landmarks named in its
     `calibration` section, hip centres by Harrington et al. (2007), knee and ankle centres
     between the epicondyles and the malleoli or, for the Helen Hayes/Davis set, by Davis et
     al.'s (1991) chord construction from the knee and ankle widths, each marker's local
-    coordinates (mean over the frames), segment lengths and inertia. Writes a model ready for
-    `fccgrb solve`."""
+    coordinates (mean over the frames), segment lengths and inertia. A Plug-in Gait template
+    (configs/models/plugin_gait.yaml) is personalized as Plug-in Gait does (Davis hip centres,
+    chord knee and ankle centres, thigh and shank rotation offsets, tibial torsion, the static's
+    foot offsets) from the subject's measurements: the static C3D's PROCESSING group, the
+    template's subject: section, --subject files and the width options, in that order. Writes a
+    model ready for `fccgrb solve`."""
     from fccgrb_cli.anatomy.calibrate import Measurements
     from fccgrb_cli.anatomy.calibrate import calibrate as personalize
     from fccgrb_cli.io.atomic import atomic_path
@@ -320,12 +333,22 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
     from fccgrb_cli.options import from_cli
 
     template = load_model(model)
-    widths = (knee_width, ankle_width, marker_diameter)
-    measured = None if all(w is None for w in widths) else Measurements.from_mm(*widths)
     labels = dict(from_cli({"mapping": mapping}).mapping)
     data = read_trial(trial, accept_truncated)
     for message in data.warnings:
         click.echo(f"fccgrb: warning: {message}", err=True)
+    if template.calibration_method == "plugin-gait":
+        _calibrate_plugin_gait(template, data, output, (frames, mass, foot_flat),
+                               (knee_width, ankle_width, marker_diameter), subject_files,
+                               labels)
+        return
+    if subject_files:
+        raise InputError(f"--subject: expected only with a Plug-in Gait template "
+                         f"(calibration.method: plugin-gait); {model} has none")
+    widths = tuple(None if w is None else _single_mm(w, flag) for w, flag in (
+        (knee_width, "--knee-width"), (ankle_width, "--ankle-width"),
+        (marker_diameter, "--marker-diameter")))
+    measured = None if all(w is None for w in widths) else Measurements.from_mm(*widths)
     result = personalize(template, data, _frame_range(frames), mass, measured, labels)
     personal = parse_model(result.text, output)
     analyse(personal)
@@ -345,6 +368,65 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
     if mass is None:
         click.echo("fccgrb: warning: no --mass: the model has no inertia (inverse dynamics "
                    "skipped)", err=True)
+
+
+def _single_mm(text: str, flag: str) -> float:
+    """One length in mm (the Helen Hayes templates take one width for both sides)."""
+    try:
+        return float(text)
+    except ValueError:
+        raise InputError(f"{flag}: expected one number in mm for a Helen Hayes template (one "
+                         f"width for both sides; Plug-in Gait templates take left,right), got "
+                         f"{text!r}") from None
+
+
+def _calibrate_plugin_gait(template, data, output: str, choices: tuple,
+                           widths: tuple[str | None, ...], subject_files: tuple[str, ...],
+                           labels: dict[str, str]) -> None:
+    """`calibrate` for a Plug-in Gait template: measurements merged from every source (the
+    static's PROCESSING group, the template's subject section, --subject files, options; later
+    wins), the model written with what was used."""
+    from fccgrb_cli.anatomy.pig_calibration import Options, calibrate_plugin_gait
+    from fccgrb_cli.io.atomic import atomic_path
+    from fccgrb_cli.io.processing import processing_measurements
+    from fccgrb_cli.io.subject_files import read_measurements
+    from fccgrb_cli.model import parse_model
+    from fccgrb_cli.model.subject import from_flags
+
+    frames, mass, foot_flat = choices
+    measured = template.measurements
+    if data.path.lower().endswith(".c3d"):
+        measured = measured.merged_over(processing_measurements(data.path))
+    for path in subject_files:
+        measured = read_measurements(path).merged_over(measured)
+    typed = dict(zip(("knee_width", "ankle_width", "marker_diameter"), widths, strict=True))
+    typed["body_mass"] = None if mass is None else f"{mass:.17g}"
+    if any(v is not None for v in typed.values()):
+        measured = from_flags(typed).merged_over(measured)
+    result = calibrate_plugin_gait(template, data, measured,
+                                   Options(_frame_range(frames), foot_flat), labels)
+    personal = parse_model(result.text, output)
+    analyse(personal)
+    with atomic_path(output) as tmp:
+        tmp.write_text(result.text, encoding="utf-8")
+    m = result.measurements
+    start, stop = result.frames
+    click.echo(f"wrote {output}: {personal.name} from frame indices {start}:{stop} of "
+               f"{data.path}")
+    click.echo(f"measurements from {m.source or 'nowhere'}")
+    for note in result.notes:
+        click.echo(f"  {note}")
+    click.echo("segment lengths (mm): " + ", ".join(
+        f"{k} {1e3 * v:.0f}" for k, v in result.lengths.items()))
+    click.echo("static foot offsets (deg): plantarflexion L/R "
+               f"{np.degrees(m.static_plantar_flexion.left):.2f} / "
+               f"{np.degrees(m.static_plantar_flexion.right):.2f}, rotation L/R "
+               f"{np.degrees(m.static_rotation_offset.left):.2f} / "
+               f"{np.degrees(m.static_rotation_offset.right):.2f}"
+               f" ({'foot flat' if foot_flat else 'foot not flat'})")
+    if m.body_mass is None:
+        click.echo("fccgrb: warning: no body mass (Bodymass or --mass): the model has no "
+                   "inertia (inverse dynamics skipped)", err=True)
 
 
 @main.command("perturb")

@@ -17,6 +17,7 @@ from fccgrb_cli.clinical import clinical_results
 from fccgrb_cli.dynamics.convert import Dynamics, classical_dynamics
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.gait.analysis import analyse_gait, landmark_labels
+from fccgrb_cli.gait.plugin_gait_outputs import plugin_gait_results
 from fccgrb_cli.io.labels import match_labels, vector_targets
 from fccgrb_cli.io.plate_loads import plate_loads
 from fccgrb_cli.io.trial import Trial
@@ -76,6 +77,8 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
         notes: list[str] = []
         stance: dict[str, np.ndarray] = {}
         solved_dynamics = _dynamics(model, trial, system, result, options, warnings, notes, stance)
+        pig = plugin_gait_results(model, result.q, result.trusted, solved_dynamics) \
+            if model.calibration_method == "plugin-gait" else None
         result = store.coordinates(result)
         solved_dynamics = store.dynamics(solved_dynamics)
         clinical = clinical_results(
@@ -93,7 +96,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
             form=",".join(sorted({b.form for b in model.bodies})),
             model_text=model.text, trial_path=trial.path,
             dynamics=solved_dynamics, warnings=tuple(warnings), notes=tuple(notes),
-            clinical=clinical, gait=gait)
+            clinical=clinical, gait=gait, plugin_gait=pig)
 
 
 class _Store:

@@ -13,6 +13,7 @@ import numpy as np
 from fccgrb_cli.clinical import ClinicalResults
 from fccgrb_cli.dynamics.convert import Dynamics
 from fccgrb_cli.gait.analysis import GaitResults
+from fccgrb_cli.gait.plugin_gait_outputs import PluginGaitResults
 from fccgrb_cli.model import Model
 from fccgrb_cli.named import NamedArray
 from fccgrb_cli.options import SolveOptions
@@ -45,6 +46,7 @@ class Run:
     notes: tuple[str, ...] = ()
     clinical: ClinicalResults | None = None
     gait: GaitResults | None = None
+    plugin_gait: PluginGaitResults | None = None
 
     def __repr__(self) -> str:
         r = self.result

@@ -49,6 +49,8 @@ Contract (SI units: m, rad, s):
       clinical/moments           frames × clinical angles, N·m, conjugate to them (with the
                                  dynamics); clinical/moments_per_kg, N·m/kg (attribute ``mass``)
       clinical/stance/<body>     per frame, True while a force plate loads that body
+    with a model calibrated as Plug-in Gait, its outputs in Plug-in Gait's names and units
+    (fccgrb_cli.io.pig_results): plugin_gait/angles, moments, powers
 Arrays of 64 KiB or more are stored chunked and gzip-compressed (``fccgrb_cli.io.datasets``):
 a long trial is written and read a chunk at a time; any HDF5 reader decodes them.
 """
@@ -67,6 +69,7 @@ from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.atomic import atomic_path
 from fccgrb_cli.io.datasets import put as put_array
 from fccgrb_cli.io.gait_results import write_gait
+from fccgrb_cli.io.pig_results import write_plugin_gait
 from fccgrb_cli.io.spill import StoredArray
 from fccgrb_cli.solvers.quality import BITS
 
@@ -209,6 +212,8 @@ def write_run(path: str | Path, run: Run, command: str, cell: dict | None = None
                 _write_clinical(g, run.clinical)
             if run.gait is not None:
                 write_gait(g, run.gait)
+            if run.plugin_gait is not None:
+                write_plugin_gait(g, run.plugin_gait)
     for spill in {stored.spill for stored in _stored(run)}:
         spill.settled(path, f"/runs/{run.name}")
 

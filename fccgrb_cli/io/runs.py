@@ -14,6 +14,7 @@ from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.datasets import open_results
 from fccgrb_cli.io.gait_results import read_gait
+from fccgrb_cli.io.pig_results import read_plugin_gait
 from fccgrb_cli.io.results import FORMAT_VERSION
 from fccgrb_cli.options import SolveOptions
 from fccgrb_cli.run import Run
@@ -67,7 +68,8 @@ def _read_run(name: str, g) -> Run:
         dynamics=_read_dynamics(g, names, time) if "joint_moments" in g else None,
         warnings=warnings, notes=_strings(a["notes"]),
         clinical=_read_clinical(g["clinical"]) if "clinical" in g else None,
-        gait=read_gait(g["gait"]) if "gait" in g else None)
+        gait=read_gait(g["gait"]) if "gait" in g else None,
+        plugin_gait=read_plugin_gait(g["plugin_gait"]) if "plugin_gait" in g else None)
 
 
 def _read_dynamics(g, names: tuple[str, ...], time: np.ndarray) -> Dynamics:

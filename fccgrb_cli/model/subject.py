@@ -19,6 +19,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from fccgrb_cli.errors import InputError
+
 SIDE_NAMES = {"l": "left", "r": "right"}
 
 
@@ -99,6 +101,20 @@ class SubjectMeasurements:
     static_rotation_offset: Sided = field(default_factory=Sided)
     source: str = ""
     present: tuple[str, ...] = ()
+
+    def merged_over(self, base: SubjectMeasurements) -> SubjectMeasurements:
+        """These measurements where given (per side), ``base``'s elsewhere; sources joined."""
+        values: dict[str, Any] = {}
+        for name in PIG_KEYS:
+            mine, theirs = getattr(self, name), getattr(base, name)
+            if isinstance(mine, Sided):
+                values[name] = Sided(theirs.left if mine.left is None else mine.left,
+                                     theirs.right if mine.right is None else mine.right)
+            else:
+                values[name] = theirs if mine is None else mine
+        source = "; ".join(s for s in (self.source, base.source) if s)
+        return replace(self, **values, source=source,
+                       present=tuple(dict.fromkeys(self.present + base.present)))
 
     def missing(self, names: tuple[str, ...]) -> list[str]:
         """The Vicon keys of the named quantities not given (per side for sided ones)."""
@@ -208,3 +224,34 @@ def from_yaml(spec: dict[str, Any], angle_scale: float,
 def yaml_keys() -> set[str]:
     """The keys a model file's ``subject:`` section may hold."""
     return {"mass", "source", *(name for name in PIG_KEYS if name != "body_mass")}
+
+
+def from_flags(flags: dict[str, str | None]) -> SubjectMeasurements:
+    """Measurements typed on the command line (``--knee-width 102,104``: field name → text in
+    Vicon's units, mm or kg, one value for both sides or ``left,right``); an InputError names
+    the flag."""
+    values: dict[str, float] = {}
+    for name, text in flags.items():
+        if text is None:
+            continue
+        flag = f"--{name.replace('_', '-')}"
+        try:
+            numbers = [float(x) for x in text.split(",")]
+        except ValueError:
+            raise InputError(f"{flag}: expected a number or two (left,right), got "
+                             f"{text!r}") from None
+        q = PIG_KEYS[name]
+        if len(numbers) not in ((1, 2) if q.sided else (1,)):
+            wanted = "one or two numbers (left,right)" if q.sided else "one number"
+            raise InputError(f"{flag}: expected {wanted}, got {text!r}")
+        if q.sided:
+            left, right = numbers if len(numbers) == 2 else numbers * 2
+            values.update({f"L{q.vicon}": left, f"R{q.vicon}": right})
+        else:
+            values[q.vicon] = numbers[0]
+
+    def fail(key: str, expected: str, got: float) -> None:
+        name = next(n for n, q in PIG_KEYS.items() if key.endswith(q.vicon))
+        raise InputError(f"--{name.replace('_', '-')}: expected {expected}, got {got:g}")
+
+    return from_vicon(values, "the command line", fail)
