@@ -724,6 +724,14 @@ def plot(results: str, kind: str, marker: str | None, angle: str | None,
                    "C3D with its markers, analogs and events, the angles and moments added as "
                    "points (POINT:ANGLES, POINT:MOMENTS). Clinical curves where the model "
                    "declares them, else every joint angle (a distance in m, its force in N).")
+@click.option("--convention", default="fccgrb", show_default=True,
+              type=click.Choice(["fccgrb", "plugin-gait", "opensim"]),
+              help="plugin-gait (--format c3d, a run of the Plug-in Gait model): Plug-in "
+                   "Gait's outputs as Nexus writes them, 3-component points LHipAngles (deg), "
+                   "LKneeMoment (N·mm/kg), LAnklePower (W/kg, in Z), ..., replacing points of "
+                   "the same names; opensim (--format mot, the same runs): OpenSim's coordinate "
+                   "names and signs (pelvis_tilt, hip_flexion_r, knee_angle_r, ankle_angle_r, "
+                   "...; Rajagopal 2015, knee flexion positive).")
 @click.option("--run", "run_name", default=None, metavar="NAME",
               help="The run to export [default: the file's only run].")
 @click.option("--trial", default=None, type=click.Path(dir_okay=False),
@@ -733,11 +741,12 @@ def plot(results: str, kind: str, marker: str | None, angle: str | None,
               help="The file to write [default: RESULTS with the format's suffix, "
                    "RESULTS.<run>.<format> when the file holds several runs].")
 @reports_input_errors
-def export(results: str, fmt: str, run_name: str | None, trial: str | None,
+def export(results: str, fmt: str, convention: str, run_name: str | None, trial: str | None,
            output: str | None) -> None:
     """Export a run of a results file for OpenSim, pandas, spreadsheets, Mokka, Nexus or
-    Visual3D. Frames the quality checks do not trust keep their values and are counted (the
-    CSV's trusted column, the header's untrustedFrames, the C3D's FCCGRB:UNTRUSTED)."""
+    Visual3D, times on the trial's own clock (its first frame's time). Frames the quality
+    checks do not trust keep their values and are counted (the CSV's trusted column, the
+    header's untrustedFrames, the C3D's FCCGRB:UNTRUSTED)."""
     from fccgrb_cli.io.export import choose_run, default_output
     from fccgrb_cli.io.export import export as write
     from fccgrb_cli.io.runs import read_runs
@@ -748,7 +757,10 @@ def export(results: str, fmt: str, run_name: str | None, trial: str | None,
     if target.resolve() in {Path(results).resolve(), Path(trial or run.trial_path).resolve()}:
         raise InputError(f"{target}: expected an output other than the results file or the "
                          "trial (inputs are never modified)")
-    write(run, fmt, target, trial)
+    replaced = write(run, fmt, target, trial, convention)
+    if replaced:
+        click.echo(f"fccgrb: {replaced} points of the trial with Plug-in Gait's names replaced "
+                   "by the run's", err=True)
     untrusted = int((~run.trusted).sum())
     if untrusted:
         click.echo(f"fccgrb: warning: {untrusted} of {len(run.trusted)} frames of run "

@@ -96,7 +96,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
             form=",".join(sorted({b.form for b in model.bodies})),
             model_text=model.text, trial_path=trial.path,
             dynamics=solved_dynamics, warnings=tuple(warnings), notes=tuple(notes),
-            clinical=clinical, gait=gait, plugin_gait=pig)
+            clinical=clinical, gait=gait, plugin_gait=pig, start_time=trial.start)
 
 
 class _Store:
@@ -130,7 +130,8 @@ class _Store:
         vectors = {label for tv in model.tracked_vectors
                    for label in (tv.from_marker, tv.to_marker) if label in trial.labels}
         labels = tuple(dict.fromkeys([*landmark_labels(model, trial).values(), *vectors]))
-        return Trial(trial.path, labels, trial.select(list(labels)), trial.rate, trial.warnings)
+        return Trial(trial.path, labels, trial.select(list(labels)), trial.rate, trial.warnings,
+                     trial.start)
 
     def rates(self, result: KinematicResult) -> KinematicResult:
         """q̇, q̈, θ̇, θ̈ stored (the dynamics stage takes q and θ only)."""

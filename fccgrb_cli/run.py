@@ -47,6 +47,7 @@ class Run:
     clinical: ClinicalResults | None = None
     gait: GaitResults | None = None
     plugin_gait: PluginGaitResults | None = None
+    start_time: float = 0.0  # s: the first frame's time on the trial file's clock
 
     def __repr__(self) -> str:
         r = self.result

@@ -107,3 +107,127 @@ def test_walking_kinetics_in_plugin_gaits_units(solved):
         assert r >= 0.85, (name, r)
         peak = np.abs(theirs[ok, k]).max()
         assert 0.5 * peak <= np.abs(ours[ok, k]).max() <= 2.0 * peak, name
+
+
+def test_plugin_gait_c3d_export_reads_back_in_plugin_gaits_layout(solved, tmp_path):
+    """ezc3d reads the export: every output a 3-component point under its Plug-in Gait name,
+    the run's values (float32), listed in POINT:ANGLES / MOMENTS / POWERS with Nexus's units;
+    Vicon's own points of those names replaced, the markers, first frame and events kept."""
+    personal, run = solved
+    results = personal.parent / "walk.h5"
+    target = tmp_path / "walk_pig.c3d"
+    out = run_cli("export", results, "--format", "c3d", "--convention", "plugin-gait",
+                  "-o", target)
+    assert out.exit_code == 0, out.stderr
+    assert "22 points of the trial with Plug-in Gait's names replaced" in out.stderr
+    original, back = ezc3d.c3d(str(WALK)), ezc3d.c3d(str(target))
+    point = back["parameters"]["POINT"]
+    labels = [s.strip() for key in ("LABELS", "LABELS2") if key in point
+              for s in point[key]["value"]]
+    xyz = back["data"]["points"][:3]
+    pig = run.plugin_gait
+    for kind, group, unit in (("angles", "ANGLES", "deg"), ("moments", "MOMENTS", "Nmm"),
+                              ("powers", "POWERS", "W")):
+        assert point[f"{group[:-1]}_UNITS"]["value"] == [unit]
+        listed = list(point[group]["value"])
+        for name, values in pig.kinds()[kind].items():
+            assert labels.count(name) == 1 and name in listed
+            stored = xyz[:, labels.index(name), :].T
+            np.testing.assert_allclose(stored, values, rtol=1e-6, atol=1e-3)
+    assert len(pig.angles) == 10 and len(pig.moments) == 6 and len(pig.powers) == 6
+    theirs, _ = vicon(WALK)
+    np.testing.assert_array_equal(xyz[:, labels.index("LASI"), :].T, theirs["LASI"])
+    assert back["header"]["points"]["first_frame"] == original["header"]["points"]["first_frame"]
+    np.testing.assert_array_equal(np.asarray(back["parameters"]["EVENT"]["TIMES"]["value"]),
+                                  np.asarray(original["parameters"]["EVENT"]["TIMES"]["value"]))
+
+
+def storage(path: Path) -> tuple[list[str], np.ndarray]:
+    lines = path.read_text(encoding="utf-8").splitlines()
+    end = lines.index("endheader")
+    rows = np.array([[float(v) for v in line.split("\t")] for line in lines[end + 2:]])
+    return lines[end + 1].split("\t"), rows
+
+
+def test_opensim_mot_on_the_trials_clock(solved, tmp_path):
+    """OpenSim's names, the time column from the trial's first frame ((286 − 1) / 100 s, its
+    TRIAL:ACTUAL_START_FIELD), Plug-in Gait's angles under OpenSim's signs: this child walks
+    with the pelvis tilted forward (PiG's tilt +), which OpenSim counts negative."""
+    personal, run = solved
+    target = tmp_path / "walk.mot"
+    out = run_cli("export", personal.parent / "walk.h5", "--format", "mot", "--convention",
+                  "opensim", "-o", target)
+    assert out.exit_code == 0, out.stderr
+    labels, rows = storage(target)
+    start = ezc3d.c3d(str(WALK))["parameters"]["TRIAL"]["ACTUAL_START_FIELD"]["value"][0]
+    np.testing.assert_allclose(rows[:, 0], (start - 1) / 100 + np.arange(len(rows)) / 100)
+    column = {name: rows[:, k] for k, name in enumerate(labels)}
+    a = run.plugin_gait.angles
+    np.testing.assert_allclose(column["hip_flexion_r"], a["RHipAngles"][:, 0], atol=1e-8)
+    np.testing.assert_allclose(column["knee_angle_l"], a["LKneeAngles"][:, 0], atol=1e-8)
+    np.testing.assert_allclose(column["ankle_angle_r"], a["RAnkleAngles"][:, 0], atol=1e-8)
+    assert column["pelvis_tilt"].mean() < -10 < 10 < a["LPelvisAngles"][:, 0].mean()
+
+
+def test_opensim_rebuilds_the_solved_pelvis_and_thighs_from_the_mot(solved, tmp_path):
+    """An OpenSim model with the pelvis's and hips' custom joints as OpenSim's gait models
+    define them (pelvis: rotations about Z, X, Y of ground, then the translations; hips: Z, X,
+    Y on the right, Z, −X, −Y on the left), driven by the .mot, puts the pelvis and both thighs
+    where the solve did (their axes in OpenSim's ground: X progression, Y up, Z right)."""
+    osim = pytest.importorskip("opensim")
+    personal, run = solved
+    target = tmp_path / "walk.mot"
+    run_cli("export", personal.parent / "walk.h5", "--format", "mot", "--convention",
+            "opensim", "-o", target)
+    labels, rows = storage(target)
+    model = osim.Model()
+
+    def body(name: str, parent, coordinates: list[str], axes: list[tuple]) -> osim.Body:
+        b = osim.Body(name, 1.0, osim.Vec3(0), osim.Inertia(0.1, 0.1, 0.1))
+        transform = osim.SpatialTransform()
+        slots = (transform.upd_rotation1, transform.upd_rotation2, transform.upd_rotation3,
+                 transform.upd_translation1, transform.upd_translation2,
+                 transform.upd_translation3)
+        for k, slot in enumerate(slots):
+            axis = slot()
+            if k < len(coordinates):
+                axis.setCoordinateNames(osim.ArrayStr(coordinates[k], 1))
+                axis.set_axis(osim.Vec3(*axes[k]))
+                axis.set_function(osim.LinearFunction())
+            else:  # an unused translation
+                axis.set_axis(osim.Vec3(*np.eye(3)[k - 3]))
+                axis.set_function(osim.Constant(0))
+        zero = osim.Vec3(0)
+        joint = osim.CustomJoint(f"{name}_joint", parent, zero, zero, b, zero, zero, transform)
+        model.addBody(b)
+        model.addJoint(joint)
+        return b
+
+    pelvis = body("pelvis", model.getGround(), ["pelvis_tilt", "pelvis_list",
+                                                "pelvis_rotation", "pelvis_tx", "pelvis_ty",
+                                                "pelvis_tz"],
+                  [(0, 0, 1), (1, 0, 0), (0, 1, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1)])
+    thighs = {s: body(f"femur_{s}", pelvis, [f"hip_flexion_{s}", f"hip_adduction_{s}",
+                                             f"hip_rotation_{s}"],
+                      [(0, 0, 1), (sign, 0, 0), (0, sign, 0)])
+              for s, sign in (("r", 1), ("l", -1))}
+    state = model.initSystem()
+    x, left, up = run.plugin_gait.progression.T
+    ground = np.stack([x, up, -left])  # rows: OpenSim's X, Y, Z in the laboratory
+    bodies = {"pelvis": pelvis, "thigh_r": thighs["r"], "thigh_l": thighs["l"]}
+    q = run.q
+    for frame in range(0, len(rows), 20):
+        for k, name in enumerate(labels[1:], start=1):
+            if not name.startswith(("pelvis", "hip")):
+                continue  # the knees and ankles have no bodies in this model
+            value = rows[frame, k]
+            model.getCoordinateSet().get(name).setValue(
+                state, value if name in ("pelvis_tx", "pelvis_ty", "pelvis_tz")
+                else np.radians(value), False)
+        model.realizePosition(state)
+        for name, b in bodies.items():
+            R = b.getTransformInGround(state).R()
+            got = np.array([[R.get(i, j) for j in range(3)] for i in range(3)])
+            solved_axes = np.column_stack([q[f"{name}.{e}.{c}"][frame] for e in "uvw"
+                                           for c in "xyz"]).reshape(3, 3).T
+            np.testing.assert_allclose(got, ground @ solved_axes, atol=1e-6, err_msg=name)

@@ -19,7 +19,7 @@ distal's long axis), and then, per output (X, Y, Z), with the signs Plug-in Gait
 The progression frame is the laboratory's horizontal axis (±x or ±y) the pelvis travels along
 over the trial, with the laboratory's up as z; a trial without travel (a static) takes the axis
 nearest the pelvis's mean anterior axis. Angles are continuous over the frames (no wrap at
-±180°, as Vicon writes them), starting within ±180°.
+±180°, as Vicon writes them), within ±180° at the first frame to be trusted.
 
 The model bodies' frames are the segments' in this project's order (u anterior, v superior, w
 to the subject's right): Plug-in Gait's axes are x = u, y = −w, z = v (foot: x = v, y = −w,
@@ -83,22 +83,26 @@ def progression_frame(pelvis_origin: np.ndarray, pelvis_anterior: np.ndarray,
     return np.stack([x, np.cross(up, x), up], axis=1)
 
 
-def _continuous(degrees: np.ndarray) -> np.ndarray:
-    """Each column unwrapped over the frames (gaps kept), its first value within ±180°."""
+def _continuous(degrees: np.ndarray, anchor: int) -> np.ndarray:
+    """Each column unwrapped over the frames (gaps kept), shifted by whole turns so that its
+    value at frame ``anchor`` lies within ±180°."""
     out = np.array(degrees, dtype=float)
     for j in range(out.shape[1]):
         ok = np.flatnonzero(np.isfinite(out[:, j]))
         if ok.size:
             out[ok, j] = np.degrees(np.unwrap(np.radians(out[ok, j])))
+            if np.isfinite(out[anchor, j]):
+                out[:, j] -= 360.0 * np.round(out[anchor, j] / 360.0)
     return out
 
 
 def pig_angles(frames: dict[str, np.ndarray], torsion: dict[str, float],
-               progression: np.ndarray) -> dict[str, np.ndarray]:
+               progression: np.ndarray, anchor: int = 0) -> dict[str, np.ndarray]:
     """Plug-in Gait's angles (name → frames × 3, deg) from the bodies' axes ``frames`` (body
     name → frames × 3 × 3, columns u, v, w: pelvis, thigh_s, shank_s, foot_s for s = l, r; the
     shank is the proximal tibia), the tibial torsion per side (rad) and the progression frame
-    (3 × 3, :func:`progression_frame`)."""
+    (3 × 3, :func:`progression_frame`); continuous over the frames, within ±180° at frame
+    ``anchor`` (the first frame to be trusted)."""
     n = len(frames["pelvis"])
     lab = np.broadcast_to(progression, (n, 3, 3))
     pelvis = pig_axes(frames["pelvis"])
@@ -122,4 +126,4 @@ def pig_angles(frames: dict[str, np.ndarray], torsion: dict[str, float],
             [-deg(a[:, 0]) - 90.0, sign * deg(a[:, 2]), sign * deg(a[:, 1])])
         out[f"{prefix}FootProgressAngles"] = np.column_stack(
             [deg(f[:, 0]), -sign * deg(f[:, 2]), sign * deg(f[:, 1])])
-    return {name: _continuous(out[name]) for name in output_names()}
+    return {name: _continuous(out[name], anchor) for name in output_names()}

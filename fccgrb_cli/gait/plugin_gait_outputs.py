@@ -2,7 +2,8 @@
 (``calibration.method: plugin-gait``): the angles (gait/plugin_gait.py) from the solved segment
 frames, and with the dynamics the joint moments and powers (gait/plugin_gait_kinetics.py) from
 the classical model's motion and the force plates. Each output is frames × 3 under Plug-in
-Gait's name; frames the quality checks do not trust are NaN.
+Gait's name; frames the quality checks do not trust keep their values (the run's ``trusted``
+says which; exports mark them), frames not solved are NaN.
 """
 
 from __future__ import annotations
@@ -64,21 +65,20 @@ def plugin_gait_results(model: Model, q: np.ndarray, trusted: np.ndarray,
     x = _body_coordinates(model, q)
     up = -np.asarray(model.gravity) / np.linalg.norm(model.gravity)
     frames = {name: _axes(value) for name, value in x.items()}
-    for value in frames.values():
-        value[~trusted] = np.nan
     pelvis = np.where(trusted[:, None], x["pelvis"][:, :3], np.nan)
-    lab = progression_frame(pelvis, frames["pelvis"][:, :, 0], up)
+    lab = progression_frame(pelvis, frames["pelvis"][trusted, :, 0], up)
     torsion = {"l": model.measurements.tibial_torsion.left or 0.0,
                "r": model.measurements.tibial_torsion.right or 0.0}
-    angles = pig_angles(frames, torsion, lab)
+    anchor = int(np.argmax(trusted)) if trusted.any() else 0
+    angles = pig_angles(frames, torsion, lab, anchor)
     moments: dict[str, np.ndarray] = {}
     powers: dict[str, np.ndarray] = {}
     if dynamics is not None and model.subject_mass is not None:
-        moments, powers = _kinetics(model, dynamics, trusted)
+        moments, powers = _kinetics(model, dynamics)
     return PluginGaitResults(angles, moments, powers, lab)
 
 
-def _kinetics(model: Model, dynamics: Dynamics, trusted: np.ndarray
+def _kinetics(model: Model, dynamics: Dynamics
               ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     kin = dynamics.kinematics
     x, xd, xdd = (_body_coordinates(model, np.asarray(values))
@@ -101,8 +101,6 @@ def _kinetics(model: Model, dynamics: Dynamics, trusted: np.ndarray
                  if load.body == f"foot_{s}"]
         leg = leg_kinetics(chain, centres, s, loads, (gravity, model.subject_mass))
         for joint in ("Hip", "Knee", "Ankle"):
-            moments[f"{prefix}{joint}Moment"] = np.where(trusted[:, None], leg.moments[joint],
-                                                         np.nan)
-            powers[f"{prefix}{joint}Power"] = np.where(trusted[:, None], leg.powers[joint],
-                                                       np.nan)
+            moments[f"{prefix}{joint}Moment"] = leg.moments[joint]
+            powers[f"{prefix}{joint}Power"] = leg.powers[joint]
     return moments, powers

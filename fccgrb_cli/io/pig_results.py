@@ -1,6 +1,6 @@
 """A run's Plug-in Gait outputs in the results file, under ``/runs/<name>/plugin_gait/``:
 ``angles``, ``moments``, ``powers`` (frames × outputs × 3; attributes ``names`` — Plug-in Gait's
-``LHipAngles`` ... — and ``units``: deg, N.mm/kg, W/kg; NaN in untrusted frames), and the
+``LHipAngles`` ... — and ``units``: deg, N.mm/kg, W/kg; NaN in frames not solved), and the
 attribute ``progression`` (the progression frame's axes, 3 × 3, columns x, y, z)."""
 
 from __future__ import annotations

@@ -15,7 +15,9 @@ Contract (SI units: m, rad, s):
                        ``filter_cutoff_hz`` (the angles' low-pass, NaN when unfiltered: the
                        AD baseline's drivers, and the angles converted for the dynamics),
                        ``warnings`` (every warning the run printed: frames flagged or not
-                       converged and why, a truncated trial accepted, …; empty when none)
+                       converged and why, a truncated trial accepted, …; empty when none),
+                       ``start_time_s`` (the first frame's time on the trial's clock; the
+                       datasets' times count from it)
       q, qd, qdd                 frames × nq
       theta, theta_d, theta_dd   frames × angles; attributes ``names`` and ``units`` (per column:
                                  rad, or m for a distance coordinate; per s, per s²)
@@ -186,7 +188,7 @@ def write_run(path: str | Path, run: Run, command: str, cell: dict | None = None
             g.attrs.create("notes", list(run.notes), dtype=text)
             g.attrs.update({"options": run.options.to_json(), "model": run.model_text,
                             "trial": run.trial_path, "rate": run.rate,
-                            "labels": list(run.labels)})
+                            "labels": list(run.labels), "start_time_s": run.start_time})
             put(g, "time", r.time)
             put(g, "reference", run.reference)
             if run.truth_theta is not None:

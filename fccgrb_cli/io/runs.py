@@ -69,7 +69,8 @@ def _read_run(name: str, g) -> Run:
         warnings=warnings, notes=_strings(a["notes"]),
         clinical=_read_clinical(g["clinical"]) if "clinical" in g else None,
         gait=read_gait(g["gait"]) if "gait" in g else None,
-        plugin_gait=read_plugin_gait(g["plugin_gait"]) if "plugin_gait" in g else None)
+        plugin_gait=read_plugin_gait(g["plugin_gait"]) if "plugin_gait" in g else None,
+        start_time=float(a.get("start_time_s", 0.0)))
 
 
 def _read_dynamics(g, names: tuple[str, ...], time: np.ndarray) -> Dynamics:
