@@ -329,14 +329,16 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
     from fccgrb_cli.anatomy.calibrate import calibrate as personalize
     from fccgrb_cli.io.atomic import atomic_path
     from fccgrb_cli.io.trial import read_trial
+    from fccgrb_cli.io.virtual import resolved
     from fccgrb_cli.model import parse_model
     from fccgrb_cli.options import from_cli
 
     template = load_model(model)
-    labels = dict(from_cli({"mapping": mapping}).mapping)
     data = read_trial(trial, accept_truncated)
     for message in data.warnings:
         click.echo(f"fccgrb: warning: {message}", err=True)
+    data, labels = resolved(template, data, dict(from_cli({"mapping": mapping}).mapping),
+                            {*template.marker_labels, *template.landmarks.values()})
     if template.calibration_method == "plugin-gait":
         _calibrate_plugin_gait(template, data, output, (frames, mass, foot_flat),
                                (knee_width, ankle_width, marker_diameter), subject_files,
@@ -388,21 +390,13 @@ def _calibrate_plugin_gait(template, data, output: str, choices: tuple,
     wins), the model written with what was used."""
     from fccgrb_cli.anatomy.pig_calibration import Options, calibrate_plugin_gait
     from fccgrb_cli.io.atomic import atomic_path
-    from fccgrb_cli.io.processing import processing_measurements
-    from fccgrb_cli.io.subject_files import read_measurements
+    from fccgrb_cli.io.subject_files import gathered
     from fccgrb_cli.model import parse_model
-    from fccgrb_cli.model.subject import from_flags
 
     frames, mass, foot_flat = choices
-    measured = template.measurements
-    if data.path.lower().endswith(".c3d"):
-        measured = measured.merged_over(processing_measurements(data.path))
-    for path in subject_files:
-        measured = read_measurements(path).merged_over(measured)
     typed = dict(zip(("knee_width", "ankle_width", "marker_diameter"), widths, strict=True))
     typed["body_mass"] = None if mass is None else f"{mass:.17g}"
-    if any(v is not None for v in typed.values()):
-        measured = from_flags(typed).merged_over(measured)
+    measured = gathered(template.measurements, data.path, subject_files, typed)
     result = calibrate_plugin_gait(template, data, measured,
                                    Options(_frame_range(frames), foot_flat), labels)
     personal = parse_model(result.text, output)

@@ -22,6 +22,7 @@ from fccgrb_cli.io.labels import match_labels, vector_targets
 from fccgrb_cli.io.plate_loads import plate_loads
 from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.io.truth import Truth, read_truth, truth_path
+from fccgrb_cli.io.virtual import resolved
 from fccgrb_cli.model import Model
 from fccgrb_cli.options import SolveOptions, prepared
 from fccgrb_cli.perturb import perturb
@@ -50,7 +51,8 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
     a long trial's memory stays at the markers, q and the dynamics stage's working arrays."""
     options = options or SolveOptions()
     model = prepared(model, options)
-    labels = match_labels(model, trial, dict(options.mapping))
+    trial, mapping = resolved(model, trial, dict(options.mapping), set(model.marker_labels))
+    labels = match_labels(model, trial, mapping)
     unknown = sorted(set(options.perturb_markers) - set(model.marker_labels))
     if unknown:
         raise InputError(f"--perturb-markers: expected marker names of the model "

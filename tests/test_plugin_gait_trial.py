@@ -231,3 +231,34 @@ def test_opensim_rebuilds_the_solved_pelvis_and_thighs_from_the_mot(solved, tmp_
             solved_axes = np.column_stack([q[f"{name}.{e}.{c}"][frame] for e in "uvw"
                                            for c in "xyz"]).reshape(3, 3).T
             np.testing.assert_allclose(got, ground @ solved_axes, atol=1e-6, err_msg=name)
+
+
+def test_calibration_sources_in_order_and_missing_measurements(tmp_path):
+    """A .vsk over the static's PROCESSING group, typed widths over both; without any source
+    (a TRC has no PROCESSING group) one error lists the Vicon keys missing."""
+    from cli_helpers import one_error_line
+
+    from fccgrb_cli.io.trial import read_trial, write_trial
+
+    vsk = tmp_path / "child.vsk"
+    vsk.write_text('<KinematicModel><Parameters>'
+                   '<StaticParameter NAME="LeftKneeWidth" VALUE="90"/>'
+                   '<StaticParameter NAME="RightKneeWidth" VALUE="92"/>'
+                   '<StaticParameter NAME="LeftAnkleWidth" VALUE="63"/>'
+                   '</Parameters></KinematicModel>', encoding="utf-8")
+    personal = tmp_path / "p.yaml"
+    out = run_cli("calibrate", TEMPLATE, STATIC, "--subject", vsk, "--ankle-width", "60,58",
+                  "-o", personal)
+    assert out.exit_code == 0, out.stderr
+    subject = yaml.safe_load(personal.read_text())["subject"]
+    assert subject["knee_width"] == pytest.approx({"left": 0.090, "right": 0.092})
+    assert subject["ankle_width"] == pytest.approx({"left": 0.060, "right": 0.058})
+    assert subject["leg_length"]["left"] == pytest.approx(0.830)  # still PROCESSING's
+    assert "child.vsk" in subject["source"] and "the command line" in subject["source"]
+    static = read_trial(STATIC)
+    trc = tmp_path / "static.trc"
+    write_trial(trc, list(static.labels), static.markers, static.rate)
+    one_error_line(run_cli("calibrate", TEMPLATE, trc, "-o", tmp_path / "q.yaml"),
+                   "expected the subject measurements LLegLength, RLegLength, LKneeWidth")
+    one_error_line(run_cli("calibrate", TEMPLATE, STATIC, "--subject", tmp_path / "s.txt",
+                           "-o", tmp_path / "q.yaml"), "expected a subject file ending in")

@@ -14,7 +14,7 @@ import yaml
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.processing import processing_measurements
 from fccgrb_cli.io.vsk import vsk_measurements
-from fccgrb_cli.model.subject import SubjectMeasurements, from_yaml, yaml_keys
+from fccgrb_cli.model.subject import SubjectMeasurements, from_flags, from_yaml, yaml_keys
 
 ENDINGS = (".vsk", ".c3d", ".yaml", ".yml")
 
@@ -56,3 +56,19 @@ def read_measurements(path: str | Path) -> SubjectMeasurements:
 
     found = from_yaml(spec, math.pi / 180.0 if angle == "deg" else 1.0, fail)
     return replace(found, source=f"{path} subject")
+
+
+def gathered(template: SubjectMeasurements, trial: str, files: tuple[str, ...],
+             typed: dict[str, str | None]) -> SubjectMeasurements:
+    """A Plug-in Gait calibration's measurements, each source over the ones before it: the
+    static ``trial``'s PROCESSING group (a C3D), the template's subject section, the
+    ``files`` (:func:`read_measurements`) in order, the ``typed`` values (field → text in mm /
+    kg, ``left,right`` for a side each: ``model.subject.from_flags``)."""
+    measured = template
+    if trial.lower().endswith(".c3d"):
+        measured = measured.merged_over(processing_measurements(trial))
+    for path in files:
+        measured = read_measurements(path).merged_over(measured)
+    if any(v is not None for v in typed.values()):
+        measured = from_flags(typed).merged_over(measured)
+    return measured

@@ -266,6 +266,7 @@ class Model:
     landmarks: FrozenMap = field(default_factory=FrozenMap)
     calibration_method: str | None = None
     measurements: SubjectMeasurements = field(default_factory=SubjectMeasurements)
+    virtual_markers: FrozenMap = field(default_factory=FrozenMap)
     source: str = "<model>"
     text: str = ""
 

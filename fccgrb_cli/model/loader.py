@@ -38,13 +38,14 @@ from fccgrb_cli.model.elements import (
 )
 from fccgrb_cli.model.motion import BaseMotion, Motion
 from fccgrb_cli.model.subject import SubjectMeasurements, from_yaml, yaml_keys
+from fccgrb_cli.model.virtual import canonical
 
 UNIT_TOL = 1e-6
 CALIBRATION_METHODS = ("plugin-gait",)  # besides the landmark-chosen ones (anatomy/calibrate)
 BODY_AXES = {"u": (1.0, 0.0, 0.0), "v": (0.0, 1.0, 0.0), "w": (0.0, 0.0, 1.0)}
 GROUND_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 TOP_KEYS = {"name", "units", "gravity", "form", "ground", "bodies", "joints", "angles",
-            "distances", "tracking", "loads", "subject", "calibration"}
+            "distances", "tracking", "loads", "subject", "calibration", "virtual_markers"}
 
 
 class _UniqueKeyLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):  # type: ignore[misc]
@@ -556,6 +557,14 @@ def _subject(r: _Reader, doc: dict, angle_scale: float) -> SubjectMeasurements:
     return from_yaml(spec, angle_scale, r.fail)
 
 
+def _virtual_markers(r: _Reader, doc: dict) -> FrozenMap:
+    """``virtual_markers: {NAME: mid(A, B)}``: model marker names made from trial labels."""
+    spec = r.mapping(doc.get("virtual_markers") or {}, "virtual_markers")
+    return _frozen({name: canonical(r.string(text, f"virtual_markers.{name}"),
+                                    f"{r.source}: virtual_markers.{name}")
+                    for name, text in spec.items()})
+
+
 def _calibration(r: _Reader, doc: dict) -> tuple[FrozenMap, str | None]:
     spec = r.mapping(doc.get("calibration") or {}, "calibration",
                      allowed={"landmarks", "method"})
@@ -613,6 +622,7 @@ def parse_model(text: str, source: str = "<model>") -> Model:
         landmarks=landmarks,
         calibration_method=method,
         measurements=subject,
+        virtual_markers=_virtual_markers(r, doc),
         source=source,
         text=text,
     )
