@@ -557,6 +557,20 @@ def bench_startup(ws: Workspace) -> list[Artifact]:
     return _bench_console(ws, "bench-startup", "startup.py")
 
 
+def plugin_gait(ws: Workspace) -> list[Artifact]:
+    """The Plug-in Gait comparison's tables, as ``benchmarks/plugin_gait.py`` prints them
+    (markdown), its captions as paragraphs."""
+    if not (SHARED / "data" / "c3d" / "plugin_gait" / "HC030A05.c3d").exists():
+        raise SystemExit(f"plugin-gait: needs {SHARED}/data/c3d/plugin_gait")
+    out = ws.run("python benchmarks/plugin_gait.py --rigid-knees", cwd=ROOT)
+    lines = []
+    for line in out.splitlines():
+        if line and not line.startswith("|") and lines and lines[-1].startswith("|"):
+            lines.append("")
+        lines.append(line)
+    return [ReadmeBlock("plugin-gait", "\n".join(lines).strip())]
+
+
 @dataclass(frozen=True)
 class Block:
     name: str
@@ -581,6 +595,7 @@ BLOCKS = {b.name: b for b in (
     Block("bench-startup", "benchmarks", bench_startup, "README: whole commands' wall time"),
     Block("bench-batch", "benchmarks", bench_batch, "README: a 50-trial study"),
     Block("study", "study", study, "README and docs/report_subject.png: a study, its report"),
+    Block("plugin-gait", "tables", plugin_gait, "README: Plug-in Gait against Vicon's angles"),
     Block("figures", "figures", figures, "docs/*.png of the Figure 8 case and their commands"),
     Block("figure8-seeds", "figures", figure8_seeds, "README: P6's distance over seeds"),
 )}

@@ -110,7 +110,7 @@ def resolve(measured: SubjectMeasurements, lm: dict[str, np.ndarray]
     return replace(measured, **values), tuple(notes)
 
 
-def _geometry(m: SubjectMeasurements, offsets: dict[str, tuple[float, float]] | None = None
+def side_geometry(m: SubjectMeasurements, offsets: dict[str, tuple[float, float]] | None = None
               ) -> dict[str, pg.SideGeometry]:
     leg = 0.5 * (m.leg_length.left + m.leg_length.right)
     out = {}
@@ -179,7 +179,7 @@ def calibrate_plugin_gait(model: Model, trial: Trial, measured: SubjectMeasureme
         markers[f"thigh_{s}"] = (lm[f"{side}_thigh_wand"], lm[f"{side}_lateral_epicondyle"])
         markers[f"shank_{s}"] = (lm[f"{side}_shank_wand"], lm[f"{side}_lateral_malleolus"])
         markers[f"toe_{s}"] = lm[f"{side}_toe"]
-    uncorrected = pg.segments(markers, _geometry(m))
+    uncorrected = pg.segments(markers, side_geometry(m))
     up = -np.asarray(model.gravity) / np.linalg.norm(model.gravity)
     offsets = {s: pg.foot_offsets(uncorrected[f"foot_{s}"], lm[f"{side}_heel"],
                                   lm[f"{side}_toe"], up, options.foot_flat,
@@ -187,8 +187,8 @@ def calibrate_plugin_gait(model: Model, trial: Trial, measured: SubjectMeasureme
                for s, side in SIDES.items()}
     m = replace(m, static_plantar_flexion=Sided(offsets["l"][0], offsets["r"][0]),
                 static_rotation_offset=Sided(offsets["l"][1], -offsets["r"][1]))
-    seg = pg.segments(markers, _geometry(m, offsets))
-    geometry = _geometry(m)
+    seg = pg.segments(markers, side_geometry(m, offsets))
+    geometry = side_geometry(m)
     doc = yaml.safe_load(model.text)
     points: dict[str, dict] = {b: {} for b in BODIES}
     vectors: dict[str, dict] = {b: {} for b in BODIES}
