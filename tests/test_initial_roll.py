@@ -49,3 +49,21 @@ def test_best_roll_takes_the_nearest_perpendicular_roll(seed):
     roots = [brentq(f, grid[i], grid[i + 1], xtol=1e-14) for i in crossings]
     expected = min(roots, key=abs)
     assert np.allclose(best_roll(R, k, [(p, s)]), rodrigues(k, expected) @ R, atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_reference_picks_the_roll(seed):
+    """With a reference rotation (the model pose as seen from the parent): the perpendicular
+    roll nearest it, even the farther one from φ = 0; without pairs, the reference's own roll
+    about the axis."""
+    rng = np.random.default_rng(10 + seed)
+    k = unit(rng.normal(size=3))
+    R = rodrigues(unit(rng.normal(size=3)), rng.uniform(0, 3))
+    turn = rng.uniform(-3, 3)
+    assert np.allclose(best_roll(R, k, [], rodrigues(k, turn) @ R), rodrigues(k, turn) @ R,
+                       atol=1e-12)
+    p = unit(np.cross(k, rng.normal(size=3)))  # p ⟂ k: the two rolls are half a turn apart
+    s = R.T @ unit(np.cross(k, p))             # ⟂ p at φ = 0 and at φ = π
+    far = best_roll(R, k, [(p, s)], rodrigues(k, np.pi + 0.3) @ R)
+    assert np.allclose(far, rodrigues(k, np.pi) @ R, atol=1e-9)
+    assert np.allclose(best_roll(R, k, [(p, s)]), R, atol=1e-9)
