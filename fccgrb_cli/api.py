@@ -84,7 +84,7 @@ def _as_mapping(options: SolveOptions) -> dict[str, Any]:
 def calibrate(template: Model, trial: Trial, *, mass: float | None = None,
               frames: tuple[int, int] | None = None, knee_width: float | None = None,
               ankle_width: float | None = None, marker_diameter: float | None = None,
-              mapping: dict[str, str] | None = None, foot_flat: bool = True) -> Model:
+              mapping: dict[str, str] | None = None) -> Model:
     """A lower-limb ``template`` personalized from a static trial or a stretch of a walking
     trial (frame indices [A, B), default all), as ``fccgrb calibrate`` does: segment frames,
     joint centres, marker positions and, with the subject's ``mass`` (kg), de Leva inertia.
@@ -93,7 +93,8 @@ def calibrate(template: Model, trial: Trial, *, mass: float | None = None,
     the measured ones); ``mapping``: the template's label → the trial's (a virtual marker
     ``mid(A,B)`` allowed). A Plug-in Gait template (``configs/models/plugin_gait.yaml``) takes
     the subject's measurements from the trial's PROCESSING group and the template's subject
-    section, the keywords (mm, kg) over both, and Plug-in Gait's ``foot_flat`` option."""
+    section, the keywords (mm, kg) over both, with Plug-in Gait's foot-flat option
+    (``anatomy.pig_calibration.calibrate_plugin_gait`` takes the other choices)."""
     from fccgrb_cli.anatomy.calibrate import Measurements
     from fccgrb_cli.anatomy.calibrate import calibrate as personalize
     from fccgrb_cli.io.virtual import resolved
@@ -110,8 +111,7 @@ def calibrate(template: Model, trial: Trial, *, mass: float | None = None,
                  "marker_diameter": marker_diameter, "body_mass": mass}
         measured = gathered(template.measurements, trial.path, (), {
             k: None if v is None else f"{v:.17g}" for k, v in typed.items()})
-        result = calibrate_plugin_gait(template, trial, measured, Options(frames, foot_flat),
-                                       mapping)
+        result = calibrate_plugin_gait(template, trial, measured, Options(frames), mapping)
         return parse_model(result.text, source)
     widths = (knee_width, ankle_width, marker_diameter)
     measured = None if all(w is None for w in widths) else Measurements.from_mm(*widths)

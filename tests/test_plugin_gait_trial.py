@@ -18,7 +18,7 @@ import pytest
 import yaml
 from cli_helpers import run_cli
 
-from fccgrb_cli.io.results import read_runs
+from fccgrb_cli.io.runs import read_runs
 
 ROOT = Path(__file__).resolve().parents[1]
 TEMPLATE = ROOT / "configs" / "models" / "plugin_gait.yaml"
