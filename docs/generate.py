@@ -561,6 +561,8 @@ def bench_startup(ws: Workspace) -> list[Artifact]:
 def clean_margins(ws: Workspace) -> list[Artifact]:
     _need_gait_trial()
     return _bench_console(ws, "clean-margins", "clean_margins.py")
+
+
 def bench_smoothing(ws: Workspace) -> list[Artifact]:
     """The smoother's table, its order, its calibration over 100 seeds, its cost on 10,000
     frames, and the Qualisys figure (docs/smoothing_qualisys.png)."""
@@ -573,6 +575,20 @@ def bench_smoothing(ws: Workspace) -> list[Artifact]:
     text = blocks[0].text.replace(f"--figure {figure}", "--figure docs/smoothing_qualisys.png")
     text = text.replace(f"wrote {figure}", "wrote docs/smoothing_qualisys.png")
     return [ReadmeBlock("bench-smoothing", text), Image.made("docs/smoothing_qualisys.png", ws)]
+
+
+def plugin_gait(ws: Workspace) -> list[Artifact]:
+    """The Plug-in Gait comparison's tables, as ``benchmarks/plugin_gait.py`` prints them
+    (markdown), its captions as paragraphs."""
+    if not (SHARED / "data" / "c3d" / "plugin_gait" / "HC030A05.c3d").exists():
+        raise SystemExit(f"plugin-gait: needs {SHARED}/data/c3d/plugin_gait")
+    out = ws.run("python benchmarks/plugin_gait.py --rigid-knees", cwd=ROOT)
+    lines = []
+    for line in out.splitlines():
+        if line and not line.startswith("|") and lines and lines[-1].startswith("|"):
+            lines.append("")
+        lines.append(line)
+    return [ReadmeBlock("plugin-gait", "\n".join(lines).strip())]
 
 
 @dataclass(frozen=True)
@@ -603,6 +619,7 @@ BLOCKS = {b.name: b for b in (
     Block("study", "study", study, "README and docs/report_subject.png: a study, its report"),
     Block("bench-smoothing", "benchmarks", bench_smoothing,
           "README: the smoother's table, calibration, cost and docs/smoothing_qualisys.png"),
+    Block("plugin-gait", "tables", plugin_gait, "README: Plug-in Gait against Vicon's angles"),
     Block("figures", "figures", figures, "docs/*.png of the Figure 8 case and their commands"),
     Block("figure8-seeds", "figures", figure8_seeds, "README: P6's distance over seeds"),
 )}

@@ -19,7 +19,7 @@ from fccgrb_cli.errors import InputError
 from fccgrb_cli.inputs import refuse_inputs
 from fccgrb_cli.model import Model, load_model
 from fccgrb_cli.options import AXES, SEED_MAX, WORKERS_MAX, SolveOptions, click_options, from_cli
-from fccgrb_cli.params import Bounded
+from fccgrb_cli.params import Bounded, Widths
 from fccgrb_cli.progress import Progress
 from fccgrb_cli.system.structure import analyse, check_tracking
 
@@ -401,17 +401,23 @@ def _frame_range(text: str | None) -> tuple[int, int] | None:
 @click.option("--mass", type=Bounded(float, 0, True, 500, "kg"), default=None,
               help="Body mass in kg: scales segment inertia (de Leva 1996) and gives moments "
                    "in N·m/kg. Without it the model has no inertia (kinematics only).")
-@click.option("--knee-width", type=Bounded(float, 0, True, 500, "mm"), default=None,
-              metavar="MM",
-              help="Helen Hayes/Davis templates: the knee's width across the epicondyles, mm "
-                   "(Davis et al. 1991).  [default: 100]")
-@click.option("--ankle-width", type=Bounded(float, 0, True, 500, "mm"), default=None,
-              metavar="MM",
-              help="Helen Hayes/Davis templates: the ankle's width across the malleoli, mm.  "
-                   "[default: 70]")
-@click.option("--marker-diameter", type=Bounded(float, 0, True, 500, "mm"), default=None,
-              metavar="MM",
-              help="Helen Hayes/Davis templates: the markers' diameter, mm.  [default: 14]")
+@click.option("--knee-width", type=Widths(500, "mm"), default=None, metavar="MM[,MM]",
+              help="The knee's width across the epicondyles, mm (Davis et al. 1991); Plug-in "
+                   "Gait templates take left,right.  [Helen Hayes default: 100]")
+@click.option("--ankle-width", type=Widths(500, "mm"), default=None, metavar="MM[,MM]",
+              help="The ankle's width across the malleoli, mm; Plug-in Gait templates take "
+                   "left,right.  [Helen Hayes default: 70]")
+@click.option("--marker-diameter", type=Widths(500, "mm"), default=None, metavar="MM",
+              help="The markers' diameter, mm.  [Helen Hayes default: 14]")
+@click.option("--subject", "subject_files", multiple=True, metavar="FILE",
+              help="Plug-in Gait templates: the subject's measurements from a Vicon .vsk, a "
+                   "C3D's PROCESSING group or a YAML subject: section (repeatable; later files "
+                   "and the width options win). The static TRIAL's own PROCESSING group and "
+                   "the template's subject: section are read first.")
+@click.option("--foot-flat/--no-foot-flat", default=True, show_default=True,
+              help="Plug-in Gait templates: the static's heel-to-toe line taken level (raised "
+                   "at the heel by the sole delta) for the foot offsets, as Plug-in Gait's "
+                   "'foot flat' option does.")
 @click.option("--map", "mapping", multiple=True, metavar="NAME=LABEL|FILE",
               help="The template's label → the trial's, where a lab spells them otherwise "
                    "(repeatable NAME=LABEL, comma-separated pairs, or a YAML file of NAME: "
@@ -422,33 +428,49 @@ def _frame_range(text: str | None) -> tuple[int, int] | None:
 @ACCEPT_TRUNCATED
 @reports_input_errors
 def calibrate(model: str, trial: str, output: str, frames: str | None,
-              mass: float | None, knee_width: float | None, ankle_width: float | None,
-              marker_diameter: float | None, mapping: tuple[str, ...], vertical: str,
-              accept_truncated: bool) -> None:
+              mass: float | None, knee_width: str | None, ankle_width: str | None,
+              marker_diameter: str | None, subject_files: tuple[str, ...], foot_flat: bool,
+              mapping: tuple[str, ...], vertical: str, accept_truncated: bool) -> None:
     """Personalize MODEL (a lower-limb template such as configs/models/lower_limb.yaml or
     helen_hayes.yaml) from TRIAL's markers: ISB segment frames from the landmarks named in its
     `calibration` section, hip centres by Harrington et al. (2007), knee and ankle centres
     between the epicondyles and the malleoli or, for the Helen Hayes/Davis set, by Davis et
     al.'s (1991) chord construction from the knee and ankle widths, each marker's local
-    coordinates (mean over the frames), segment lengths and inertia. Writes a model ready for
-    `fccgrb solve`."""
+    coordinates (mean over the frames), segment lengths and inertia. A Plug-in Gait template
+    (configs/models/plugin_gait.yaml) is personalized as Plug-in Gait does (Davis hip centres,
+    chord knee and ankle centres, thigh and shank rotation offsets, tibial torsion, the static's
+    foot offsets) from the subject's measurements: the static C3D's PROCESSING group, the
+    template's subject: section, --subject files and the width options, in that order. Writes a
+    model ready for `fccgrb solve`."""
     from fccgrb_cli.anatomy.calibrate import Measurements
     from fccgrb_cli.anatomy.calibrate import calibrate as personalize
     from fccgrb_cli.io.atomic import atomic_path, check_target
     from fccgrb_cli.io.trial import read_trial
+    from fccgrb_cli.io.virtual import resolved
     from fccgrb_cli.model import parse_model
     from fccgrb_cli.options import from_cli
 
     refuse_inputs(output, [model, trial, *_map_files({"mapping": mapping})])
     check_target(output)
     template = load_model(model)
-    widths = (knee_width, ankle_width, marker_diameter)
-    measured = None if all(w is None for w in widths) else Measurements.from_mm(*widths)
-    labels = dict(from_cli({"mapping": mapping}).mapping)
-    _template_labels(template, labels)
     data = read_trial(trial, accept_truncated)
     for message in data.warnings:
         click.echo(f"fccgrb: warning: {message}", err=True)
+    data, labels = resolved(template, data, dict(from_cli({"mapping": mapping}).mapping),
+                            {*template.marker_labels, *template.landmarks.values()})
+    if template.calibration_method == "plugin-gait":
+        _calibrate_plugin_gait(template, data, output, (frames, mass, foot_flat),
+                               (knee_width, ankle_width, marker_diameter), subject_files,
+                               labels)
+        return
+    if subject_files:
+        raise InputError(f"--subject: expected only with a Plug-in Gait template "
+                         f"(calibration.method: plugin-gait); {model} has none")
+    widths = tuple(None if w is None else _single_mm(w, flag) for w, flag in (
+        (knee_width, "--knee-width"), (ankle_width, "--ankle-width"),
+        (marker_diameter, "--marker-diameter")))
+    measured = None if all(w is None for w in widths) else Measurements.from_mm(*widths)
+    _template_labels(template, labels)
     result = personalize(template, data, _frame_range(frames), mass, measured, labels,
                          vertical)
     for message in result.axes.warnings:
@@ -475,6 +497,57 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
     for warning in result.warnings:
         click.echo(f"fccgrb: warning: {output}: implausible calibration: {warning}; every "
                    "frame solved with this model is flagged", err=True)
+
+
+def _single_mm(text: str, flag: str) -> float:
+    """One length in mm (the Helen Hayes templates take one width for both sides)."""
+    try:
+        return float(text)
+    except ValueError:
+        raise InputError(f"{flag}: expected one number in mm for a Helen Hayes template (one "
+                         f"width for both sides; Plug-in Gait templates take left,right), got "
+                         f"{text!r}") from None
+
+
+def _calibrate_plugin_gait(template, data, output: str, choices: tuple,
+                           widths: tuple[str | None, ...], subject_files: tuple[str, ...],
+                           labels: dict[str, str]) -> None:
+    """`calibrate` for a Plug-in Gait template: measurements merged from every source (the
+    static's PROCESSING group, the template's subject section, --subject files, options; later
+    wins), the model written with what was used."""
+    from fccgrb_cli.anatomy.pig_calibration import Options, calibrate_plugin_gait
+    from fccgrb_cli.io.atomic import atomic_path
+    from fccgrb_cli.io.subject_files import gathered
+    from fccgrb_cli.model import parse_model
+
+    frames, mass, foot_flat = choices
+    typed = dict(zip(("knee_width", "ankle_width", "marker_diameter"), widths, strict=True))
+    typed["body_mass"] = None if mass is None else f"{mass:.17g}"
+    measured = gathered(template.measurements, data.path, subject_files, typed)
+    result = calibrate_plugin_gait(template, data, measured,
+                                   Options(_frame_range(frames), foot_flat), labels)
+    personal = parse_model(result.text, output)
+    analyse(personal)
+    with atomic_path(output) as tmp:
+        tmp.write_text(result.text, encoding="utf-8")
+    m = result.measurements
+    start, stop = result.frames
+    click.echo(f"wrote {output}: {personal.name} from frame indices {start}:{stop} of "
+               f"{data.path}")
+    click.echo(f"measurements from {m.source or 'nowhere'}")
+    for note in result.notes:
+        click.echo(f"  {note}")
+    click.echo("segment lengths (mm): " + ", ".join(
+        f"{k} {1e3 * v:.0f}" for k, v in result.lengths.items()))
+    click.echo("static foot offsets (deg): plantarflexion L/R "
+               f"{np.degrees(m.static_plantar_flexion.left):.2f} / "
+               f"{np.degrees(m.static_plantar_flexion.right):.2f}, rotation L/R "
+               f"{np.degrees(m.static_rotation_offset.left):.2f} / "
+               f"{np.degrees(m.static_rotation_offset.right):.2f}"
+               f" ({'foot flat' if foot_flat else 'foot not flat'})")
+    if m.body_mass is None:
+        click.echo("fccgrb: warning: no body mass (Bodymass or --mass): the model has no "
+                   "inertia (inverse dynamics skipped)", err=True)
 
 
 @main.command("perturb")
@@ -811,6 +884,14 @@ def plot(results: str, kind: str, marker: str | None, angle: str | None,
                    "C3D with its markers, analogs and events, the angles and moments added as "
                    "points (POINT:ANGLES, POINT:MOMENTS). Clinical curves where the model "
                    "declares them, else every joint angle (a distance in m, its force in N).")
+@click.option("--convention", default="fccgrb", show_default=True,
+              type=click.Choice(["fccgrb", "plugin-gait", "opensim"]),
+              help="plugin-gait (--format c3d, a run of the Plug-in Gait model): Plug-in "
+                   "Gait's outputs as Nexus writes them, 3-component points LHipAngles (deg), "
+                   "LKneeMoment (N·mm/kg), LAnklePower (W/kg, in Z), ..., replacing points of "
+                   "the same names; opensim (--format mot, the same runs): OpenSim's coordinate "
+                   "names and signs (pelvis_tilt, hip_flexion_r, knee_angle_r, ankle_angle_r, "
+                   "...; Rajagopal 2015, knee flexion positive).")
 @click.option("--run", "run_name", default=None, metavar="NAME",
               help="The run to export [default: the file's only run].")
 @click.option("--trial", default=None, type=click.Path(dir_okay=False),
@@ -820,11 +901,12 @@ def plot(results: str, kind: str, marker: str | None, angle: str | None,
               help="The file to write [default: RESULTS with the format's suffix, "
                    "RESULTS.<run>.<format> when the file holds several runs].")
 @reports_input_errors
-def export(results: str, fmt: str, run_name: str | None, trial: str | None,
+def export(results: str, fmt: str, convention: str, run_name: str | None, trial: str | None,
            output: str | None) -> None:
     """Export a run of a results file for OpenSim, pandas, spreadsheets, Mokka, Nexus or
-    Visual3D. Frames the quality checks do not trust keep their values and are counted (the
-    CSV's trusted column, the header's untrustedFrames, the C3D's FCCGRB:UNTRUSTED)."""
+    Visual3D, times on the trial's own clock (its first frame's time). Frames the quality
+    checks do not trust keep their values and are counted (the CSV's trusted column, the
+    header's untrustedFrames, the C3D's FCCGRB:UNTRUSTED)."""
     from fccgrb_cli.io.atomic import check_target
     from fccgrb_cli.io.export import choose_run, default_output
     from fccgrb_cli.io.export import export as write
@@ -835,7 +917,10 @@ def export(results: str, fmt: str, run_name: str | None, trial: str | None,
     target = Path(output) if output is not None else default_output(results, run, fmt, list(runs))
     refuse_inputs(target, [results, trial or run.trial_path])
     check_target(target)
-    write(run, fmt, target, trial)
+    replaced = write(run, fmt, target, trial, convention)
+    if replaced:
+        click.echo(f"fccgrb: {replaced} points of the trial with Plug-in Gait's names replaced "
+                   "by the run's", err=True)
     untrusted = int((~run.trusted).sum())
     if untrusted:
         click.echo(f"fccgrb: warning: {untrusted} of {len(run.trusted)} frames of run "

@@ -126,7 +126,8 @@ class SolveOptions:
     mapping: tuple[tuple[str, str], ...] = _option(
         (), flag="map", metavar="NAME=LABEL|FILE", sweep="map",
         help="Model marker name → trial label, where they differ (CLI: repeatable NAME=LABEL, "
-             "comma-separated pairs, or a YAML file of NAME: LABEL lines).")
+             "comma-separated pairs, or a YAML file of NAME: LABEL lines); a label may be a "
+             "virtual marker, mid(A,B) or mean(A,B,...) of trial labels.")
     # --- perturbation ----------------------------------------------------------------------
     perturb_mm: float = _option(
         0.0, flag="perturb", unit="mm", low=0.0, high=1000.0, sweep="level",
@@ -365,7 +366,7 @@ def _pairs(items: tuple[str, ...]) -> tuple[tuple[str, str], ...]:
         if item.strip().lower().endswith((".yaml", ".yml")) and "=" not in item:
             out += label_map_file(item.strip())
             continue
-        for pair in (p.strip() for p in item.split(",") if p.strip()):
+        for pair in (p.strip() for p in _outside_parentheses(item) if p.strip()):
             if pair.count("=") != 1 or not all(p.strip() for p in pair.split("=")):
                 raise InputError(f"--map: expected MODEL_NAME=FILE_LABEL or a FILE.yaml, got "
                                  f"{pair!r}")
@@ -390,6 +391,18 @@ def one_label_each(labels: Mapping[str, str], what: str) -> None:
         label, names = next(iter(sorted(shared.items())))
         raise InputError(f"--map: expected one {what} per trial label, got {' and '.join(names)} "
                          f"on the label {label}")
+
+
+def _outside_parentheses(text: str) -> list[str]:
+    """``text`` split at the commas outside parentheses (a virtual marker's own commas,
+    ``SACR=mid(LPSI,RPSI)``, stay)."""
+    parts, depth, start = [], 0, 0
+    for k, char in enumerate(text):
+        depth += {"(": 1, ")": -1}.get(char, 0)
+        if char == "," and depth == 0:
+            parts.append(text[start:k])
+            start = k + 1
+    return [*parts, text[start:]]
 
 
 def label_map_file(path: str) -> list[tuple[str, str]]:

@@ -38,3 +38,21 @@ class Bounded(click.ParamType):
 
     def get_metavar(self, param, ctx=None) -> str:
         return self.name.upper()
+
+
+class Widths(click.ParamType):
+    """One length, or a left,right pair, each a finite float inside (0, high] in ``unit``;
+    kept as the text given (the templates read one or two from it)."""
+
+    name = "widths"
+
+    def __init__(self, high: float, unit: str) -> None:
+        self.one = Bounded(float, 0.0, True, high, unit)
+
+    def convert(self, value: Any, param, ctx) -> Any:
+        parts = str(value).split(",")
+        if len(parts) > 2:
+            self.fail(f"expected one number or a left,right pair, got {value!r}", param, ctx)
+        for part in parts:
+            self.one.convert(part, param, ctx)
+        return str(value)

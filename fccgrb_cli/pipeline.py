@@ -26,11 +26,13 @@ from fccgrb_cli.dynamics.convert import Dynamics, classical_dynamics
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.filtering import frames_needed
 from fccgrb_cli.gait.analysis import analyse_gait, find_events, landmark_labels
+from fccgrb_cli.gait.plugin_gait_outputs import plugin_gait_results
 from fccgrb_cli.io.lab_axes import lab_axes
 from fccgrb_cli.io.labels import match_labels, vector_targets
 from fccgrb_cli.io.plate_loads import plate_loads
 from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.io.truth import Truth, read_truth, truth_path
+from fccgrb_cli.io.virtual import resolved
 from fccgrb_cli.model import Model
 from fccgrb_cli.options import SolveOptions, prepared
 from fccgrb_cli.perturb import perturb
@@ -65,7 +67,8 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
     options = options or SolveOptions()
     _check_length(trial, options)
     model = prepared(model, options)
-    labels = match_labels(model, trial, dict(options.mapping))
+    trial, mapping = resolved(model, trial, dict(options.mapping), set(model.marker_labels))
+    labels = match_labels(model, trial, mapping)
     unknown = sorted(set(options.perturb_markers) - set(model.marker_labels))
     if unknown:
         raise InputError(f"--perturb-markers: expected marker names of the model "
@@ -120,6 +123,8 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
             solved_dynamics = _blank_frames(solved_dynamics, outside, result.time)
         if solved_dynamics is not None:
             result = with_findings(result, dynamic_findings(model, solved_dynamics))
+        pig = plugin_gait_results(model, result.q, result.trusted, solved_dynamics) \
+            if model.calibration_method == "plugin-gait" else None
         result = store.coordinates(result)
         solved_dynamics = store.dynamics(solved_dynamics)
         clinical = clinical_results(
@@ -149,7 +154,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
             model_text=model.text, trial_path=trial.path,
             dynamics=solved_dynamics, warnings=tuple(warnings), notes=tuple(notes),
             clinical=clinical, gait=gait, moment_flags=moments, axes=axes,
-            uncertainty=uncertainty)
+            uncertainty=uncertainty, plugin_gait=pig, start_time=trial.start)
 
 
 class _Store:
@@ -183,7 +188,8 @@ class _Store:
         vectors = {label for tv in model.tracked_vectors
                    for label in (tv.from_marker, tv.to_marker) if label in trial.labels}
         labels = tuple(dict.fromkeys([*landmark_labels(model, trial).values(), *vectors]))
-        return Trial(trial.path, labels, trial.select(list(labels)), trial.rate, trial.warnings)
+        return Trial(trial.path, labels, trial.select(list(labels)), trial.rate, trial.warnings,
+                     trial.start)
 
     def rates(self, result: KinematicResult) -> KinematicResult:
         """q̇, q̈, θ̇, θ̈ stored (the dynamics stage takes q and θ only)."""

@@ -13,6 +13,7 @@ import numpy as np
 from fccgrb_cli.clinical import ClinicalResults
 from fccgrb_cli.dynamics.convert import Dynamics
 from fccgrb_cli.gait.analysis import GaitResults
+from fccgrb_cli.gait.plugin_gait_outputs import PluginGaitResults
 from fccgrb_cli.io.lab_axes import LabAxes
 from fccgrb_cli.model import Model
 from fccgrb_cli.named import NamedArray
@@ -50,6 +51,8 @@ class Run:
     moment_flags: np.ndarray | None = None
     axes: LabAxes | None = None
     uncertainty: Uncertainty | None = None
+    plugin_gait: PluginGaitResults | None = None
+    start_time: float = 0.0  # s: the first frame's time on the trial file's clock
 
     def __repr__(self) -> str:
         r = self.result

@@ -27,6 +27,7 @@ universal  e1, e2       –              (−e3_p, e2_c) = 90° + φ1, (−e1_p,
 cylindrical e1          e1             (e2_p, e3_c); d along e1_p
 prismatic  –            e1             d along e1_p (lock: e2_p ⟂ e3_c)
 parallel   e1           e1, e2, e3     (e2_p, e3_c); d along e1_p, e2_p, e3_p
+line       e1, e2, e3   e1             as spherical; d along e1_p
 ========== ============ ============== =========================================================
 
 Every angle is 90° at the neutral pose and the rotations stay within ±30°, so every angle keeps
@@ -43,10 +44,12 @@ import yaml
 from hypothesis import strategies as st
 
 JOINT_TYPES = ("spherical", "revolute", "universal", "cylindrical", "prismatic", "parallel")
+# A line joint (a spherical joint sliding along a line of its parent) is not drawn (adding a type
+# would change every drawn case); tests/test_generated.py features it.
 ROTATIONS = {"spherical": (0, 1, 2), "revolute": (0,), "universal": (0, 1),
-             "cylindrical": (0,), "prismatic": (), "parallel": (0,)}
+             "cylindrical": (0,), "prismatic": (), "parallel": (0,), "line": (0, 1, 2)}
 SLIDES = {"spherical": (), "revolute": (), "universal": (), "cylindrical": (0,),
-          "prismatic": (0,), "parallel": (0, 1, 2)}
+          "prismatic": (0,), "parallel": (0, 1, 2), "line": (0,)}
 MAX_ROTATION = np.radians(30.0)   # |φ| of any rotation, mean and amplitudes together
 MAX_FREQUENCY = 1.5               # Hz, every motion term (joint variables and base)
 MARKERS_PER_BODY = 3
@@ -303,7 +306,8 @@ def build_case(s: Structure) -> Case:
 
 def angle_pairs(jtype: str) -> list[tuple[str, str]]:
     """The (parent, child) vector names of a joint's angles (table in the module docstring)."""
-    return {"spherical": [("me3", "e2"), ("me1", "e3"), ("me2", "e1")],
+    spherical = [("me3", "e2"), ("me1", "e3"), ("me2", "e1")]
+    return {"spherical": spherical, "line": spherical,
             "universal": [("me3", "e2"), ("me1", "e3")]}.get(
         jtype, [("e2", "e3")] if ROTATIONS[jtype] else [])
 
@@ -359,7 +363,9 @@ def _spec(case: Case, ground_points: dict, ground_vectors: dict) -> dict:
         entry = {"name": j.name, "type": j.type, "bodies": [parent, case.bodies[j.child].name]}
         if j.type != "parallel":
             entry["points"] = [f"{j.name}P", f"{j.name}Q"]
-        if j.type != "spherical":
+        if j.type == "line":
+            entry["axis"] = f"{j.name}p_e1"
+        elif j.type != "spherical":
             entry["axes"] = [f"{j.name}p_e1", f"{j.name}c_e{2 if j.type == 'universal' else 1}"]
         if j.type == "prismatic":
             entry["lock"] = [f"{j.name}p_e2", f"{j.name}c_e3"]

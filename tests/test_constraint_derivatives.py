@@ -32,16 +32,17 @@ from fccgrb_cli.system import Drive, compile_system
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "models"
 
-JOINT_TYPES = ("spherical", "revolute", "universal", "cylindrical", "prismatic", "parallel")
+JOINT_TYPES = ("spherical", "revolute", "universal", "cylindrical", "prismatic", "parallel",
+               "line")
 # Scalar equations per joint (FORMULATION §2; cylindrical = 2 axis + 2 offset, prismatic + lock,
-# parallel = the 2 axis equations).
+# parallel = the 2 axis equations, line = the 2 offset equations).
 EXPECTED_ROWS = {"spherical": 3, "revolute": 5, "universal": 4, "cylindrical": 4,
-                 "prismatic": 5, "parallel": 2}
-WITH_POINTS = {"spherical", "revolute", "universal", "cylindrical", "prismatic"}
+                 "prismatic": 5, "parallel": 2, "line": 2}
+WITH_POINTS = {"spherical", "revolute", "universal", "cylindrical", "prismatic", "line"}
 WITH_AXES = {"revolute", "universal", "cylindrical", "prismatic", "parallel"}
 # Joints that leave a slide: their models add distance coordinates (body–body, ground–body with
 # the ground's point and axis, body–ground with the ground's point second).
-WITH_DISTANCES = {"cylindrical", "prismatic", "parallel"}
+WITH_DISTANCES = {"cylindrical", "prismatic", "parallel", "line"}
 DISTANCES = """\
 distances:
   - {name: d12, points: [B1.P, B2.Q], axis: B1.s}
@@ -110,6 +111,8 @@ def model_text(jtype: str, form: str) -> str:
             parts.append(f"axes: [{', '.join(axes)}]")
         if jtype == "prismatic":
             parts.append(f"lock: [{', '.join(lock)}]")
+        if jtype == "line":
+            parts.append(f"axis: {axes[0]}")
         lines.append("  - {" + ", ".join(parts) + "}")
     form1, form2 = FORMS[form]
     return MODEL_TEMPLATE.format(jtype=jtype, form1=form1, form2=form2, joints="\n".join(lines),

@@ -70,7 +70,9 @@ FEATURED = (
               (None, "parallel", "prismatic", "cylindrical", "universal", "spherical"),
               "reduced", 12),
     Structure((-1, 0, 1, 0), (None, "revolute", "spherical", "universal"), "full", 13),
+    Structure((-1, 0, 1, 0, 3), (None, "line", "universal", "line", "spherical"), "full", 14),
 )
+FEATURED_IDS = ("fixed-all-joints", "floating-branched", "floating-serial", "floating-line")
 
 # Sampling of the mixed-coordinate runs. Every motion term is at most 1.5 Hz; the three-point
 # central difference of sin(ωt) errs by (ωh)²/6 of its amplitude·ω in the first derivative and
@@ -223,8 +225,7 @@ def _omega(x: np.ndarray, xd: np.ndarray) -> np.ndarray:
     return 0.5 * np.cross(e, ed).sum(axis=0)
 
 
-@pytest.mark.parametrize("structure", FEATURED, ids=("fixed-all-joints", "floating-branched",
-                                                     "floating-serial"))
+@pytest.mark.parametrize("structure", FEATURED, ids=FEATURED_IDS)
 def test_classical_path_featured(structure: Structure) -> None:
     check_classical(structure)
 
@@ -296,8 +297,7 @@ def check_mixed(structure: Structure) -> None:
     assert rel(inv.residual_moment[:, 0], known.base_moment) < 3 * e2
 
 
-@pytest.mark.parametrize("structure", FEATURED, ids=("fixed-all-joints", "floating-branched",
-                                                     "floating-serial"))
+@pytest.mark.parametrize("structure", FEATURED, ids=FEATURED_IDS)
 def test_mixed_path_featured(structure: Structure) -> None:
     check_mixed(structure)
 
@@ -344,7 +344,7 @@ def check_methods(structure: Structure) -> None:
         check_rates(case, layout, model, result, ref, error)
 
 
-@pytest.mark.parametrize("structure", FEATURED[1:], ids=("floating-branched", "floating-serial"))
+@pytest.mark.parametrize("structure", FEATURED[1:], ids=FEATURED_IDS[1:])
 def test_every_method_featured(structure: Structure) -> None:
     check_methods(structure)
 

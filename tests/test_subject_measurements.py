@@ -125,3 +125,72 @@ def test_shared_plugin_gait_static():
     assert m.marker_diameter == pytest.approx(0.010)
     assert m.missing(("leg_length", "knee_width", "ankle_width", "marker_diameter")) == []
     assert m.missing(("sole_delta",)) == ["LSoleDelta", "RSoleDelta"]
+
+
+# --- other sources: a Vicon .vsk, a YAML subject section, the command line -------------------
+
+def write_vsk(path: Path, values: dict[str, float]) -> None:
+    rows = "\n".join(f'    <StaticParameter NAME="{k}" VALUE="{v!r}" PRIOR="0"/>'
+                     for k, v in values.items())
+    path.write_text(f'<?xml version="1.0"?>\n<KinematicModel>\n  <Parameters>\n{rows}\n'
+                    "  </Parameters>\n</KinematicModel>\n", encoding="utf-8")
+
+
+def test_vsk_spells_the_sides_left_and_right(tmp_path):
+    from fccgrb_cli.io.vsk import vsk_measurements
+
+    path = tmp_path / "child.vsk"
+    write_vsk(path, {"Bodymass": 31.5, "LeftLegLength": 702.0, "RightLegLength": 698.0,
+                     "LeftKneeWidth": 88.5, "RightTibialTorsion": -0.21, "MarkerDiameter": 14.0,
+                     "Theta": 0.5})
+    m = vsk_measurements(path)
+    assert m.body_mass == pytest.approx(31.5)
+    assert (m.leg_length.left, m.leg_length.right) == pytest.approx((0.702, 0.698))
+    assert m.knee_width.left == pytest.approx(0.0885) and m.knee_width.right is None
+    assert m.tibial_torsion.right == pytest.approx(-0.21)
+    assert set(m.present) == {"Bodymass", "LeftLegLength", "RightLegLength", "LeftKneeWidth",
+                              "RightTibialTorsion", "MarkerDiameter"}
+    write_vsk(path, {"LeftKneeWidth": "wide"})  # type: ignore[dict-item]
+    path.write_text(path.read_text().replace("'wide'", "wide"))
+    with pytest.raises(InputError, match=r"child\.vsk: StaticParameter LeftKneeWidth: expected"):
+        vsk_measurements(path)
+    path.write_text("not xml <")
+    with pytest.raises(InputError, match=r"child\.vsk: not a readable Vicon subject file"):
+        vsk_measurements(path)
+
+
+def test_yaml_subject_file_in_model_units(tmp_path):
+    from fccgrb_cli.io.subject_files import read_measurements
+
+    path = tmp_path / "subject.yaml"
+    path.write_text("subject:\n  mass: 40\n  knee_width: {left: 0.095, right: 0.097}\n"
+                    "  ankle_width: 0.06\n  thigh_rotation: {left: -6}\n", encoding="utf-8")
+    m = read_measurements(path)
+    assert m.body_mass == 40 and m.knee_width.right == pytest.approx(0.097)
+    assert (m.ankle_width.left, m.ankle_width.right) == (0.06, 0.06)
+    assert m.thigh_rotation.left == pytest.approx(np.radians(-6)) and \
+        m.thigh_rotation.right is None
+    path.write_text("subject:\n  knee_width: 102\n", encoding="utf-8")  # mm by mistake
+    with pytest.raises(InputError, match=r"subject\.yaml: subject\.knee_width: expected"):
+        read_measurements(path)
+    path.write_text("subject:\n  knee_widht: 0.1\n", encoding="utf-8")
+    with pytest.raises(InputError, match="expected only the keys"):
+        read_measurements(path)
+
+
+def test_typed_values_and_their_precedence():
+    from fccgrb_cli.model.subject import Sided, SubjectMeasurements, from_flags
+
+    typed = from_flags({"knee_width": "102,104", "ankle_width": "61", "body_mass": None})
+    assert (typed.knee_width.left, typed.knee_width.right) == pytest.approx((0.102, 0.104))
+    assert (typed.ankle_width.left, typed.ankle_width.right) == pytest.approx((0.061, 0.061))
+    base = SubjectMeasurements(body_mass=45.0, knee_width=Sided(0.1, None),
+                               leg_length=Sided(0.8, 0.81), source="base")
+    merged = typed.merged_over(base)
+    assert merged.knee_width.right == pytest.approx(0.104) and merged.body_mass == 45.0
+    assert merged.leg_length.right == 0.81 and merged.source == "the command line; base"
+    for text, message in (("10,104", "--knee-width: expected 20–250 mm"),
+                          ("1,2,3", "--knee-width: expected one or two numbers"),
+                          ("wide", "--knee-width: expected a number")):
+        with pytest.raises(InputError, match=message):
+            from_flags({"knee_width": text})

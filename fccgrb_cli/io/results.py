@@ -19,7 +19,9 @@ Contract (SI units: m, rad, s):
                        the lab's axes (``fccgrb_cli.io.lab_axes``): ``vertical`` (the axis up,
                        '+z'), ``gravity`` (m/s², what the dynamics used), ``vertical_chosen_by``
                        ('ground', 'model', 'option' or 'file'), ``vertical_why`` (the cues),
-                       ``up`` and ``walking`` (unit vectors; NaN when not walking)
+                       ``up`` and ``walking`` (unit vectors; NaN when not walking),
+                       ``start_time_s`` (the first frame's time on the trial's clock; the
+                       datasets' times count from it)
       q, qd, qdd                 frames × nq
       theta, theta_d, theta_dd   frames × angles; attributes ``names`` and ``units`` (per column:
                                  rad, or m for a distance coordinate; per s, per s²)
@@ -67,6 +69,8 @@ Contract (SI units: m, rad, s):
       clinical/moments_trusted   frames × clinical angles: the moment trusted (its frame and
                                  its own checks, as ``moment_flags``)
       clinical/stance/<body>     per frame, True while a force plate loads that body
+    with a model calibrated as Plug-in Gait, its outputs in Plug-in Gait's names and units
+    (fccgrb_cli.io.pig_results): plugin_gait/angles, moments, powers
 Arrays of 64 KiB or more are stored chunked and gzip-compressed (``fccgrb_cli.io.datasets``):
 a long trial is written and read a chunk at a time; any HDF5 reader decodes them.
 
@@ -95,6 +99,7 @@ from fccgrb_cli.io.gait_results import write_gait, write_subject
 from fccgrb_cli.io.hdf5_writer import writing
 from fccgrb_cli.io.lab_axes import LabAxes
 from fccgrb_cli.io.lock import exclusive
+from fccgrb_cli.io.pig_results import write_plugin_gait
 from fccgrb_cli.io.results_format import FORMAT_VERSION, check_run, reading, runs_group
 from fccgrb_cli.io.spill import StoredArray
 from fccgrb_cli.solvers.quality import BITS, FLAG_DTYPE, FRAME_BITS, MOMENT_BITS, bit_summary
@@ -242,7 +247,7 @@ def _write_run(h5, run: Run, command: str, cell: dict | None) -> None:
         _write_axes(g, run.axes)
     g.attrs.update({"options": run.options.to_json(), "model": run.model_text,
                     "trial": run.trial_path, "rate": run.rate,
-                    "labels": list(run.labels)})
+                    "labels": list(run.labels), "start_time_s": run.start_time})
     put(g, "time", r.time)
     put(g, "reference", run.reference)
     if run.truth_theta is not None:
@@ -272,6 +277,8 @@ def _write_run(h5, run: Run, command: str, cell: dict | None) -> None:
         _write_uncertainty(g, run)
     if run.gait is not None:
         write_gait(g, run.gait)
+    if run.plugin_gait is not None:
+        write_plugin_gait(g, run.plugin_gait)
 
 
 def _write_axes(g, axes: LabAxes) -> None:

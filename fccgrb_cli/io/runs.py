@@ -15,6 +15,7 @@ from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.datasets import open_results
 from fccgrb_cli.io.gait_results import read_gait
 from fccgrb_cli.io.lab_axes import LabAxes
+from fccgrb_cli.io.pig_results import read_plugin_gait
 from fccgrb_cli.io.results_format import check_run, reading, runs_group
 from fccgrb_cli.options import SolveOptions
 from fccgrb_cli.run import Run
@@ -74,7 +75,9 @@ def _read_run(name: str, g) -> Run:
         gait=read_gait(g["gait"]) if "gait" in g else None,
         moment_flags=g["moment_flags"][()] if "moment_flags" in g else None,
         axes=_read_axes(a),
-        uncertainty=_read_uncertainty(g["uncertainty"]) if "uncertainty" in g else None)
+        uncertainty=_read_uncertainty(g["uncertainty"]) if "uncertainty" in g else None,
+        plugin_gait=read_plugin_gait(g["plugin_gait"]) if "plugin_gait" in g else None,
+        start_time=float(a.get("start_time_s", 0.0)))
 
 
 def _read_axes(a: dict) -> LabAxes | None:

@@ -35,13 +35,16 @@ TRC_MAX = 4 << 30  # bytes: a TRC is read whole (a 10-minute trial of 55 markers
 @dataclass(frozen=True)
 class Trial:
     """Marker positions (frames × markers × 3, metres, NaN in gaps) sampled at ``rate`` Hz;
-    ``warnings`` says what the reader let through (a truncated file accepted)."""
+    ``warnings`` says what the reader let through (a truncated file accepted); ``start`` the
+    first frame's time on the file's clock (s: a C3D's first frame F counts from the capture's
+    frame 1, so (F − 1) / rate; a TRC's first Time)."""
 
     path: str
     labels: tuple[str, ...]
     markers: np.ndarray
     rate: float
     warnings: tuple[str, ...] = ()
+    start: float = 0.0
 
     @property
     def n_frames(self) -> int:
@@ -101,7 +104,7 @@ def read_c3d(path: Path, accept_truncated: bool = False) -> Trial:
         reason = str(exc).strip() or exc.__class__.__name__
         raise InputError(f"{path}: not a readable C3D file ({reason})") from None
     point = c3d["parameters"]["POINT"]
-    labels = tuple(str(label).strip() for label in point["LABELS"]["value"])
+    labels = tuple(str(label).strip() for label in point_labels(point))
     units = point.get("UNITS", {}).get("value") or ["mm"]
     scale = _unit_scale(str(units[0]), path, "POINT:UNITS")
     rate = _rate(float(point["RATE"]["value"][0]), path)
@@ -114,7 +117,18 @@ def read_c3d(path: Path, accept_truncated: bool = False) -> Trial:
                          f"{frames} ({layout.announced()})")
     labels = labels[: xyz.shape[1]]
     _finite(xyz, labels, path)
-    return Trial(str(path), labels, xyz, rate, warnings)
+    return Trial(str(path), labels, xyz, rate, warnings, (layout.first_frame - 1) / rate)
+
+
+def point_labels(point: dict) -> list[str]:
+    """Every point label of an ezc3d POINT group: LABELS, then LABELS2, LABELS3, … (a file
+    with more than 255 points continues its labels there)."""
+    labels = list(point["LABELS"]["value"])
+    k = 2
+    while f"LABELS{k}" in point:
+        labels += list(point[f"LABELS{k}"]["value"])
+        k += 1
+    return labels
 
 
 def _finite(xyz: np.ndarray, labels: tuple[str, ...], path: Path) -> None:
@@ -148,10 +162,12 @@ def _read_long_c3d(path: Path, layout: C3DLayout, frames: int,
     rate = _rate(float(params["POINT:RATE"].values[0]), path)
     xyz = read_points(path, layout, frames)
     xyz *= scale
-    labels = tuple(str(label).strip() for label in params["POINT:LABELS"].values)
+    labels = tuple(str(label).strip() for key in sorted(
+        (k for k in params if k.startswith("POINT:LABELS")), key=lambda k: (len(k), k))
+        for label in params[key].values)
     labels = labels[: xyz.shape[1]]
     _finite(xyz, labels, path)
-    return Trial(str(path), labels, xyz, rate, warnings)
+    return Trial(str(path), labels, xyz, rate, warnings, (layout.first_frame - 1) / rate)
 
 
 def read_trc(path: Path, accept_truncated: bool = False) -> Trial:
@@ -183,10 +199,17 @@ def read_trc(path: Path, accept_truncated: bool = False) -> Trial:
             and complete:
         data = data[:-1]  # the cut last row: its values may be cut too
     rows = []
+    start = None
     for number, line in enumerate(data, start=6):
         if not line.strip():
             continue
-        coords = line.rstrip("\r\n").split("\t")[2:]
+        fields = line.rstrip("\r\n").split("\t")
+        if start is None and len(fields) > 1:
+            try:
+                start = float(fields[1])
+            except ValueError:
+                start = 0.0  # no time column: the trial's clock starts at 0
+        coords = fields[2:]
         while len(coords) > 3 * n_markers and not coords[-1].strip():
             coords.pop()
         if len(coords) != 3 * n_markers:
@@ -212,7 +235,7 @@ def read_trc(path: Path, accept_truncated: bool = False) -> Trial:
     if not rows:
         raise InputError(f"{path}: expected at least one frame of data after the header")
     xyz = np.array(rows).reshape(len(rows), n_markers, 3) * scale
-    return Trial(str(path), labels, xyz, rate, warnings)
+    return Trial(str(path), labels, xyz, rate, warnings, start or 0.0)
 
 
 def _header_number(header: dict[str, str], key: str, kind: type, path: Path):

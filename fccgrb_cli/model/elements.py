@@ -9,6 +9,7 @@ from typing import Literal
 import numpy as np
 
 from fccgrb_cli.model.motion import BaseMotion, Motion
+from fccgrb_cli.model.subject import SubjectMeasurements
 
 GROUND = "ground"
 Form = Literal["full", "reduced"]
@@ -22,8 +23,10 @@ JOINT_EQUATIONS: dict[str, int] = {
     "cylindrical": 4,
     "prismatic": 5,
     "parallel": 2,
+    "line": 2,
 }
-JOINTS_WITH_POINTS = frozenset({"spherical", "revolute", "universal", "cylindrical", "prismatic"})
+JOINTS_WITH_POINTS = frozenset({"spherical", "revolute", "universal", "cylindrical", "prismatic",
+                                "line"})
 JOINTS_WITH_AXES = frozenset({"revolute", "universal", "cylindrical", "prismatic", "parallel"})
 
 
@@ -132,7 +135,9 @@ class Joint:
 
     ``points`` name the coincident point on each body; ``axes`` the joint axes (revolute,
     cylindrical, prismatic, parallel: s_i ∥ s_j) or the perpendicular arms (universal: s_i ⟂ s_j);
-    ``lock`` two vectors kept perpendicular to stop a prismatic joint's rotation.
+    ``lock`` two vectors kept perpendicular to stop a prismatic joint's rotation; ``axis`` (line
+    joints) body i's vector along which body j's point stays on the line through body i's point
+    (a spherical joint that also slides along that line: 3 rotations and a slide).
     """
 
     name: str
@@ -141,6 +146,7 @@ class Joint:
     points: tuple[str, str] | None = None
     axes: tuple[str, str] | None = None
     lock: tuple[str, str] | None = None
+    axis: str | None = None
 
 
 @dataclass(frozen=True)
@@ -273,6 +279,9 @@ class Model:
     contact_bodies: tuple[str, ...] = ()
     subject_mass: float | None = None
     landmarks: FrozenMap = field(default_factory=FrozenMap)
+    calibration_method: str | None = None
+    measurements: SubjectMeasurements = field(default_factory=SubjectMeasurements)
+    virtual_markers: FrozenMap = field(default_factory=FrozenMap)
     source: str = "<model>"
     text: str = ""
     calibrated: CalibrationRecord | None = None

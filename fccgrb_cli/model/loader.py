@@ -40,14 +40,18 @@ from fccgrb_cli.model.elements import (
 )
 from fccgrb_cli.model.motion import BaseMotion, Motion
 from fccgrb_cli.model.ranges import physiological_range
+from fccgrb_cli.model.subject import SubjectMeasurements, from_yaml, yaml_keys
+from fccgrb_cli.model.virtual import canonical
 
 UNIT_TOL = 1e-6
 LARGEST = 1e9          # the largest magnitude of any number in a model file
 FREQUENCY_MAX = 1e4    # Hz: a motion term's frequency (its acceleration ∝ frequency²)
+CALIBRATION_METHODS = ("plugin-gait",)  # besides the landmark-chosen ones (anatomy/calibrate)
 BODY_AXES = {"u": (1.0, 0.0, 0.0), "v": (0.0, 1.0, 0.0), "w": (0.0, 0.0, 1.0)}
 GROUND_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 TOP_KEYS = {"name", "units", "gravity", "form", "ground", "bodies", "joints", "angles",
-            "distances", "tracking", "loads", "subject", "calibration", "calibrated"}
+            "distances", "tracking", "loads", "subject", "calibration", "calibrated",
+            "virtual_markers"}
 
 
 class _UniqueKeyLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):  # type: ignore[misc]
@@ -309,7 +313,7 @@ def _joints(r: _Reader, doc: dict, names: _Names) -> tuple[Joint, ...]:
     for k, spec in enumerate(r.items(doc.get("joints"), "joints")):
         path = f"joints[{k}]"
         spec = r.mapping(spec, path, required=frozenset({"type", "bodies"}),
-                         allowed={"name", "type", "bodies", "points", "axes", "lock"})
+                         allowed={"name", "type", "bodies", "points", "axes", "lock", "axis"})
         jtype = spec["type"]
         if not isinstance(jtype, str) or jtype not in JOINT_EQUATIONS:
             r.fail(f"{path}.type", f"a joint type (one of {sorted(JOINT_EQUATIONS)})", jtype)
@@ -338,6 +342,16 @@ def _joints(r: _Reader, doc: dict, names: _Names) -> tuple[Joint, ...]:
             return (lookup(bodies[0], pair[0], f"{path}.{key}[0]"),
                     lookup(bodies[1], pair[1], f"{path}.{key}[1]"))
 
+        axis = None
+        if jtype == "line" and "axis" not in spec:
+            r.fail(f"{path}.axis", "axis for a line joint (a vector of its first body)", None,
+                   show_got=False)
+        if "axis" in spec:
+            if jtype != "line":
+                r.fail(f"{path}.axis", f"no axis for a {jtype} joint (axes: [s_i, s_j])",
+                       spec["axis"])
+            axis = names.vector(bodies[0], r.string(spec["axis"], f"{path}.axis"),
+                                f"{path}.axis")
         joints.append(Joint(
             name=name,
             type=jtype,
@@ -345,6 +359,7 @@ def _joints(r: _Reader, doc: dict, names: _Names) -> tuple[Joint, ...]:
             points=members("points", names.point, jtype in JOINTS_WITH_POINTS),
             axes=members("axes", names.vector, jtype in JOINTS_WITH_AXES),
             lock=members("lock", names.vector, jtype == "prismatic"),
+            axis=axis,
         ))
     return tuple(joints)
 
@@ -560,21 +575,30 @@ def _loads(r: _Reader, doc: dict, names: _Names
     return tuple(plates), threshold, tuple(contact)
 
 
-def _subject_mass(r: _Reader, doc: dict) -> float | None:
-    spec = r.mapping(doc.get("subject") or {}, "subject", allowed={"mass"})
-    if "mass" not in spec:
-        return None
-    mass = r.number(spec["mass"], "subject.mass")
-    if mass <= 0:
-        r.fail("subject.mass", "a positive body mass (kg)", mass)
-    return mass
+def _subject(r: _Reader, doc: dict, angle_scale: float) -> SubjectMeasurements:
+    """The ``subject:`` section: body mass and the measurements of model/subject.py."""
+    spec = r.mapping(doc.get("subject") or {}, "subject", allowed=yaml_keys())
+    return from_yaml(spec, angle_scale, r.fail)
 
 
-def _calibration(r: _Reader, doc: dict) -> FrozenMap:
-    spec = r.mapping(doc.get("calibration") or {}, "calibration", allowed={"landmarks"})
+def _virtual_markers(r: _Reader, doc: dict) -> FrozenMap:
+    """``virtual_markers: {NAME: mid(A, B)}``: model marker names made from trial labels."""
+    spec = r.mapping(doc.get("virtual_markers") or {}, "virtual_markers")
+    return _frozen({name: canonical(r.string(text, f"virtual_markers.{name}"),
+                                    f"{r.source}: virtual_markers.{name}")
+                    for name, text in spec.items()})
+
+
+def _calibration(r: _Reader, doc: dict) -> tuple[FrozenMap, str | None]:
+    spec = r.mapping(doc.get("calibration") or {}, "calibration",
+                     allowed={"landmarks", "method"})
     landmarks = r.mapping(spec.get("landmarks") or {}, "calibration.landmarks")
+    method = spec.get("method")
+    if method is not None and method not in CALIBRATION_METHODS:
+        r.fail("calibration.method", f"one of {', '.join(CALIBRATION_METHODS)}", method)
     return _frozen({r.string(k, "calibration.landmarks"):
-                    r.string(v, f"calibration.landmarks.{k}") for k, v in landmarks.items()})
+                    r.string(v, f"calibration.landmarks.{k}") for k, v in landmarks.items()}), \
+        method
 
 
 def _calibrated(r: _Reader, doc: dict) -> CalibrationRecord | None:
@@ -620,6 +644,8 @@ def parse_model(text: str, source: str = "<model>") -> Model:
     distances = _distances(r, doc, names, scale, seen)
     tracked_points, tracked_vectors = _tracking(r, doc, names)
     plates, threshold, contact = _loads(r, doc, names)
+    subject = _subject(r, doc, scale)
+    landmarks, method = _calibration(r, doc)
     return Model(
         name=r.string(doc.get("name", Path(source).stem), "name"),
         gravity=gravity,
@@ -632,8 +658,11 @@ def parse_model(text: str, source: str = "<model>") -> Model:
         force_plates=plates,
         plate_threshold=threshold,
         contact_bodies=contact,
-        subject_mass=_subject_mass(r, doc),
-        landmarks=_calibration(r, doc),
+        subject_mass=subject.body_mass,
+        landmarks=landmarks,
+        calibration_method=method,
+        measurements=subject,
+        virtual_markers=_virtual_markers(r, doc),
         source=source,
         text=text,
         calibrated=_calibrated(r, doc),

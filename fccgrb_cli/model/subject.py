@@ -19,6 +19,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from fccgrb_cli.errors import InputError
+
 SIDE_NAMES = {"l": "left", "r": "right"}
 
 
@@ -51,7 +53,7 @@ class Quantity:
 
 # Field name → how Vicon spells and scales it. Ranges cover children to tall adults (mm, rad, kg).
 PIG_KEYS: dict[str, Quantity] = {
-    "body_mass": Quantity("Bodymass", "mass", False, 1.0, 400.0, True),
+    "body_mass": Quantity("Bodymass", "mass", False, 0.5, 400.0, True),
     "height": Quantity("Height", "length", False, 300.0, 2600.0, True),
     "marker_diameter": Quantity("MarkerDiameter", "length", False, 0.0, 50.0),
     "inter_asis_distance": Quantity("InterAsisDistance", "length", False, 50.0, 500.0, True),
@@ -99,6 +101,20 @@ class SubjectMeasurements:
     static_rotation_offset: Sided = field(default_factory=Sided)
     source: str = ""
     present: tuple[str, ...] = ()
+
+    def merged_over(self, base: SubjectMeasurements) -> SubjectMeasurements:
+        """These measurements where given (per side), ``base``'s elsewhere; sources joined."""
+        values: dict[str, Any] = {}
+        for name in PIG_KEYS:
+            mine, theirs = getattr(self, name), getattr(base, name)
+            if isinstance(mine, Sided):
+                values[name] = Sided(theirs.left if mine.left is None else mine.left,
+                                     theirs.right if mine.right is None else mine.right)
+            else:
+                values[name] = theirs if mine is None else mine
+        source = "; ".join(s for s in (self.source, base.source) if s)
+        return replace(self, **values, source=source,
+                       present=tuple(dict.fromkeys(self.present + base.present)))
 
     def missing(self, names: tuple[str, ...]) -> list[str]:
         """The Vicon keys of the named quantities not given (per side for sided ones)."""
@@ -153,3 +169,89 @@ def from_vicon(values: dict[str, float], source: str, fail: Callable[[str, str, 
         else:
             collected[name] = si
     return SubjectMeasurements(**collected, source=source, present=tuple(present))
+
+
+YAML_UNITS = {"length": "m", "angle": "the file's angle unit", "mass": "kg"}
+
+
+def from_yaml(spec: dict[str, Any], angle_scale: float,
+              fail: Callable[[str, str, Any], None]) -> SubjectMeasurements:
+    """Measurements from a model file's ``subject:`` section (``mass`` in kg; lengths in m;
+    angles in the file's angle unit, ``angle_scale`` to radians; a per-side quantity as
+    ``{left: .., right: ..}`` or one number for both; ``source`` free text). ``fail(path,
+    expected, got)`` raises with the key path."""
+    names = {"mass": "body_mass", **{name: name for name in PIG_KEYS if name != "body_mass"}}
+    collected: dict[str, Any] = {}
+    for key, value in spec.items():
+        if key == "source":
+            continue
+        name = names[key]
+        q = PIG_KEYS[name]
+        scale = angle_scale if q.kind == "angle" else 1.0
+        to_vicon = scale / VICON_SCALE[q.kind]
+
+        def read(v: Any, path: str, q: Quantity = q, scale: float = scale,
+                 to_vicon: float = to_vicon) -> float:
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                fail(path, "a finite number", v)
+            low, high = q.low / to_vicon, q.high / to_vicon
+            if q.kind == "mass" and not 0 < v <= high:
+                fail(path, f"a positive body mass (kg), at most {high:g}", v)
+            if not low <= v <= high:
+                fail(path, f"{low:g}–{high:g} ({YAML_UNITS[q.kind]})", v)
+            return float(v) * scale
+
+        path = f"subject.{key}"
+        if not q.sided:
+            collected[name] = read(value, path)
+        elif isinstance(value, dict):
+            extra = set(value) - {"left", "right"}
+            if extra:
+                fail(path, "the keys left and right", sorted(extra))
+            collected[name] = Sided(*(read(value[side], f"{path}.{side}")
+                                      if side in value else None
+                                      for side in ("left", "right")))
+        else:
+            both = read(value, path)
+            collected[name] = Sided(both, both)
+    source = spec.get("source", "")
+    if not isinstance(source, str):
+        fail("subject.source", "text", source)
+    return SubjectMeasurements(**collected, source=source,
+                               present=tuple(k for k in spec if k != "source"))
+
+
+def yaml_keys() -> set[str]:
+    """The keys a model file's ``subject:`` section may hold."""
+    return {"mass", "source", *(name for name in PIG_KEYS if name != "body_mass")}
+
+
+def from_flags(flags: dict[str, str | None]) -> SubjectMeasurements:
+    """Measurements typed on the command line (``--knee-width 102,104``: field name → text in
+    Vicon's units, mm or kg, one value for both sides or ``left,right``); an InputError names
+    the flag."""
+    values: dict[str, float] = {}
+    for name, text in flags.items():
+        if text is None:
+            continue
+        flag = f"--{name.replace('_', '-')}"
+        try:
+            numbers = [float(x) for x in text.split(",")]
+        except ValueError:
+            raise InputError(f"{flag}: expected a number or two (left,right), got "
+                             f"{text!r}") from None
+        q = PIG_KEYS[name]
+        if len(numbers) not in ((1, 2) if q.sided else (1,)):
+            wanted = "one or two numbers (left,right)" if q.sided else "one number"
+            raise InputError(f"{flag}: expected {wanted}, got {text!r}")
+        if q.sided:
+            left, right = numbers if len(numbers) == 2 else numbers * 2
+            values.update({f"L{q.vicon}": left, f"R{q.vicon}": right})
+        else:
+            values[q.vicon] = numbers[0]
+
+    def fail(key: str, expected: str, got: float) -> None:
+        name = next(n for n, q in PIG_KEYS.items() if key.endswith(q.vicon))
+        raise InputError(f"--{name.replace('_', '-')}: expected {expected}, got {got:g}")
+
+    return from_vicon(values, "the command line", fail)

@@ -7,10 +7,11 @@ non-collinear points give a least-squares rigid fit (Söderkvist–Wedin, via th
 segment's direction (the smallest rotation from the model pose); one, a translation of the pose.
 A two-point segment's rotation about its own axis is then chosen to satisfy its joints' axis
 equations with the bodies already placed (a universal joint's perpendicular arms, a revolute's
-parallel axes), the closest such roll to the model pose winning ties. Mixed coordinates follow
+parallel axes), the roll nearest the model pose as seen from the body it is reached from winning
+ties. Mixed coordinates follow
 from the fitted bodies: θ = acos(s1·s2) from their vectors, d = (r_Q − r_P)·s from their points.
-Only joints whose points coincide (spherical, revolute, universal) share a point: a cylindrical
-or prismatic joint's points only lie on one axis line, some slide apart.
+Only joints whose points coincide (spherical, revolute, universal) share a point: a cylindrical,
+prismatic or line joint's points only lie on one axis line, some slide apart.
 """
 
 from __future__ import annotations
@@ -58,36 +59,61 @@ def axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
 
 
 def best_roll(R: np.ndarray, axis_world: np.ndarray,
-              pairs: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
+              pairs: list[tuple[np.ndarray, np.ndarray]],
+              reference: np.ndarray | None = None) -> np.ndarray:
     """Rotate R about ``axis_world`` so that every (fixed world vector p, body-local vector s)
-    pair is as perpendicular as possible: min Σ (p · Rot(φ) R s)²; the smallest |φ| among
-    equally good rolls (a trigonometric polynomial, sampled then refined)."""
+    pair is as perpendicular as possible: min Σ (p · Rot(φ) R s)²; among equally good rolls
+    (a trigonometric polynomial, sampled, every local minimum refined) the one nearest the
+    rotation ``reference`` when given, else the smallest |φ|; without pairs, the roll nearest
+    ``reference`` (R itself when there is none)."""
+    k = axis_world / np.linalg.norm(axis_world)
     if not pairs:
-        return R
+        if reference is None:
+            return R
+        # max trace(referenceᵀ Rot(φ) R) = A cos φ + B sin φ + C (Rodrigues, M = R referenceᵀ)
+        M = R @ reference.T
+        K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+        return axis_rotation(k, np.arctan2(np.trace(K @ M), np.trace(M) - k @ M @ k)) @ R
     P = np.array([p for p, _ in pairs])
     S = np.array([R @ s for _, s in pairs])
-    k = axis_world / np.linalg.norm(axis_world)
     # p · Rot(φ) s = A cos φ + B sin φ + C
     A = np.einsum("ij,ij->i", P, S - np.outer(S @ k, k))
     B = np.einsum("ij,ij->i", P, np.cross(k, S))
     C = (P @ k) * (S @ k)
-    phis = np.linspace(-np.pi, np.pi, 721)
+
+    def residual(phi: float) -> np.ndarray:
+        return A * np.cos(phi) + B * np.sin(phi) + C
+
+    def refine(phi: float) -> float:
+        for _ in range(20):
+            res = residual(phi)
+            d1 = -A * np.sin(phi) + B * np.cos(phi)
+            d2 = -A * np.cos(phi) - B * np.sin(phi)
+            grad, hess = 2 * res @ d1, 2 * (d1 @ d1 + res @ d2)
+            if hess <= 0:
+                break
+            phi -= grad / hess
+        return float(phi)
+
+    phis = np.linspace(-np.pi, np.pi, 720, endpoint=False)
     cost = ((np.outer(np.cos(phis), A) + np.outer(np.sin(phis), B) + C) ** 2).sum(axis=1)
-    good = cost <= cost.min() + 1e-9 * max(1.0, cost.min())
-    phi = phis[good][np.argmin(np.abs(phis[good]))]
-    for _ in range(20):
-        res = A * np.cos(phi) + B * np.sin(phi) + C
-        d1 = -A * np.sin(phi) + B * np.cos(phi)
-        d2 = -A * np.cos(phi) - B * np.sin(phi)
-        grad, hess = 2 * res @ d1, 2 * (d1 @ d1 + res @ d2)
-        if hess <= 0:
-            break
-        phi -= grad / hess
+    # every sampled local minimum, refined: equally good rolls (a universal joint's arm and its
+    # opposite) are told apart by their refined cost, not by where the samples fell
+    minima = phis[(cost <= np.roll(cost, 1)) & (cost <= np.roll(cost, -1))]
+    refined = [refine(phi) for phi in minima]
+    costs = np.array([residual(phi) @ residual(phi) for phi in refined])
+    good = [phi for phi, c in zip(refined, costs, strict=True)
+            if c <= costs.min() + 1e-9 * max(1.0, costs.min())]
+    if reference is None:
+        phi = min(good, key=abs)
+    else:
+        phi = min(good, key=lambda a: np.linalg.norm(axis_rotation(k, a) @ R - reference))
     return axis_rotation(k, phi) @ R
 
 
 def _place(local: np.ndarray, world: np.ndarray, R0: np.ndarray, r0: np.ndarray,
-           perpendicular: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+           perpendicular: list[tuple[np.ndarray, np.ndarray]],
+           reference: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     if len(local) >= 3:
         spread = np.linalg.svd(local - local.mean(axis=0), compute_uv=False)
         if spread[1] > 1e-6 * max(spread[0], 1e-12):
@@ -97,7 +123,7 @@ def _place(local: np.ndarray, world: np.ndarray, R0: np.ndarray, r0: np.ndarray,
         if np.linalg.norm(local[far] - local[0]) > 1e-9:
             direction = world[far] - world[0]
             R = rotation_between(R0 @ (local[far] - local[0]), direction) @ R0
-            R = best_roll(R, direction, perpendicular)
+            R = best_roll(R, direction, perpendicular, reference)
             return R, world[0] - R @ local[0]
     if len(local) >= 1:
         return R0, world[0] - R0 @ local[0]
@@ -146,7 +172,7 @@ def initial_guess(system: System, targets: np.ndarray) -> np.ndarray:
             tracked[tp.body].append((model.body(tp.body).points[tp.point].local, target))
     placed: dict[str, tuple[np.ndarray, np.ndarray]] = {GROUND: (np.eye(3), np.zeros(3))}
 
-    def place(other: str) -> None:
+    def place(other: str, parent: str | None = None) -> None:
         pairs = list(tracked[other])
         for j in model.joints:
             if other in j.bodies and j.type in COINCIDENT:
@@ -157,10 +183,17 @@ def initial_guess(system: System, targets: np.ndarray) -> np.ndarray:
                                   _global_point(model, placed, neighbour, j.points[1 - k])))
         pose = model.body(other).pose
         R0 = np.column_stack([pose.u, pose.v, pose.w])
+        reference = None
+        if parent not in (None, GROUND):
+            # the model pose as seen from the body it is reached from: a two-point segment
+            # takes the roll nearest it, so that a trial facing another way than the model's
+            # pose does not turn the segment upside down
+            seen = model.body(parent).pose
+            reference = placed[parent][0] @ np.column_stack([seen.u, seen.v, seen.w]).T @ R0
         local = np.array([p for p, _ in pairs]).reshape(-1, 3)
         world = np.array([w for _, w in pairs]).reshape(-1, 3)
         placed[other] = _place(local, world, R0, np.array(pose.r),
-                               _perpendicular_pairs(model, placed, other))
+                               _perpendicular_pairs(model, placed, other), reference)
 
     # Outward from the ground, then from each floating base (placed by its own markers).
     for root in (GROUND, *model.floating_bases):
@@ -173,7 +206,7 @@ def initial_guess(system: System, targets: np.ndarray) -> np.ndarray:
                 if here in joint.bodies:
                     other = joint.bodies[1 - joint.bodies.index(here)]
                     if other not in placed:
-                        place(other)
+                        place(other, here)
                         order.append(other)
     for name, (R, r) in placed.items():
         if name == GROUND:

@@ -59,11 +59,13 @@ def _axis_parallel(features: FeatureTable, out: ConstraintList, joint: Joint, la
     out.dot(axis_i, features.body_vector(bj, b_local), 0.0, f"{label}: axis ⟂ b")
 
 
-def _on_axis(features: FeatureTable, out: ConstraintList, joint: Joint, label: str) -> None:
-    """(P_j − P_i) · a_i = 0 and (P_j − P_i) · b_i = 0: P_j stays on body i's axis line."""
-    (bi, bj), (pi, pj), (si, _) = joint.bodies, joint.points, joint.axes
+def _on_axis(features: FeatureTable, out: ConstraintList, joint: Joint, label: str,
+             axis: str) -> None:
+    """(P_j − P_i) · a_i = 0 and (P_j − P_i) · b_i = 0 with a_i, b_i ⟂ body i's ``axis``: P_j
+    stays on body i's axis line through P_i (cylindrical, prismatic and line joints)."""
+    (bi, bj), (pi, pj) = joint.bodies, joint.points
     d = features.difference(features.point(bj, pj), features.point(bi, pi))
-    a_local, b_local = perpendiculars(features.local_of(bi, si))
+    a_local, b_local = perpendiculars(features.local_of(bi, axis))
     out.dot(d, features.body_vector(bi, a_local), 0.0, f"{label}: offset ⟂ a")
     out.dot(d, features.body_vector(bi, b_local), 0.0, f"{label}: offset ⟂ b")
 
@@ -78,7 +80,9 @@ def joint(features: FeatureTable, out: ConstraintList, joint: Joint) -> None:
     if joint.type in ("revolute", "cylindrical", "prismatic", "parallel"):
         _axis_parallel(features, out, joint, label)
     if joint.type in ("cylindrical", "prismatic"):
-        _on_axis(features, out, joint, label)
+        _on_axis(features, out, joint, label, joint.axes[0])
+    if joint.type == "line":
+        _on_axis(features, out, joint, label, joint.axis)
     if joint.type == "universal":
         si, sj = joint.axes
         out.dot(features.vector(bi, si), features.vector(bj, sj), 0.0, f"{label}: arms ⟂")

@@ -100,7 +100,7 @@ def analyse(model: Model) -> StructureReport:
     bases = floating_bases(model)
     joint_dof = dof - 6 * len(bases)
     if n_angles != joint_dof:
-        slides = n_distances or any(j.type in ("cylindrical", "prismatic", "parallel")
+        slides = n_distances or any(j.type in ("cylindrical", "prismatic", "parallel", "line")
                                     for j in model.joints)
         what = "coordinates (angles and distances)" if slides else "angular coordinates"
         detail = (f"add {what} for the free motions" if n_angles < joint_dof

@@ -1,0 +1,197 @@
+"""Plug-in Gait compatibility against Vicon's own outputs: calibrate configs/models/plugin_gait.yaml
+on each subject's static trial (measurements from its PROCESSING group, nothing typed), solve each
+walking trial by mixed coordinates (NRM-WLS, the default), and compare every Plug-in Gait angle
+the run computes with the one Vicon's Plug-in Gait stored in the same C3D file.
+
+    python benchmarks/plugin_gait.py [--rigid-knees]        # the shared pair HC030A01/HC030A05
+    python benchmarks/plugin_gait.py --trials DIR           # every subject of a folder
+
+A folder's trials are grouped by subject (the file name without its last two digits); a
+subject's static trial is the one whose PROCESSING group says ``Static``, else its first.
+Printed per walking trial: RMS differences (deg) of X, Y, Z over the frames the run trusts and
+Vicon computed, per side, and two references that explain them:
+
+* ``direct``: the same Plug-in Gait definitions applied frame by frame to the markers with the
+  file's own measurements (anatomy/plugin_gait.py, no solve): how far Vicon's processing of this
+  file differs from its PROCESSING group's values (0 when they agree);
+* ``frames``: how far the solved segments stay from those per-frame segments (RMS angle between
+  their axes, deg, worst segment): the rigid model against Plug-in Gait's frame-by-frame
+  construction, which follows the skin markers;
+"""
+
+from __future__ import annotations
+
+import fccgrb_cli  # noqa: F401  (first: pins BLAS to one thread before numpy loads)
+import argparse
+import warnings
+from pathlib import Path
+
+import ezc3d
+import numpy as np
+import yaml
+
+from fccgrb_cli.anatomy import plugin_gait as pg
+from fccgrb_cli.anatomy.pig_calibration import side_geometry
+from fccgrb_cli.api import calibrate
+from fccgrb_cli.gait.plugin_gait import JOINTS, pig_angles, progression_frame
+from fccgrb_cli.io.trial import read_trial
+from fccgrb_cli.model import load_model, parse_model
+from fccgrb_cli.options import SolveOptions
+from fccgrb_cli.pipeline import solve_trial
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED = ROOT.parent / "shared" / "data" / "c3d" / "plugin_gait"
+TEMPLATE = ROOT / "configs" / "models" / "plugin_gait.yaml"
+SEGMENTS = ("pelvis", "thigh_l", "shank_l", "foot_l", "thigh_r", "shank_r", "foot_r")
+
+
+def vicon(path: Path) -> tuple[dict[str, np.ndarray], dict[str, float]]:
+    """A Nexus file's points (frames × 3, NaN where Vicon wrote none) and PROCESSING values."""
+    c3d = ezc3d.c3d(str(path))
+    point = c3d["parameters"]["POINT"]
+    labels = [s.strip() for key in ("LABELS", "LABELS2") if key in point
+              for s in point[key]["value"]]
+    xyz = c3d["data"]["points"][:3]
+    residual = c3d["data"]["meta_points"]["residuals"][0]
+    points = {}
+    for k, label in enumerate(labels[: xyz.shape[1]]):
+        values = xyz[:, k, :].T.copy()
+        values[(residual[k] < 0) | np.all(values == 0, axis=1)] = np.nan
+        points[label] = values
+    processing = c3d["parameters"].get("PROCESSING", {})
+    proc = {k: float(v["value"][0]) for k, v in processing.items()
+            if isinstance(v, dict) and len(v.get("value", [])) and not isinstance(
+                v["value"][0], str)}
+    return points, proc
+
+
+def pairs(folder: Path) -> list[tuple[Path, list[Path]]]:
+    """(static, walking trials) per subject of a folder."""
+    subjects: dict[str, list[Path]] = {}
+    for path in sorted(folder.glob("*.c3d")):
+        subjects.setdefault(path.stem[:-2], []).append(path)
+    out = []
+    for trials in subjects.values():
+        statics = [t for t in trials if vicon(t)[1].get("Static", 0) == 1]
+        static = statics[0] if statics else trials[0]
+        out.append((static, [t for t in trials if t != static]))
+    return out
+
+
+def rms(ours: np.ndarray, theirs: np.ndarray, frames: np.ndarray) -> np.ndarray:
+    """RMS (deg) per component over ``frames``, modulo whole turns (Vicon unwraps too)."""
+    error = (ours[frames] - theirs[frames] + 180.0) % 360.0 - 180.0
+    return np.sqrt(np.nanmean(error ** 2, axis=0))
+
+
+def direct_angles(model, trial, up: np.ndarray) -> tuple[dict, dict]:
+    """Plug-in Gait frame by frame from the markers with the model's measurements."""
+    m = model.measurements
+    offsets = {"l": (m.static_plantar_flexion.left, m.static_rotation_offset.left),
+               "r": (m.static_plantar_flexion.right, -m.static_rotation_offset.right)}
+    mark = {label: trial.markers[:, trial.labels.index(label)] for label in trial.labels}
+    lm = {"pelvis": (mark["RASI"], mark["LASI"], mark["SACR"])}
+    for s, p in (("l", "L"), ("r", "R")):
+        lm[f"thigh_{s}"] = (mark[p + "THI"], mark[p + "KNE"])
+        lm[f"shank_{s}"] = (mark[p + "TIB"], mark[p + "ANK"])
+        lm[f"toe_{s}"] = mark[p + "TOE"]
+    seg = pg.segments(lm, side_geometry(m, offsets))
+    lab = progression_frame(seg["pelvis"].origin, seg["pelvis"].axes[:, :, 0], up)
+    torsion = {"l": m.tibial_torsion.left, "r": m.tibial_torsion.right}
+    return pig_angles({k: v.axes for k, v in seg.items()}, torsion, lab), seg
+
+
+def rigid_knees(text: str) -> str:
+    """The template with spherical knees instead of the sliding ones (its variant without the
+    tibia's slide)."""
+    doc = yaml.safe_load(text)
+    for joint in doc["joints"]:
+        if joint["type"] == "line":
+            joint.update(type="spherical", bodies=joint["bodies"][::-1])
+            del joint["axis"]
+    del doc["distances"]
+    return yaml.safe_dump(doc, sort_keys=False)
+
+
+def evaluate(static: Path, walk: Path, rigid: bool = False) -> dict:
+    template = load_model(TEMPLATE)
+    if rigid:
+        template = parse_model(rigid_knees(template.text), "plugin_gait.yaml (rigid knees)")
+    model = calibrate(template, read_trial(static))
+    trial = read_trial(walk)
+    run = solve_trial(model, trial, SolveOptions(dynamics=False, events="none",
+                                                 skip_unsolvable=True))
+    points, _ = vicon(walk)
+    up = -np.asarray(model.gravity) / np.linalg.norm(model.gravity)
+    direct, seg = direct_angles(model, trial, up)
+    out: dict = {"trial": walk.name, "frames": int(run.trusted.sum()), "of": len(run.trusted)}
+    for joint in JOINTS:
+        for side in "LR":
+            name = f"{side}{joint}Angles"
+            theirs = points.get(name)
+            frames = run.trusted & np.isfinite(theirs).all(axis=1) if theirs is not None \
+                else np.zeros_like(run.trusted)
+            for kind, source in (("solve", run.plugin_gait.angles), ("direct", direct)):
+                out[(kind, joint, side)] = rms(source[name], theirs, frames) if frames.any() \
+                    else np.full(3, np.nan)
+    out["frames_deg"] = max(_axes_rms(run, model, seg, name) for name in SEGMENTS)
+    out["tibia_mm"] = max(float(np.nanmax(length) - np.nanmin(length)) for length in (
+        1e3 * np.linalg.norm(seg[f"shank_{s}"].origin - seg[f"foot_{s}"].origin, axis=1)
+        for s in "lr"))
+    return out
+
+
+def _axes_rms(run, model, seg, name: str) -> float:
+    """RMS over the trusted frames of the largest angle (deg) between a solved segment's axes
+    and the per-frame Plug-in Gait segment's."""
+    solved = np.stack([np.column_stack([run.q[f"{name}.{e}.{c}"] for c in "xyz"])
+                       for e in "uvw"], axis=2)
+    cosines = np.clip(np.einsum("fij,fij->fj", solved, seg[name].axes), -1, 1)
+    angle = np.degrees(np.arccos(cosines)).max(axis=1)[run.trusted]
+    return float(np.sqrt(np.nanmean(angle ** 2)))
+
+
+def table(results: list[dict]) -> list[str]:
+    head = ("| trial | side | frames | " + " | ".join(f"{j} X / Y / Z" for j in JOINTS)
+            + " | direct (worst) | solve vs PiG frames | tibia length range mm |")
+    lines = [head, "|" + "---|" * (len(JOINTS) + 6)]
+    for r in results:
+        direct = np.nanmax([r[("direct", j, side)] for j in JOINTS for side in "LR"])
+        for side in "LR":
+            cells = [" / ".join(f"{v:.2f}" for v in r[("solve", j, side)]) for j in JOINTS]
+            extra = (f"{direct:.2f} | {r['frames_deg']:.2f} | {r['tibia_mm']:.0f}"
+                     if side == "L" else " | | ")
+            lines.append(f"| {r['trial'] if side == 'L' else ''} | {side} | "
+                         f"{r['frames']}/{r['of']} | " + " | ".join(cells) + f" | {extra} |")
+    return lines
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--trials", type=Path, default=None,
+                        help="a folder of Nexus C3D files (default: the shared pair)")
+    parser.add_argument("--rigid-knees", action="store_true",
+                        help="also the template with spherical knees (no slide of the tibia)")
+    args = parser.parse_args()
+    todo = pairs(args.trials) if args.trials else [(SHARED / "HC030A01.c3d",
+                                                     [SHARED / "HC030A05.c3d"])]
+    for rigid in (False, True) if args.rigid_knees else (False,):
+        results = []
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            for static, walks in todo:
+                for walk in walks:
+                    results.append(evaluate(static, walk, rigid))
+        print("RMS difference to Vicon's Plug-in Gait angles (deg), X / Y / Z"
+              + (", spherical knees (no slide):" if rigid else ":"))
+        print("\n".join(table(results)))
+        sagittal = np.nanmax([r[("solve", j, s)][0] for r in results for j in JOINTS
+                              for s in "LR"])
+        other = np.nanmax([r[("solve", j, s)][1:] for r in results for j in JOINTS
+                           for s in "LR"])
+        print(f"worst: sagittal (X) {sagittal:.2f} deg, others (Y, Z) {other:.2f} deg over "
+              f"{len(results)} walking trials\n")
+
+
+if __name__ == "__main__":
+    main()
