@@ -313,7 +313,7 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
     coordinates (mean over the frames), segment lengths and inertia. Writes a model ready for
     `fccgrb solve`."""
     from fccgrb_cli.anatomy.calibrate import Measurements
-    from fccgrb_cli.anatomy.calibrate import calibrate as personalize
+    from fccgrb_cli.anatomy.full_body import personalize
     from fccgrb_cli.io.atomic import atomic_path
     from fccgrb_cli.io.trial import read_trial
     from fccgrb_cli.model import parse_model
