@@ -40,8 +40,8 @@ SEGMENTS: dict[str, Segment] = {
     "hand": Segment(0.0061, 0.7900, (0.628, 0.513, 0.401)),
 }
 REFERENCE_LENGTHS: dict[str, float] = {
-    "thigh": 0.4222, "shank": 0.4340, "head": 0.2429, "upper_arm": 0.2817, "forearm": 0.2689,
-    "hand": 0.0862}
+    "thigh": 0.4222, "shank": 0.4340, "head": 0.2429, "upper_trunk": 0.1707,
+    "upper_arm": 0.2817, "forearm": 0.2689, "hand": 0.0862}
 
 
 def segment_inertia(segment: str, body_mass: float, length: float,

@@ -24,6 +24,9 @@ import yaml
 
 from fccgrb_cli.anatomy.anthropometry import REFERENCE_LENGTHS, SEGMENTS, combine, principal
 from fccgrb_cli.anatomy.calibrate import (
+    BODIES as LOWER_BODIES,
+)
+from fccgrb_cli.anatomy.calibrate import (
     SIDES,
     Calibration,
     Measurements,
@@ -34,7 +37,7 @@ from fccgrb_cli.anatomy.calibrate import (
     read_marker,
     segment_frames,
 )
-from fccgrb_cli.anatomy.frames import Frames
+from fccgrb_cli.anatomy.frames import Frames, harrington_hip_centre, pelvis_frames
 from fccgrb_cli.anatomy.upper_body import (
     forearm_frames,
     hand_frames,
@@ -51,7 +54,14 @@ TRUNK_LANDMARKS = ("c7", "t8", "suprasternal_notch", "xiphoid")
 HEAD_LANDMARKS = ("left_front_head", "right_front_head", "left_back_head", "right_back_head")
 ARM_NAMES = ("acromion", "lateral_humeral_epicondyle", "medial_humeral_epicondyle",
              "radial_styloid", "ulnar_styloid", "second_metacarpal", "fifth_metacarpal")
-ARM_LANDMARKS = tuple(f"{side}_{name}" for side in SIDES.values() for name in ARM_NAMES)
+# Plug-in Gait's arm: one elbow marker (lateral), the wrist bar's two (radial and ulnar
+# styloids), one finger marker (just distal to the 2nd metacarpal head)
+PIG_ARM_NAMES = ("acromion", "lateral_humeral_epicondyle", "radial_styloid", "ulnar_styloid",
+                 "finger")
+ARM_LANDMARKS = tuple(f"{side}_{name}" for side in SIDES.values()
+                      for name in (*ARM_NAMES, "finger"))
+ELBOW_WIDTH = 0.25  # an elbow's width over its upper arm's length (adults: ~70 over 280 mm)
+MARKER_DIAMETER = 0.014  # m, without a measured one
 UPPER_BODIES = ("thorax", "head", *(f"{seg}_{s}" for s in SIDES
                                     for seg in ("upper_arm", "forearm", "hand")))
 LUMPED = "hat"
@@ -80,33 +90,38 @@ def is_full_body(model: Model) -> bool:
 def personalize(model: Model, trial: Trial, frames: tuple[int, int] | None = None,
                 mass: float | None = None, measurements: Measurements | None = None,
                 mapping: dict[str, str] | None = None) -> Calibration:
-    """``calibrate`` for any template: a lower-limb one as it is, a whole-body one with its
-    upper body (this module) on top."""
-    lower = calibrate(model, trial, frames, mass, measurements, mapping)
-    if not is_full_body(model):
-        return lower
-    mapping = mapping or {}
+    """``calibrate`` for any template: a lower-limb one as it is, a whole-body one (or an upper
+    body on a pelvis, without legs) with its upper body (this module) on top."""
     names = {b.name for b in model.bodies}
+    if not is_full_body(model):
+        return calibrate(model, trial, frames, mass, measurements, mapping)
+    mapping = mapping or {}
+    legs = all(b in names for b in LOWER_BODIES)
+    lower = (calibrate(model, trial, frames, mass, measurements, mapping) if legs
+             else _pelvis_alone(model, trial, frames, mass, mapping))
     lumped = LUMPED in names
-    missing = [] if lumped else [b for b in UPPER_BODIES if b not in names]
-    if missing:
-        raise InputError(f"{model.source}: bodies: expected the upper-body bodies "
-                         f"{', '.join(UPPER_BODIES)} (or one lumped '{LUMPED}'); missing "
-                         f"{', '.join(missing)}")
-    window = slice(*lower.frames)
-    needed = TRUNK_LANDMARKS + (() if lumped else HEAD_LANDMARKS + ARM_LANDMARKS)
+    needed = TRUNK_LANDMARKS
+    if not lumped:
+        needed += HEAD_LANDMARKS if "head" in names else ()
+        needed += tuple(f"{side}_{n}" for s, side in SIDES.items() if f"upper_arm_{s}" in names
+                        for n in _arm_set(model.landmarks, side))
     absent = [n for n in needed if n not in model.landmarks]
     if absent:
         raise InputError(f"{model.source}: calibration.landmarks: expected the upper-body "
                          f"landmarks {', '.join(absent)} mapped to trial labels")
-    optional = tuple(n for n in HEAD_LANDMARKS + ARM_LANDMARKS if n in model.landmarks)
-    method = calibration_method(model)
-    lower_names = tuple(k for k in model.landmarks if k not in needed + optional)
-    lm = read_landmarks(model, trial, window, needed + optional + lower_names, mapping)
-    anatomy = (davis_segment_frames(lm, lower.measurements) if method == "davis"
-               else segment_frames(lm))
+    window = slice(*lower.frames)
+    optional = tuple(n for n in HEAD_LANDMARKS + ARM_LANDMARKS
+                     if n in model.landmarks and n not in needed)
+    rest = tuple(k for k in model.landmarks if k not in needed + optional)
+    lm = read_landmarks(model, trial, window, needed + optional + rest, mapping)
+    if not legs:
+        pelvis = _pelvis_frames(lm)[0]
+    elif calibration_method(model) == "davis":
+        pelvis = davis_segment_frames(lm, lower.measurements).frames["pelvis"]
+    else:
+        pelvis = segment_frames(lm).frames["pelvis"]
     doc = yaml.safe_load(lower.text)
-    parts, pelvis = _parts(lm, anatomy.frames["pelvis"], doc, lower, mass)
+    parts, pelvis_part = _parts(lm, pelvis, doc, lower, mass, lumped)
     if lumped:
         parts = {LUMPED: _lumped(parts)}
     for tp in model.tracked_points:
@@ -114,7 +129,7 @@ def personalize(model: Model, trial: Trial, frames: tuple[int, int] | None = Non
             parts[tp.body].points[tp.point] = parts[tp.body].frames.mean_local(
                 read_marker(trial, tp.marker, window, f"{model.source} tracking.points",
                             mapping))
-    _write(doc, "pelvis", pelvis)
+    _write(doc, "pelvis", pelvis_part)
     for name, part in parts.items():
         _write(doc, name, part)
     lengths = {**lower.lengths, **{n: p.length for n, p in parts.items() if p.length}}
@@ -126,10 +141,56 @@ def personalize(model: Model, trial: Trial, frames: tuple[int, int] | None = Non
     return replace(lower, text=text, lengths=lengths)
 
 
+def _pelvis_frames(lm: dict[str, np.ndarray]) -> tuple[Frames, float, float]:
+    """The pelvis from the ASIS and the PSIS (or the sacrum), its width and depth."""
+    posterior = (lm["sacrum"] if "sacrum" in lm
+                 else 0.5 * (lm["right_psis"] + lm["left_psis"]))
+    pelvis = pelvis_frames(lm["right_asis"], lm["left_asis"], posterior, posterior)
+    width = float(np.mean(np.linalg.norm(lm["right_asis"] - lm["left_asis"], axis=1)))
+    depth = float(np.mean(np.linalg.norm(pelvis.origin - posterior, axis=1)))
+    return pelvis, width, depth
+
+
+def _pelvis_alone(model: Model, trial: Trial, frames: tuple[int, int] | None,
+                  mass: float | None, mapping: dict[str, str]) -> Calibration:
+    """A template without legs: the pelvis alone from its landmarks (ASIS and PSIS, or the
+    sacrum), its markers, and the hip centres (Harrington et al. 2007) as points of it."""
+    start, stop = frames if frames is not None else (0, trial.n_frames)
+    if not 0 <= start < stop <= trial.n_frames:
+        raise InputError(f"--frames: expected A:B with 0 ≤ A < B ≤ {trial.n_frames} (frame "
+                         f"indices of {trial.path}), got {start}:{stop}")
+    if mass is not None and not (np.isfinite(mass) and mass > 0):
+        raise InputError(f"--mass: expected a positive, finite body mass in kg, got {mass}")
+    back = ("sacrum",) if "sacrum" in model.landmarks else ("right_psis", "left_psis")
+    names = ("right_asis", "left_asis", *back)
+    absent = [n for n in names if n not in model.landmarks]
+    if absent:
+        raise InputError(f"{model.source}: calibration.landmarks: expected the pelvis's "
+                         f"landmarks {', '.join(absent)} mapped to trial labels")
+    window = slice(start, stop)
+    pelvis, width, depth = _pelvis_frames(read_landmarks(model, trial, window, names, mapping))
+    doc = yaml.safe_load(model.text)
+    part = Part(pelvis, {f"HJC_{s}": harrington_hip_centre(width, depth, s) for s in SIDES})
+    for tp in model.tracked_points:
+        if tp.body == "pelvis":
+            part.points[tp.point] = pelvis.mean_local(read_marker(
+                trial, tp.marker, window, f"{model.source} tracking.points", mapping))
+    _write(doc, "pelvis", part)
+    doc.pop("subject", None)
+    if mass is not None:
+        doc["subject"] = {"mass": mass}
+    text = (f"# {doc.get('name', 'model')} personalized by `fccgrb calibrate` from {trial.path}, "
+            f"frame indices {start}:{stop}\n# from the template {model.source}. Hip centres: "
+            "Harrington et al. (2007); inertia: de Leva (1996).\n"
+            + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=100))
+    return Calibration(text, (start, stop), {}, width, depth, mass)
+
+
 def _parts(lm: dict[str, np.ndarray], pelvis: Frames, doc: dict, lower: Calibration,
-           mass: float | None) -> tuple[dict[str, Part], Part]:
-    """Every upper-body segment whose landmarks are given, and the pelvis's lumbar joint and
-    inertia (de Leva's lower trunk)."""
+           mass: float | None, lumped: bool) -> tuple[dict[str, Part], Part]:
+    """Every upper-body segment whose landmarks are given (for a ``lumped`` body also those
+    that are not, in an assumed posture), and the pelvis's lumbar joint and inertia (de Leva's
+    lower trunk)."""
     spec = doc["bodies"]["pelvis"]
     hips = 0.5 * (np.array(spec["points"]["HJC_r"]) + np.array(spec["points"]["HJC_l"]))
     hip_mid = pelvis.origin + pelvis.axes @ hips
@@ -143,25 +204,29 @@ def _parts(lm: dict[str, np.ndarray], pelvis: Frames, doc: dict, lower: Calibrat
         com = hips + np.array([0.0, (1.0 - SEGMENTS["pelvis"].com) * lower_trunk, 0.0])
         pelvis_part.inertia = (m, com, tensor)
     lumbar_global = pelvis.origin + pelvis.axes @ lumbar
-    scale = _leg_scale(lower.lengths)
+    scale = _scale(lower.lengths, lm)
     parts = {"thorax": _thorax(lm, lumbar_global, mass)}
     thorax = parts["thorax"].frames
     if all(n in lm for n in HEAD_LANDMARKS):
         parts["head"] = _head(lm, mass, scale)
-    elif mass is not None:
+    elif lumped and mass is not None:
         parts["head"] = _upright_head(parts["thorax"], mass, scale)
     for s, side in SIDES.items():
-        if all(f"{side}_{n}" in lm for n in ARM_NAMES):
+        if all(f"{side}_{n}" in lm for n in _arm_set(lm, side)):
             parts |= _arm(lm, thorax, parts["thorax"], s, side, mass)
-        elif mass is not None:
+        elif lumped and mass is not None:
             parts |= _hanging_arm(lm, parts["thorax"], s, side, mass, scale)
     return parts, pelvis_part
 
 
-def _leg_scale(lengths: dict[str, float]) -> float:
-    """The subject's leg (thigh + shank, mean of both sides) over de Leva's."""
-    legs = [lengths[f"thigh_{s}"] + lengths[f"shank_{s}"] for s in SIDES]
-    return float(np.mean(legs)) / (REFERENCE_LENGTHS["thigh"] + REFERENCE_LENGTHS["shank"])
+def _scale(lengths: dict[str, float], lm: dict[str, np.ndarray]) -> float:
+    """The subject's size over de Leva's: by the legs (thigh + shank, mean of both sides), or
+    without legs by the upper trunk (suprasternal notch to xiphoid)."""
+    if all(f"thigh_{s}" in lengths for s in SIDES):
+        legs = [lengths[f"thigh_{s}"] + lengths[f"shank_{s}"] for s in SIDES]
+        return float(np.mean(legs)) / (REFERENCE_LENGTHS["thigh"] + REFERENCE_LENGTHS["shank"])
+    trunk = np.linalg.norm(lm["suprasternal_notch"] - lm["xiphoid"], axis=1)
+    return float(np.mean(trunk)) / REFERENCE_LENGTHS["upper_trunk"]
 
 
 def _thorax(lm: dict[str, np.ndarray], lumbar: np.ndarray, mass: float | None) -> Part:
@@ -224,31 +289,63 @@ def _segment(frames: Frames, distal: np.ndarray, segment: str, mass: float | Non
     return part
 
 
+def _arm_set(landmarks, side: str) -> tuple[str, ...]:
+    """The arm landmarks of a side: the ISB set when its medial epicondyle is given, else
+    Plug-in Gait's."""
+    return ARM_NAMES if f"{side}_medial_humeral_epicondyle" in landmarks else PIG_ARM_NAMES
+
+
+def _lateral_elbow(shoulder: np.ndarray, lateral: np.ndarray, thorax: Frames, s: str
+                   ) -> np.ndarray:
+    """The elbow centre from the lateral epicondyle alone (Plug-in Gait's set): medial of the
+    marker by half the elbow width (ELBOW_WIDTH × the upper arm's length) and the marker's
+    radius, perpendicular to the humerus and in the plane of the humerus and the thorax's
+    medio-lateral axis (the epicondylar axis of an arm in neutral rotation, as in the static
+    posture calibration assumes)."""
+    axis = lateral - shoulder
+    length = float(np.mean(np.linalg.norm(axis, axis=1)))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    medial = -thorax.axes[:, :, 2] if s == "r" else thorax.axes[:, :, 2]
+    medial = medial - np.sum(medial * axis, axis=1, keepdims=True) * axis
+    medial /= np.linalg.norm(medial, axis=1, keepdims=True)
+    return lateral + 0.5 * (ELBOW_WIDTH * length + MARKER_DIAMETER) * medial
+
+
 def _arm(lm: dict[str, np.ndarray], thorax: Frames, thorax_part: Part, s: str, side: str,
          mass: float | None) -> dict[str, Part]:
-    """Upper arm, forearm and hand of one side, and the shoulder centre on the thorax."""
-    get = {name: lm[f"{side}_{name}"] for name in (
-        "acromion", "lateral_humeral_epicondyle", "medial_humeral_epicondyle", "radial_styloid",
-        "ulnar_styloid", "second_metacarpal", "fifth_metacarpal")}
-    lateral, medial = get["lateral_humeral_epicondyle"], get["medial_humeral_epicondyle"]
+    """Upper arm, forearm and hand of one side, and the shoulder centre on the thorax; from the
+    ISB landmarks or Plug-in Gait's (one elbow marker, one finger marker: the elbow centre by
+    :func:`_lateral_elbow`, the hand from the wrist centre to the finger marker, its lateral
+    direction the wrist bar's)."""
+    get = {name: lm[f"{side}_{name}"] for name in _arm_set(lm, side)}
+    lateral = get["lateral_humeral_epicondyle"]
     reach = float(np.mean(np.linalg.norm(get["acromion"] - lateral, axis=1)))
     shoulder = shoulder_centre(get["acromion"], thorax, reach)
     thorax_part.points[f"GH_{s}"] = thorax.mean_local(shoulder)
-    elbow = 0.5 * (lateral + medial)
-    wrist = 0.5 * (get["radial_styloid"] + get["ulnar_styloid"])
-    knuckles = 0.5 * (get["second_metacarpal"] + get["fifth_metacarpal"])
-    upper = _segment(upper_arm_frames(shoulder, lateral, medial, s), elbow, "upper_arm", mass)
-    fore = _segment(forearm_frames(elbow, get["radial_styloid"], get["ulnar_styloid"], s),
-                    wrist, "forearm", mass)
-    hand = _segment(hand_frames(wrist, get["second_metacarpal"], get["fifth_metacarpal"], s),
-                    knuckles, "hand", mass)
+    if "medial_humeral_epicondyle" in get:
+        elbow = 0.5 * (lateral + get["medial_humeral_epicondyle"])
+    else:
+        elbow = _lateral_elbow(shoulder, lateral, thorax, s)
+    radial, ulnar = get["radial_styloid"], get["ulnar_styloid"]
+    wrist = 0.5 * (radial + ulnar)
+    if "finger" in get:  # the wrist bar's direction, about the finger marker
+        knuckles = get["finger"]
+        second, fifth = knuckles + 0.5 * (radial - ulnar), knuckles - 0.5 * (radial - ulnar)
+    else:
+        second, fifth = get["second_metacarpal"], get["fifth_metacarpal"]
+        knuckles = 0.5 * (second + fifth)
+    upper = _segment(upper_arm_frames(shoulder, lateral, 2.0 * elbow - lateral, s), elbow,
+                     "upper_arm", mass)
+    fore = _segment(forearm_frames(elbow, radial, ulnar, s), wrist, "forearm", mass)
+    hand = _segment(hand_frames(wrist, second, fifth, s), knuckles, "hand", mass)
     upper.points.update(GH=np.zeros(3), EJC=upper.points.pop("distal"))
     fore.points.update(EJC=np.zeros(3), WJC=fore.points.pop("distal"))
     hand.points.update(WJC=np.zeros(3))
     hand.points.pop("distal")
     elbow_axis = fore.frames.mean_direction(upper.frames.axes[:, :, 2])
     arm = _perpendicular(E_V, elbow_axis)
-    fore.vectors.update(elbow_arm=arm, pronation_ref=_perpendicular(E_U, arm))
+    fore.vectors.update(elbow_axis=elbow_axis, elbow_arm=arm,
+                        pronation_ref=_perpendicular(E_U, arm))
     wrist_axis = hand.frames.mean_direction(fore.frames.axes[:, :, 2])
     arm = _perpendicular(E_U, wrist_axis)
     hand.vectors.update(wrist_arm=arm, wrist_up=_perpendicular(E_V, arm))
