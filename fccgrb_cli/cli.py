@@ -188,11 +188,14 @@ def _trial_paths(patterns: tuple[str, ...]) -> list[str]:
 @click.option("-o", "--output", default="results.h5", show_default=True,
               type=click.Path(dir_okay=False),
               help="HDF5 results file; an existing one gains (or replaces) this run.")
+@click.option("--write-model", type=click.Path(dir_okay=False), default=None, metavar="PATH",
+              help="With --reduce-residuals: write the model with the adjusted segment masses "
+                   "and centres of mass (YAML) to PATH.")
 @click_options
 @ACCEPT_TRUNCATED
 @reports_input_errors
-def solve(model: str, trials: tuple[str, ...], output: str, accept_truncated: bool,
-          **options: Any) -> None:
+def solve(model: str, trials: tuple[str, ...], output: str, write_model: str | None,
+          accept_truncated: bool, **options: Any) -> None:
     """Solve the kinematics of MODEL (YAML) over TRIAL (C3D or TRC markers) and write HDF5.
 
     Prints a one-row summary: ms/frame (positions), iterations/frame, mean ‖Φ‖ over the active
@@ -212,6 +215,8 @@ def solve(model: str, trials: tuple[str, ...], output: str, accept_truncated: bo
     if Path(output).resolve() in inputs:
         raise InputError(f"{output}: expected a results file other than the model, the trials "
                          "or their truth files (inputs are never modified)")
+    if write_model is not None:
+        _check_model_output(write_model, inputs | {Path(output).resolve()}, chosen, paths)
     loaded = load_checked(model, chosen.form)
     from fccgrb_cli.io.results import check_output
 
@@ -223,6 +228,12 @@ def solve(model: str, trials: tuple[str, ...], output: str, accept_truncated: bo
             run = dataclasses.replace(run, name=f"{Path(path).stem}-{run.name}")
         _write_and_show(run, output)
         runs.append(run)
+        if write_model is not None:
+            from fccgrb_cli.io.atomic import atomic_path
+
+            with atomic_path(write_model) as tmp:
+                tmp.write_text(run.reduction.text, encoding="utf-8")
+            click.echo(f"wrote {write_model}: the model with the adjusted segment inertia")
     with_gait = [r for r in runs if r.gait is not None]
     if len(with_gait) > 1:
         from fccgrb_cli.gait.cycles import pooled
@@ -233,6 +244,20 @@ def solve(model: str, trials: tuple[str, ...], output: str, accept_truncated: bo
         cycles = pooled([r.gait.cycles for r in with_gait])
         write_subject(output, names, cycles)
         click.echo(subject_report(names, cycles))
+
+
+def _check_model_output(path: str, taken: set[Path], options: SolveOptions,
+                        trials: list[str]) -> None:
+    """--write-model asks for a reduction of one trial, into a file that is no input."""
+    if not options.reduce_residuals:
+        raise InputError("--write-model: expected --reduce-residuals (the model it writes is "
+                         "the one the reduction adjusts)")
+    if len(trials) > 1:
+        raise InputError(f"--write-model: expected one trial (each trial adjusts the model its "
+                         f"own way), got {len(trials)}")
+    if Path(path).resolve() in taken:
+        raise InputError(f"--write-model {path}: expected a file other than the model, the "
+                         "trials and the results (inputs are never modified)")
 
 
 def _solve_one(model: Model, path: str, options: SolveOptions, accept_truncated: bool,
@@ -259,6 +284,10 @@ def _write_and_show(run: Run, output: str) -> None:
     click.echo(format_summary(summary(run)))
     if run.clinical is not None:
         click.echo(clinical_table(run.clinical))
+    if run.residuals is not None:
+        from fccgrb_cli.residual_table import residual_table
+
+        click.echo(residual_table(run.residuals, run.reduction))
     if run.gait is not None:
         from fccgrb_cli.gait.report import gait_report
 
@@ -516,6 +545,14 @@ def batch(study: str, output: str | None, workers: int, scheduler: str | None, f
         sys.exit(1)
 
 
+def _rate(results: str) -> float:
+    """The frame rate of a results file's trial (Hz)."""
+    import h5py
+
+    with h5py.File(results, "r") as h5:
+        return float(h5["reference/markers"].attrs["rate"])
+
+
 @main.command()
 @click.argument("results")
 @click.option("--format", "fmt", type=click.Choice(["text", "csv", "markdown"]), default="text",
@@ -573,12 +610,17 @@ def report(results: str, fmt: str, table: str | None, html_folder: str | None,
 
         for name, gait in read_all_gait(results).items():
             click.echo(f"\nrun {name}: {gait_report(gait)}")
+        from fccgrb_cli.io.residual_results import read_all_residuals
+        from fccgrb_cli.residual_table import residual_table
+
+        for name, (residuals, reduction) in read_all_residuals(results).items():
+            click.echo(f"\nrun {name}: {residual_table(residuals, reduction)}")
 
 
 @main.command()
 @click.argument("results")
 @click.option("--kind", type=click.Choice(["point", "ed", "angle", "velocity", "clinical",
-                                          "cycles"]),
+                                          "cycles", "residuals"]),
               default="point", show_default=True,
               help="point: x, y, z of a marker's model point against the reference (m); ed: its "
                    "Euclidean distance to the reference over time (mm); angle: a joint angle "
@@ -586,7 +628,9 @@ def report(results: str, fmt: str, table: str | None, html_folder: str | None,
                    "(m/s, central differences); clinical: clinical angles (deg) and joint "
                    "moments (N·m/kg) of both legs, force-plate stances shaded; cycles: each "
                    "side's mean ± SD gait cycle (0–100 %) of the clinical angles and moments, "
-                   "toe-off dashed.")
+                   "toe-off dashed; residuals: a floating base's residual force and moment "
+                   "over the trial (the first model's beside the reduced one's), frames with "
+                   "an unmeasured ground contact greyed.")
 @click.option("--marker", default=None, help="Model marker name [default: the last tracked].")
 @click.option("--angle", default=None,
               help="Angle name for --kind angle [default: the first]; for --kind clinical, "
@@ -626,6 +670,16 @@ def plot(results: str, kind: str, marker: str | None, angle: str | None,
         save(draw_cycles(gaits, tuple(a for a in (angle or "").split(",") if a),
                          read_norms(normative).curves if normative else None), output)
         click.echo(f"wrote {output}: cycles for {len(gaits)} runs")
+        return
+    if kind == "residuals":
+        from fccgrb_cli.io.residual_results import read_all_residuals
+        from fccgrb_cli.residual_plot import draw_residuals
+
+        wanted = _split(runs)
+        found = {k: r for k, r in read_all_residuals(results).items()
+                 if not wanted or k in wanted}
+        save(draw_residuals(found, _rate(results)), output)
+        click.echo(f"wrote {output}: residuals for {len(found)} runs")
         return
     series = load_series(Path(results), _split(runs))
     save(draw(series, kind, marker, angle, axis), output)

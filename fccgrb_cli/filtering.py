@@ -21,3 +21,16 @@ def lowpass(signal: np.ndarray, rate: float, cutoff: float, order: int = 2) -> n
         raise InputError(f"--filter-cutoff: the trial has {len(signal)} frames; the filter needs "
                          f"more than {pad}")
     return filtfilt(b, a, signal, axis=0)
+
+
+def settling_frames(rate: float, cutoff: float, order: int = 2, tolerance: float = 0.05) -> int:
+    """How many frames either side of a step :func:`lowpass` spreads it by more than
+    ``tolerance`` of the step (its reach: a frame that near a jump in the input carries part of
+    it). Measured on the filter's own step response."""
+    from scipy.signal import butter, filtfilt
+
+    b, a = butter(order, cutoff / (rate / 2))
+    half = max(64, int(20 * rate / cutoff))
+    step = np.r_[np.zeros(half), np.ones(half)]
+    spread = np.flatnonzero(np.abs(filtfilt(b, a, step) - step) > tolerance)
+    return int(max(half - spread.min(), spread.max() - half + 1)) if spread.size else 0

@@ -24,6 +24,7 @@ from fccgrb_cli.io.truth import Truth, read_truth, truth_path
 from fccgrb_cli.model import Model
 from fccgrb_cli.options import SolveOptions, prepared
 from fccgrb_cli.perturb import perturb
+from fccgrb_cli.residual_stage import residual_stage
 from fccgrb_cli.run import Run
 from fccgrb_cli.solvers import KinematicResult, solve_ad
 from fccgrb_cli.solvers.ad.baseline import solve_baseline
@@ -76,6 +77,9 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
         notes: list[str] = []
         stance: dict[str, np.ndarray] = {}
         solved_dynamics = _dynamics(model, trial, system, result, options, warnings, notes, stance)
+        residuals = residual_stage(model, trial, result, solved_dynamics, stance, inputs, options,
+                                   warnings)
+        solved_dynamics = residuals.dynamics
         result = store.coordinates(result)
         solved_dynamics = store.dynamics(solved_dynamics)
         clinical = clinical_results(
@@ -93,7 +97,8 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
             form=",".join(sorted({b.form for b in model.bodies})),
             model_text=model.text, trial_path=trial.path,
             dynamics=solved_dynamics, warnings=tuple(warnings), notes=tuple(notes),
-            clinical=clinical, gait=gait)
+            clinical=clinical, gait=gait, residuals=residuals.report,
+            reduction=residuals.reduction)
 
 
 class _Store:

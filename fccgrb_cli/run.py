@@ -12,6 +12,8 @@ import numpy as np
 
 from fccgrb_cli.clinical import ClinicalResults
 from fccgrb_cli.dynamics.convert import Dynamics
+from fccgrb_cli.dynamics.reduction import Reduction
+from fccgrb_cli.dynamics.residuals import ResidualReport
 from fccgrb_cli.gait.analysis import GaitResults
 from fccgrb_cli.model import Model
 from fccgrb_cli.named import NamedArray
@@ -45,6 +47,8 @@ class Run:
     notes: tuple[str, ...] = ()
     clinical: ClinicalResults | None = None
     gait: GaitResults | None = None
+    residuals: ResidualReport | None = None
+    reduction: Reduction | None = None
 
     def __repr__(self) -> str:
         r = self.result
@@ -233,6 +237,10 @@ def summary(run: Run) -> dict[str, float | str | int]:
         row["max |dθ| deg"] = float(np.degrees(angle_err.max())) if angle_err.size else float("nan")
         if distance.any():
             row["max |dd| mm"] = 1e3 * float(err[:, distance].max()) if err.size else float("nan")
+    if run.residuals is not None:
+        over = run.residuals.over_measured
+        row["residual F %BW"] = over.force_rms_bw
+        row["residual M N·m"] = over.moment_rms
     if run.dynamics is not None:
         loads = np.abs(run.dynamics.inverse.joint_moments)
         distance = np.array(run._angle_units) == "m"

@@ -37,9 +37,9 @@ SEGMENTS = {
 }
 # angle name (side removed) → (mean offset from 90 deg, amplitude deg)
 MOTIONS = {
-    "hip_flexion": (10, 25), "hip_adduction": (0, 8), "hip_rotation": (0, 8),
-    "knee_flexion": (30, 25), "ankle_dorsiflexion": (0, 12), "ankle_inversion": (0, 8),
-    "trunk_flexion": (0, 10), "trunk_lateral_bending": (0, 6), "trunk_rotation": (0, 10),
+    "hip_flexion": (10, 25), "hip_adduction": (0, 10), "hip_rotation": (0, 15),
+    "knee_flexion": (30, 25), "ankle_dorsiflexion": (0, 20), "ankle_inversion": (0, 15),
+    "trunk_flexion": (0, 20), "trunk_lateral_bending": (0, 12), "trunk_rotation": (0, 20),
     "neck_flexion": (0, 12), "neck_lateral_bending": (0, 8), "neck_rotation": (0, 15),
     "shoulder_flexion": (0, 30), "shoulder_abduction": (10, 12), "shoulder_rotation": (0, 15),
     "elbow_flexion": (50, 35), "elbow_pronation": (60, 25), "wrist_flexion": (0, 20),

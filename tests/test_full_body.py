@@ -27,6 +27,7 @@ from fccgrb_cli.synth import synthesize
 
 ROOT = Path(__file__).resolve().parents[1]
 QUALISYS = ROOT / ".." / "shared" / "data" / "c3d" / "Qualisys.c3d"
+PIG = ROOT / ".." / "shared" / "data" / "c3d" / "plugin_gait"
 MASS = 70.0
 # de Leva (1996) Table 4, males: mass fractions, typed from the paper
 DE_LEVA = {"thorax": 0.1596 + 0.1633, "head": 0.0694, "upper_arm": 0.0271, "forearm": 0.0162,
@@ -127,3 +128,30 @@ def test_a_signed_joint_angle_reads_within_half_a_turn() -> None:
         np.testing.assert_allclose(angle.clinical(theta), clinical, atol=1e-9)
     cosine = AngularCoordinate("knee", "a", "v", "b", "u", clinical_sign=1)
     np.testing.assert_allclose(cosine.clinical(np.radians([100.0])), [10.0])
+
+
+@pytest.mark.skipif(not PIG.exists(), reason="../shared/data not present")
+def test_plugin_gait_full_body_calibrates_from_its_static_and_solves_walking() -> None:
+    """The PiG full-body template on the shared child trials: calibrated from the static with
+    the measurements Nexus stored in it (PROCESSING: knee and ankle widths, marker diameter,
+    body mass), then every frame of a stretch of the walking trial solved, markers within
+    10 mm."""
+    import fccgrb_cli as fc
+    from fccgrb_cli.anatomy.calibrate import Measurements
+    from fccgrb_cli.io.processing import processing_measurements
+
+    static = PIG / "HC030A01.c3d"
+    m = processing_measurements(static)
+    widths = Measurements(knee_width=float(np.mean([m.knee_width.left, m.knee_width.right])),
+                          ankle_width=float(np.mean([m.ankle_width.left,
+                                                     m.ankle_width.right])),
+                          marker_diameter=m.marker_diameter)
+    template = load_model(ROOT / "configs" / "models" / "full_body_plugin_gait.yaml")
+    personal = parse_model(personalize(template, fc.read_trial(str(static)), mass=m.body_mass,
+                                       measurements=widths).text, "personal.yaml")
+    walk = fc.read_trial(str(PIG / "HC030A05.c3d"))
+    walk = Trial(walk.path, walk.labels, walk.markers[:40], walk.rate)
+    run = fc.solve(personal, walk, method="nrm-wls", dynamics=False, events="none",
+                   engine="compiled", max_iter=500)
+    assert run.summary()["failed"] == 0
+    assert run.summary()["mean ED mm"] <= 10.0

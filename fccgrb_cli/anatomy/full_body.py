@@ -344,8 +344,7 @@ def _arm(lm: dict[str, np.ndarray], thorax: Frames, thorax_part: Part, s: str, s
     hand.points.pop("distal")
     elbow_axis = fore.frames.mean_direction(upper.frames.axes[:, :, 2])
     arm = _perpendicular(E_V, elbow_axis)
-    fore.vectors.update(elbow_axis=elbow_axis, elbow_arm=arm,
-                        pronation_ref=_perpendicular(E_U, arm))
+    fore.vectors.update(elbow_arm=arm, pronation_ref=_perpendicular(E_U, arm))
     wrist_axis = hand.frames.mean_direction(fore.frames.axes[:, :, 2])
     arm = _perpendicular(E_U, wrist_axis)
     hand.vectors.update(wrist_arm=arm, wrist_up=_perpendicular(E_V, arm))

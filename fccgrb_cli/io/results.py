@@ -49,6 +49,9 @@ Contract (SI units: m, rad, s):
       clinical/moments           frames × clinical angles, N·m, conjugate to them (with the
                                  dynamics); clinical/moments_per_kg, N·m/kg (attribute ``mass``)
       clinical/stance/<body>     per frame, True while a force plate loads that body
+    with one floating base and the dynamics: residuals/ (the residual over the frames where
+    every ground contact is measured) and, with --reduce-residuals, the first model's residual
+    and the reduction (layout in fccgrb_cli.io.residual_results)
 Arrays of 64 KiB or more are stored chunked and gzip-compressed (``fccgrb_cli.io.datasets``):
 a long trial is written and read a chunk at a time; any HDF5 reader decodes them.
 """
@@ -67,6 +70,7 @@ from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.atomic import atomic_path
 from fccgrb_cli.io.datasets import put as put_array
 from fccgrb_cli.io.gait_results import write_gait
+from fccgrb_cli.io.residual_results import write_residuals
 from fccgrb_cli.io.spill import StoredArray
 from fccgrb_cli.solvers.quality import BITS
 
@@ -209,6 +213,8 @@ def write_run(path: str | Path, run: Run, command: str, cell: dict | None = None
                 _write_clinical(g, run.clinical)
             if run.gait is not None:
                 write_gait(g, run.gait)
+            if run.residuals is not None:
+                write_residuals(g, run.residuals, run.reduction)
     for spill in {stored.spill for stored in _stored(run)}:
         spill.settled(path, f"/runs/{run.name}")
 

@@ -14,6 +14,7 @@ from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.io.datasets import open_results
 from fccgrb_cli.io.gait_results import read_gait
+from fccgrb_cli.io.residual_results import read_residuals
 from fccgrb_cli.io.results import FORMAT_VERSION
 from fccgrb_cli.options import SolveOptions
 from fccgrb_cli.run import Run
@@ -57,6 +58,7 @@ def _read_run(name: str, g) -> Run:
     result = _read_result(g, names, time, a, g["solver_converged"][()], {
         "messages": messages, "wall_s": float(a["wall_s"]), "flags": g["flags"][()],
         "status": _strings(g["status"][()]) if "status" in g else ()})
+    residuals, reduction = read_residuals(g)
     return Run(
         name=name, options=SolveOptions.from_json(str(a["options"])), result=result,
         labels=_strings(a["labels"]), rate=float(a["rate"]), reference=g["reference"][()],
@@ -67,7 +69,8 @@ def _read_run(name: str, g) -> Run:
         dynamics=_read_dynamics(g, names, time) if "joint_moments" in g else None,
         warnings=warnings, notes=_strings(a["notes"]),
         clinical=_read_clinical(g["clinical"]) if "clinical" in g else None,
-        gait=read_gait(g["gait"]) if "gait" in g else None)
+        gait=read_gait(g["gait"]) if "gait" in g else None, residuals=residuals,
+        reduction=reduction)
 
 
 def _read_dynamics(g, names: tuple[str, ...], time: np.ndarray) -> Dynamics:
