@@ -357,7 +357,7 @@ WHOLE_BODY = [
 RESIDUAL_ANCHORS = [
     "| AddBiomechanics (Werling et al. 2023), Hamner running | mean | 5.7 | – | 34.8 |",
     "| AddBiomechanics (Werling et al. 2023), Uhlrich walking | mean | 12.8 | – | 11.4 |",
-    "| OpenSim RRA guidelines (Hicks et al. 2015) | peak | 10–20 | – | < 75 |",
+    "| OpenSim RRA guidelines (OpenSim documentation) | peak | 10–20 | – | < 75 |",
 ]
 
 

@@ -1,7 +1,8 @@
 """The residual figure (``fccgrb plot --kind residuals``): per run, the magnitude of the floating
 base's residual force (N, and % of body weight on the right axis) and moment (N·m) over the
 trial, the first model's dashed beside the reduced one's after ``--reduce-residuals``, the
-frames where a ground contact is not measured greyed (their residual is no check of anything)."""
+frames where a ground contact is not measured greyed (their residual is no check of anything,
+and the axes are scaled to the measured frames: there the unmeasured reaction runs off them)."""
 
 from __future__ import annotations
 
@@ -37,11 +38,15 @@ def draw_residuals(runs: dict[str, tuple[ResidualReport, Reduction | None]], rat
         weight = report.over_measured.weight
         for ax, key, unit in ((row[0], "force", "N"), (row[1], "moment", "N·m")):
             _grey_unmeasured(ax, time, report.measured)
+            curves = [np.linalg.norm(getattr(report, key), axis=1)]
             if reduction is not None:
-                ax.plot(time, np.linalg.norm(getattr(reduction.before, key), axis=1), "--",
-                        color="tab:red", lw=1.2, label="first model")
-            ax.plot(time, np.linalg.norm(getattr(report, key), axis=1), color="tab:blue",
-                    lw=1.5, label="reduced" if reduction is not None else name)
+                curves.append(np.linalg.norm(getattr(reduction.before, key), axis=1))
+                ax.plot(time, curves[1], "--", color="tab:red", lw=1.2, label="first model")
+            ax.plot(time, curves[0], color="tab:blue", lw=1.5,
+                    label="reduced" if reduction is not None else name)
+            if report.measured.any():
+                top = max(float(c[report.measured].max()) for c in curves)
+                ax.set_ylim(0.0, 1.4 * top)
             ax.set_xlabel("time (s)")
             ax.set_ylabel(f"|residual {key}| ({unit})")
             ax.set_title(f"{name}: residual {key} (grey: a contact not measured)", fontsize=9)

@@ -14,13 +14,14 @@ J⁰, J¹, J² from the residual of the rigidly moved motion (``residuals.whole_
 polynomial in δ, so central differences give its derivatives exactly). δ minimizes
 
     Σ_{t measured} ‖r_t + J_t δ‖²_W + Σ_{t not measured} ‖J_t δ‖²_W
-        + Σ_t ‖J_{t+1} δ − J_t δ‖²_W + Σ_t (1/σ²) mean_k ‖e_k,t + Δp_k,t‖²,
+        + Σ_t ‖J_{t+1} δ − 2 J_t δ + J_{t−1} δ‖²_W + Σ_t (1/σ²) mean_k ‖e_k,t + Δp_k,t‖²,
 
 W = diag(1/σ_F², 1/σ_M²): the residual where every contact is measured; no change of it where a
-contact is not (the correction adds no acceleration there); the change the correction makes
-to the residual from one frame to the next (without it the correction would switch on and off
+contact is not (the correction adds no acceleration there); the bend, frame to frame, of the
+change the correction makes to the residual (without it the correction would switch on and off
 at the edges of the measured stretches within a frame: a step in the accelerations, and so in
-the joint moments); and the mean squared marker misfit (the quantity whose RMS is reported).
+the joint moments; a second difference leaves a smooth change, however fast, nearly free); and
+the mean squared marker misfit (the quantity whose RMS is reported).
 σ_F = 0.5 % of body weight, σ_M = 0.5 % of body weight × 1 m and σ = 2 mm: a residual that
 size costs as much as a marker misfit of 2 mm, the growth of marker RMS a lab accepts (on the
 Qualisys walking trial the reduction then adds 0.3 mm to the markers' RMS over the trial). A
@@ -177,8 +178,9 @@ def correction_step(model: Model, data: CorrectionData) -> RigidCorrection:
     W = diags(np.tile(w, n))
     target = np.where(data.measured[:, None], r0, 0.0).ravel()
     WA = W @ A
-    step_change = diags(np.tile(w, n - 1)) @ kron(
-        diags([-np.ones(n - 1), np.ones(n - 1)], [0, 1], shape=(n - 1, n)), I6) @ A
+    bend = diags([np.ones(n - 2), -2 * np.ones(n - 2), np.ones(n - 2)], [0, 1, 2],
+                 shape=(n - 2, n))  # the second difference from frame to frame
+    step_change = diags(np.tile(w, n - 2)) @ kron(bend, I6) @ A
     lhs = WA.T @ WA + step_change.T @ step_change
     rhs = -(WA.T @ (W @ target))
     # markers: Δp = δr + θ × d = [I, −[d]×] δ per marker, mean over the markers seen
