@@ -254,11 +254,14 @@ def _trial_paths(patterns: tuple[str, ...]) -> list[str]:
 @click.option("-o", "--output", default="results.h5", show_default=True,
               type=click.Path(dir_okay=False),
               help="HDF5 results file; an existing one gains (or replaces) this run.")
+@click.option("--write-model", type=click.Path(dir_okay=False), default=None, metavar="PATH",
+              help="With --reduce-residuals: write the model with the adjusted segment masses "
+                   "and centres of mass (YAML) to PATH.")
 @click_options
 @ACCEPT_TRUNCATED
 @reports_input_errors
-def solve(model: str, trials: tuple[str, ...], output: str, accept_truncated: bool,
-          **options: Any) -> None:
+def solve(model: str, trials: tuple[str, ...], output: str, write_model: str | None,
+          accept_truncated: bool, **options: Any) -> None:
     """Solve the kinematics of MODEL (YAML) over TRIAL (C3D or TRC markers) and write HDF5.
 
     Prints a one-row summary: ms/frame (positions), iterations/frame, mean ‖Φ‖ over the active
@@ -279,6 +282,11 @@ def solve(model: str, trials: tuple[str, ...], output: str, accept_truncated: bo
     paths = _trial_paths(trials)
     refuse_inputs(output, [model, *paths, *map(truth_path, paths), *_map_files(options)])
     check_target(output)
+    if write_model is not None:
+        taken = {Path(p).resolve() for p in (model, *paths, *map(truth_path, paths), output,
+                                             *_map_files(options))}
+        _check_model_output(write_model, taken, chosen, paths)
+        check_target(write_model)
     check_output(output)
     loaded = load_checked(model, chosen.form)
     runs = []
@@ -292,6 +300,12 @@ def solve(model: str, trials: tuple[str, ...], output: str, accept_truncated: bo
             name = check_name(f"{Path(path).stem}-{run.name}", f"{path}: run name")
             run = dataclasses.replace(run, name=name)
         runs.append(run)
+        if write_model is not None:
+            from fccgrb_cli.io.atomic import atomic_path
+
+            with atomic_path(write_model) as tmp:
+                tmp.write_text(run.reduction.text, encoding="utf-8")
+            click.echo(f"wrote {write_model}: the model with the adjusted segment inertia")
     with_gait = [r for r in runs if r.gait is not None]
     subject = None
     if len(with_gait) > 1:
@@ -312,6 +326,20 @@ def _map_files(options: dict[str, Any]) -> list[str]:
     """The label-map files a --map names (inputs too)."""
     return [item.strip() for item in options.get("mapping") or ()
             if item.strip().lower().endswith((".yaml", ".yml")) and "=" not in item]
+
+
+def _check_model_output(path: str, taken: set[Path], options: SolveOptions,
+                        trials: list[str]) -> None:
+    """--write-model asks for a reduction of one trial, into a file that is no input."""
+    if not options.reduce_residuals:
+        raise InputError("--write-model: expected --reduce-residuals (the model it writes is "
+                         "the one the reduction adjusts)")
+    if len(trials) > 1:
+        raise InputError(f"--write-model: expected one trial (each trial adjusts the model its "
+                         f"own way), got {len(trials)}")
+    if Path(path).resolve() in taken:
+        raise InputError(f"--write-model {path}: expected a file other than the model, the "
+                         "trials and the results (inputs are never modified)")
 
 
 def _solve_one(model: Model, path: str, options: SolveOptions, accept_truncated: bool,
@@ -360,6 +388,10 @@ def _show(run: Run, output: str) -> None:
     click.echo(format_summary(summary(run)))
     if run.clinical is not None:
         click.echo(clinical_table(run.clinical))
+    if run.residuals is not None:
+        from fccgrb_cli.residual_table import residual_table
+
+        click.echo(residual_table(run.residuals, run.reduction))
     if run.gait is not None:
         from fccgrb_cli.gait.report import gait_report
 
@@ -443,7 +475,7 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
     template's subject: section, --subject files and the width options, in that order. Writes a
     model ready for `fccgrb solve`."""
     from fccgrb_cli.anatomy.calibrate import Measurements
-    from fccgrb_cli.anatomy.calibrate import calibrate as personalize
+    from fccgrb_cli.anatomy.full_body import personalize
     from fccgrb_cli.io.atomic import atomic_path, check_target
     from fccgrb_cli.io.trial import read_trial
     from fccgrb_cli.io.virtual import resolved
@@ -473,9 +505,10 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
     _template_labels(template, labels)
     result = personalize(template, data, _frame_range(frames), mass, measured, labels,
                          vertical)
-    for message in result.axes.warnings:
-        click.echo(f"fccgrb: warning: {message}", err=True)
-    click.echo(f"fccgrb: {result.axes.note()}", err=True)
+    if result.axes is not None:  # None: a template without legs keeps its own gravity
+        for message in result.axes.warnings:
+            click.echo(f"fccgrb: warning: {message}", err=True)
+        click.echo(f"fccgrb: {result.axes.note()}", err=True)
     personal = parse_model(result.text, output)
     analyse(personal)
     with atomic_path(output) as tmp:
@@ -753,6 +786,14 @@ def _cycle_bands(results: str, names: tuple[str, ...]
     return out
 
 
+def _rate(results: str) -> float:
+    """The frame rate of a results file's trial (Hz)."""
+    import h5py
+
+    with h5py.File(results, "r") as h5:
+        return float(h5["reference/markers"].attrs["rate"])
+
+
 @main.command()
 @click.argument("results")
 @click.option("--format", "fmt", type=click.Choice(["text", "csv", "markdown"]), default="text",
@@ -811,12 +852,17 @@ def report(results: str, fmt: str, table: str | None, html_folder: str | None,
 
         for name, gait in read_all_gait(results).items():
             click.echo(f"\nrun {name}: {gait_report(gait)}")
+        from fccgrb_cli.io.residual_results import read_all_residuals
+        from fccgrb_cli.residual_table import residual_table
+
+        for name, (residuals, reduction) in read_all_residuals(results).items():
+            click.echo(f"\nrun {name}: {residual_table(residuals, reduction)}")
 
 
 @main.command()
 @click.argument("results")
 @click.option("--kind", type=click.Choice(["point", "ed", "angle", "velocity", "clinical",
-                                          "cycles"]),
+                                          "cycles", "residuals"]),
               default="point", show_default=True,
               help="point: x, y, z of a marker's model point against the reference (m); ed: its "
                    "Euclidean distance to the reference over time (mm); angle: a joint angle "
@@ -824,7 +870,9 @@ def report(results: str, fmt: str, table: str | None, html_folder: str | None,
                    "(m/s, central differences); clinical: clinical angles (deg) and joint "
                    "moments (N·m/kg) of both legs, force-plate stances shaded; cycles: each "
                    "side's mean ± SD gait cycle (0–100 %) of the clinical angles and moments, "
-                   "toe-off dashed.")
+                   "toe-off dashed; residuals: a floating base's residual force and moment "
+                   "over the trial (the first model's beside the reduced one's), frames with "
+                   "an unmeasured ground contact greyed.")
 @click.option("--marker", default=None, help="Model marker name [default: the last tracked].")
 @click.option("--angle", default=None,
               help="Angle name for --kind angle [default: the first]; for --kind clinical, "
@@ -868,6 +916,16 @@ def plot(results: str, kind: str, marker: str | None, angle: str | None,
                          read_norms(normative).curves if normative else None,
                          _cycle_bands(results, tuple(gaits))), output)
         click.echo(f"wrote {output}: cycles for {len(gaits)} runs")
+        return
+    if kind == "residuals":
+        from fccgrb_cli.io.residual_results import read_all_residuals
+        from fccgrb_cli.residual_plot import draw_residuals
+
+        wanted = _split(runs)
+        found = {k: r for k, r in read_all_residuals(results).items()
+                 if not wanted or k in wanted}
+        save(draw_residuals(found, _rate(results)), output)
+        click.echo(f"wrote {output}: residuals for {len(found)} runs")
         return
     series = load_series(Path(results), _split(runs))
     save(draw(series, kind, marker, angle, axis), output)

@@ -47,7 +47,22 @@ def noise_share(signal: np.ndarray, rate: float, above: float = NOISE_BAND_HZ) -
     with np.errstate(invalid="ignore", divide="ignore"):
         share = np.where(total > 0, np.sqrt(high / total), np.nan)
     return np.where(np.sqrt(high / count) < NOISE_FLOOR, 0.0, share)
+
+
 def frames_needed(order: int) -> int:
     """The fewest samples the forward-backward filter of ``order`` takes: more than its padding,
     three times the filter's length (order + 1 coefficients), as scipy's filtfilt pads."""
     return 3 * (order + 1) + 1
+
+
+def settling_frames(rate: float, cutoff: float, order: int = 2, tolerance: float = 0.05) -> int:
+    """How many frames either side of a step :func:`lowpass` spreads it by more than
+    ``tolerance`` of the step (its reach: a frame that near a jump in the input carries part of
+    it). Measured on the filter's own step response."""
+    from scipy.signal import butter, filtfilt
+
+    b, a = butter(order, cutoff / (rate / 2))
+    half = max(64, int(20 * rate / cutoff))
+    step = np.r_[np.zeros(half), np.ones(half)]
+    spread = np.flatnonzero(np.abs(filtfilt(b, a, step) - step) > tolerance)
+    return int(max(half - spread.min(), spread.max() - half + 1)) if spread.size else 0

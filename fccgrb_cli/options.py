@@ -184,6 +184,14 @@ class SolveOptions:
         None, help="Inverse dynamics (joint moments in N·m, multipliers, energies) on the "
                    "classical model driven by the solved angles [default: on when every body "
                    "has mass and inertia].")
+    reduce_residuals: bool = _option(
+        False, help="Residual reduction (dynamic consistency) for a model with one floating "
+                    "base and force plates: segment masses (within ±25 %) and centres of mass "
+                    "(within ±10 % of each segment's size) fitted to the base's residual over "
+                    "the frames where every ground contact is measured, then a small rigid "
+                    "correction of the whole body's trajectory that trades the residual against "
+                    "the markers' misfit; the run's dynamics are then the adjusted model's, the "
+                    "first model's residual kept beside them (fccgrb_cli/dynamics/reduction.py).")
     name: str | None = _option(
         None, help="Run name inside the results file [default: the method, then -truth, "
                    "-f<cutoff>Hz and -P<mm> where they apply, e.g. ad-f6Hz-P30].")

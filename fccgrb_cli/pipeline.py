@@ -36,6 +36,7 @@ from fccgrb_cli.io.virtual import resolved
 from fccgrb_cli.model import Model
 from fccgrb_cli.options import SolveOptions, prepared
 from fccgrb_cli.perturb import perturb
+from fccgrb_cli.residual_stage import residual_stage
 from fccgrb_cli.run import Run
 from fccgrb_cli.smoothing import Smoothing, smoothed_or_warned
 from fccgrb_cli.solvers import KinematicResult, solve_ad
@@ -121,6 +122,9 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
                 () if solved_dynamics is None else solved_dynamics.loads), outside)
             notes.append(uncertainty.describe())
             solved_dynamics = _blank_frames(solved_dynamics, outside, result.time)
+        residuals = residual_stage(model, trial, result, solved_dynamics, stance, inputs, options,
+                                   warnings)
+        solved_dynamics = residuals.dynamics
         if solved_dynamics is not None:
             result = with_findings(result, dynamic_findings(model, solved_dynamics))
         pig = plugin_gait_results(model, result.q, result.trusted, solved_dynamics) \
@@ -154,7 +158,8 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
             model_text=model.text, trial_path=trial.path,
             dynamics=solved_dynamics, warnings=tuple(warnings), notes=tuple(notes),
             clinical=clinical, gait=gait, moment_flags=moments, axes=axes,
-            uncertainty=uncertainty, plugin_gait=pig, start_time=trial.start)
+            uncertainty=uncertainty, plugin_gait=pig, start_time=trial.start,
+            residuals=residuals.report, reduction=residuals.reduction)
 
 
 class _Store:

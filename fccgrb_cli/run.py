@@ -12,6 +12,8 @@ import numpy as np
 
 from fccgrb_cli.clinical import ClinicalResults
 from fccgrb_cli.dynamics.convert import Dynamics
+from fccgrb_cli.dynamics.reduction import Reduction
+from fccgrb_cli.dynamics.residuals import ResidualReport
 from fccgrb_cli.gait.analysis import GaitResults
 from fccgrb_cli.gait.plugin_gait_outputs import PluginGaitResults
 from fccgrb_cli.io.lab_axes import LabAxes
@@ -53,6 +55,8 @@ class Run:
     uncertainty: Uncertainty | None = None
     plugin_gait: PluginGaitResults | None = None
     start_time: float = 0.0  # s: the first frame's time on the trial file's clock
+    residuals: ResidualReport | None = None
+    reduction: Reduction | None = None
 
     def __repr__(self) -> str:
         r = self.result
@@ -291,6 +295,10 @@ def summary(run: Run) -> dict[str, float | str | int]:
         row["max |dθ| deg"] = float(np.degrees(angle_err.max())) if angle_err.size else float("nan")
         if distance.any():
             row["max |dd| mm"] = 1e3 * float(err[:, distance].max()) if err.size else float("nan")
+    if run.residuals is not None:
+        over = run.residuals.over_measured
+        row["residual F %BW"] = over.force_rms_bw
+        row["residual M N·m"] = over.moment_rms
     if run.dynamics is not None:  # over the trusted moments only
         trusted = run.moments_trusted
         loads = np.where(trusted, np.abs(run.dynamics.inverse.joint_moments), np.nan)

@@ -138,15 +138,19 @@ def calibration_method(model: Model) -> str:
                      f"the other: {', '.join(n for n in METHODS if n != nearest)})")
 
 
-def _landmarks(model: Model, trial: Trial, frames: slice, names: tuple[str, ...],
-               mapping: dict[str, str]) -> dict[str, np.ndarray]:
-    return {name: _marker(trial, model.landmarks[name], frames,
-                          f"{model.source} calibration.landmarks.{name}", mapping)
+def read_landmarks(model: Model, trial: Trial, frames: slice, names: tuple[str, ...],
+                   mapping: dict[str, str]) -> dict[str, np.ndarray]:
+    """Each named landmark's trajectory (frames × 3) over ``frames``, by the template's
+    ``calibration.landmarks`` label (through ``mapping``)."""
+    return {name: read_marker(trial, model.landmarks[name], frames,
+                              f"{model.source} calibration.landmarks.{name}", mapping)
             for name in names}
 
 
-def _marker(trial: Trial, label: str, frames: slice, used_by: str,
-            mapping: dict[str, str]) -> np.ndarray:
+def read_marker(trial: Trial, label: str, frames: slice, used_by: str,
+                mapping: dict[str, str]) -> np.ndarray:
+    """A marker's trajectory over ``frames``; an error names it (and ``used_by``) when it is
+    absent or has a gap there."""
     wanted = mapping.get(label, label)
     found = trial.find(wanted)
     if found is None:
@@ -302,7 +306,7 @@ def calibrate(model: Model, trial: Trial, frames: tuple[int, int] | None = None,
         raise InputError(f"{model.source}: bodies: expected the lower-limb bodies "
                          f"{', '.join(BODIES)}; missing {', '.join(absent)}")
     window = slice(start, stop)
-    lm = _landmarks(model, trial, window, METHODS[method], mapping)
+    lm = read_landmarks(model, trial, window, METHODS[method], mapping)
     axes = lab_axes(model, trial, _tracked_markers(model, trial, window, mapping), vertical)
     if method == "davis":
         measurements = measurements or Measurements()
@@ -355,7 +359,7 @@ def calibrate(model: Model, trial: Trial, frames: tuple[int, int] | None = None,
     for tp in model.tracked_points:
         if tp.body in seg:
             local = seg[tp.body].local(
-                _marker(trial, tp.marker, window, f"{model.source} tracking.points", mapping))
+                read_marker(trial, tp.marker, window, f"{model.source} tracking.points", mapping))
             points[tp.body][tp.point] = np.nanmean(local, axis=0)
             strayed.append(np.linalg.norm(local - points[tp.body][tp.point], axis=1))
     fit = (1e3 * float(np.mean(strayed)), 1e3 * float(np.max(strayed))) if strayed else \

@@ -70,7 +70,10 @@ Contract (SI units: m, rad, s):
                                  its own checks, as ``moment_flags``)
       clinical/stance/<body>     per frame, True while a force plate loads that body
     with a model calibrated as Plug-in Gait, its outputs in Plug-in Gait's names and units
-    (fccgrb_cli.io.pig_results): plugin_gait/angles, moments, powers
+    (fccgrb_cli.io.pig_results): plugin_gait/angles, moments, powers;
+    with one floating base and the dynamics: residuals/ (the residual over the frames where
+    every ground contact is measured) and, with --reduce-residuals, the first model's residual
+    and the reduction (layout in fccgrb_cli.io.residual_results)
 Arrays of 64 KiB or more are stored chunked and gzip-compressed (``fccgrb_cli.io.datasets``):
 a long trial is written and read a chunk at a time; any HDF5 reader decodes them.
 
@@ -100,6 +103,7 @@ from fccgrb_cli.io.hdf5_writer import writing
 from fccgrb_cli.io.lab_axes import LabAxes
 from fccgrb_cli.io.lock import exclusive
 from fccgrb_cli.io.pig_results import write_plugin_gait
+from fccgrb_cli.io.residual_results import write_residuals
 from fccgrb_cli.io.results_format import FORMAT_VERSION, check_run, reading, runs_group
 from fccgrb_cli.io.spill import StoredArray
 from fccgrb_cli.solvers.quality import BITS, FLAG_DTYPE, FRAME_BITS, MOMENT_BITS, bit_summary
@@ -279,6 +283,8 @@ def _write_run(h5, run: Run, command: str, cell: dict | None) -> None:
         write_gait(g, run.gait)
     if run.plugin_gait is not None:
         write_plugin_gait(g, run.plugin_gait)
+    if run.residuals is not None:
+        write_residuals(g, run.residuals, run.reduction)
 
 
 def _write_axes(g, axes: LabAxes) -> None:

@@ -16,6 +16,7 @@ from fccgrb_cli.io.datasets import open_results
 from fccgrb_cli.io.gait_results import read_gait
 from fccgrb_cli.io.lab_axes import LabAxes
 from fccgrb_cli.io.pig_results import read_plugin_gait
+from fccgrb_cli.io.residual_results import read_residuals
 from fccgrb_cli.io.results_format import check_run, reading, runs_group
 from fccgrb_cli.options import SolveOptions
 from fccgrb_cli.run import Run
@@ -62,6 +63,7 @@ def _read_run(name: str, g) -> Run:
         "messages": messages, "wall_s": float(a["wall_s"]),
         "flags": g["flags"][()].astype(FLAG_DTYPE),  # uint8 in files written before 16 bits
         "status": _strings(g["status"][()]) if "status" in g else ()})
+    residuals, reduction = read_residuals(g)
     return Run(
         name=name, options=SolveOptions.from_json(str(a["options"])), result=result,
         labels=_strings(a["labels"]), rate=float(a["rate"]), reference=g["reference"][()],
@@ -77,7 +79,8 @@ def _read_run(name: str, g) -> Run:
         axes=_read_axes(a),
         uncertainty=_read_uncertainty(g["uncertainty"]) if "uncertainty" in g else None,
         plugin_gait=read_plugin_gait(g["plugin_gait"]) if "plugin_gait" in g else None,
-        start_time=float(a.get("start_time_s", 0.0)))
+        start_time=float(a.get("start_time_s", 0.0)), residuals=residuals,
+        reduction=reduction)
 
 
 def _read_axes(a: dict) -> LabAxes | None:

@@ -180,10 +180,15 @@ class AngularCoordinate:
         return "angle"
 
     def clinical(self, theta: np.ndarray) -> np.ndarray | None:
-        """The clinical angle in degrees, sign·(θ − 90°), or None when none is declared."""
+        """The clinical angle in degrees, sign·(θ − 90°), or None when none is declared. A
+        signed angle counts turns from wherever its solve started, so its clinical series is
+        moved by whole turns to put its mean in (−180°, 180°] (a joint, not a crank)."""
         if self.clinical_sign is None:
             return None
-        return self.clinical_sign * (np.degrees(theta) - 90.0)
+        degrees = self.clinical_sign * (np.degrees(theta) - 90.0)
+        if self.full and np.isfinite(degrees).any():
+            degrees = degrees - 360.0 * np.ceil((np.nanmean(degrees) - 180.0) / 360.0)
+        return degrees
 
 
 @dataclass(frozen=True)
