@@ -176,8 +176,8 @@ def moment_flags(model: Model, result: KinematicResult, dynamics: Dynamics,
         details[NOISY] = (f"{100 * np.nanmedian(share):.0f} % of the angular accelerations' "
                           f"RMS lies above {min(NOISE_BAND_HZ, 0.3 * rate):g} Hz (median over "
                           f"the angles; flagged above {100 * NOISE_SHARE:.0f} %): "
-                          "differentiated marker noise; smooth the trial (--smooth auto, the "
-                          "default for the mixed methods) or low-pass the angles "
+                          "differentiated marker noise; smooth the trial (--smooth auto) or "
+                          "low-pass the angles "
                           "(--filter-cutoff 6, the gait standard)")
     return out, details
 

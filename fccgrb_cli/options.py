@@ -153,7 +153,7 @@ class SolveOptions:
              "the markers; POINT:Y_SCREEN reported beside them) and turns the model's gravity "
              "onto it; an axis states it. A model tied to its ground keeps its own frame.")
     smooth: str = _option(
-        "auto", choices=("auto", "none"),
+        "none", choices=("auto", "none"),
         help="auto: smooth the whole trial at once (mixed-coordinate methods): every frame's "
              "angles, a floating base's pose and their first two derivatives from all frames' "
              "markers, the topology kept at every frame, the smoothing strength estimated from "
@@ -161,14 +161,14 @@ class SolveOptions:
              "likelihood); the inverse dynamics is driven by the smoothed rates, force plates "
              "are smoothed alike, and every angle, rate and joint moment gets its standard "
              "deviation. Not with {method} ad (the paper's baseline) nor with "
-             "{filter_cutoff} (the paper's Butterworth filter). none: each frame's own "
-             "solution, rates by central differences.")
+             "{filter_cutoff} (the paper's Butterworth filter). none (the default): each "
+             "frame's own solution, rates by central differences.")
     smooth_cutoff: float | None = _option(
-        None, unit="Hz", low=0.0, low_open=True, metavar="HZ",
+        None, unit="Hz", low=0.0, low_open=True, high=1e4, metavar="HZ",
         help="With {smooth} auto: every coordinate's equivalent cutoff as given (the smoother's "
              "gain is 1/2 there), instead of estimated.")
     smooth_noise: float | None = _option(
-        None, unit="mm", low=0.0, low_open=True, metavar="MM",
+        None, unit="mm", low=0.0, low_open=True, high=1000.0, metavar="MM",
         help="With {smooth} auto: the markers' noise (standard deviation per coordinate) as "
              "given, instead of estimated from the residuals.")
     # --- gait ----------------------------------------------------------------------------

@@ -22,7 +22,7 @@ from fccgrb_cli.assessment import (
     moment_flags,
 )
 from fccgrb_cli.clinical import clinical_results
-from fccgrb_cli.dynamics.convert import Dynamics, classical_dynamics
+from fccgrb_cli.dynamics.convert import Dynamics, classical_dynamics, smoothed_dynamics
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.filtering import frames_needed
 from fccgrb_cli.gait.analysis import analyse_gait, find_events, landmark_labels
@@ -427,8 +427,8 @@ def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResul
     cutoff = options.filter_cutoff
     if smoothing is not None and parts == [(0, n)]:
         loads = smoothing.smoothed_loads(loads, trial.rate)
-        return classical_dynamics(model, result, loads=loads, tol=options.tol,
-                                  engine=options.engine, drives=smoothing.drives)
+        return smoothed_dynamics(model, result, smoothing.drives, loads=loads, tol=options.tol,
+                                 engine=options.engine)
     pieces = []
     for a, b in parts:
         part = slice(a, b)

@@ -226,8 +226,7 @@ def smoothed_or_warned(model: Model, result: KinematicResult, markers: np.ndarra
         return None
     why = applies(options, model)
     if why is not None:
-        if options.method != "ad" and options.filter_cutoff is None:
-            warnings.append(f"--smooth auto not applied: {why}")
+        warnings.append(f"--smooth auto not applied: {why}")
         return None
     try:
         return smooth(model, result, markers, settings_of(options))

@@ -442,7 +442,7 @@ def test_unfiltered_real_markers_give_no_trusted_moment():
     """Qualisys without a filter: the double-differentiated marker noise is most of the
     accelerations (the hip moment swings −2.0…3.2 N·m/kg where the 6 Hz run gives −0.6…1.2), so
     no moment is trusted and the run says to filter; with the filter they are, and with the
-    whole-trial smoother (the default) too."""
+    whole-trial smoother (--smooth auto) too."""
     trial = fc.read_trial(QUALISYS)
     raw = fc.solve(qualisys_model(), trial, method="nrm-wls", smooth="none")
     assert raw.trusted.all()                   # the kinematics are fine
@@ -450,7 +450,7 @@ def test_unfiltered_real_markers_give_no_trusted_moment():
     assert "--filter-cutoff" in said(raw)
     filtered = fc.solve(qualisys_model(), trial, method="nrm-wls", filter_cutoff=6.0)
     assert filtered.moments_trusted.any()
-    smoothed = fc.solve(qualisys_model(), trial, method="nrm-wls")
+    smoothed = fc.solve(qualisys_model(), trial, method="nrm-wls", smooth="auto")
     assert smoothed.uncertainty is not None and smoothed.moments_trusted.any()
 
 

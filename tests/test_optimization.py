@@ -564,7 +564,8 @@ def fccgrb(*args: object):
 def summary_cell(stdout: str, column: str) -> str:
     """A cell of the two-line summary (right-aligned columns; headers may contain spaces)."""
     lines = stdout.splitlines()
-    k = next(i for i, line in enumerate(lines) if "ms/frame" in line)
+    k = next(i for i, line in enumerate(lines)
+             if "ms/frame" in line and not line.startswith("fccgrb:"))
     head, body = lines[k], lines[k + 1]
     end = head.index(column) + len(column)
     return body[:end].split()[-1]

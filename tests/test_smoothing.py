@@ -49,7 +49,7 @@ def _truth_moments(model, synth) -> np.ndarray:
 
 def test_smoothed_motion_keeps_the_topology_and_consistent_rates(five_bar, tmp_path) -> None:
     model, synth = five_bar
-    run = fc.solve(model, _trial(synth, _noisy(synth, 1e-3, 0)))
+    run = fc.solve(model, _trial(synth, _noisy(synth, 1e-3, 0)), smooth="auto")
     assert run.uncertainty is not None and any("smoothed" in n for n in run.notes)
     mixed = compile_system(model, angles="coordinate", track=True)
     top = mixed.masks()["topology"]
@@ -84,7 +84,7 @@ def test_moments_and_their_standard_deviations_against_seeds(five_bar) -> None:
     errors, sds, raw = [], [], []
     for seed in range(12):
         trial = _trial(synth, _noisy(synth, 1e-3, seed))
-        run = fc.solve(model, trial)
+        run = fc.solve(model, trial, smooth="auto")
         errors.append(run.dynamics.inverse.joint_moments - truth)
         sds.append(run.uncertainty.moments_sd)
         if seed < 2:
@@ -105,7 +105,7 @@ def test_a_gap_is_bridged_by_the_prior(five_bar) -> None:
     model, synth = five_bar
     markers = _noisy(synth, 1e-3, 3)
     markers[60:90] = np.nan
-    run = fc.solve(model, _trial(synth, markers), skip_unsolvable=True)
+    run = fc.solve(model, _trial(synth, markers), skip_unsolvable=True, smooth="auto")
     r = run.result
     assert not r.trusted[60:90].any() and r.trusted[:55].all()
     assert np.isfinite(r.q).all() and run.dynamics is not None
@@ -162,7 +162,7 @@ def test_the_smoothers_filter_is_its_transfer_function() -> None:
 def test_what_switches_the_smoother_off(five_bar) -> None:
     model, synth = five_bar
     trial = _trial(synth, _noisy(synth, 1e-3, 0))
-    assert fc.solve(model, trial, filter_cutoff=10.0).uncertainty is None
+    assert fc.solve(model, trial, filter_cutoff=10.0, smooth="auto").uncertainty is None
     assert fc.solve(model, trial, smooth="none").uncertainty is None
 
 

@@ -30,7 +30,7 @@ class Dynamics:
 def classical_dynamics(model: Model, result: KinematicResult, *, cutoff: float | None = None,
                        order: int = 2, loads: Sequence[ExternalLoad] = (),
                        tol: float = 1e-10, batched: bool | None = None,
-                       engine: str = "numpy", drives: Drives | None = None) -> Dynamics:
+                       engine: str = "numpy") -> Dynamics:
     """Drive the classical model with the run's angles and solve its inverse dynamics.
 
     ``batched`` True: every frame at once, each starting from the run's own body coordinates
@@ -46,20 +46,35 @@ def classical_dynamics(model: Model, result: KinematicResult, *, cutoff: float |
     lower-limb gait trial: 4 per frame against 2.8), so it stays frame by frame. ``engine``
     ('numpy', 'compiled' or 'auto', as SolveOptions.engine): the compiled kernels solve the
     batch frame by frame in machine code (any Φ_q of full column rank) where they take the
-    model. ``drives``: the classical model's θ*, θ̇*, θ̈* and base features with their rates
-    as given (the smoother's, ``smoothing.py``) instead of the run's θ differenced."""
+    model."""
     system = compile_system(model, angles="driver")
+    base = Stacked(system).base_reference(result.q[:, :system.layout.n_body_q])
+    drives = drivers_from(system, result.time, result.theta, base, cutoff, order)
+    return _driven(system, result, drives, loads, tol, batched, engine, cutoff)
+
+
+def smoothed_dynamics(model: Model, result: KinematicResult, drives: Drives, *,
+                      loads: Sequence[ExternalLoad] = (), tol: float = 1e-10,
+                      engine: str = "numpy") -> Dynamics:
+    """:func:`classical_dynamics` with the classical model's θ*, θ̇*, θ̈* and base features
+    with their rates as given (the whole-trial smoother's, ``smoothing.py``) instead of the
+    run's θ differenced."""
+    system = compile_system(model, angles="driver")
+    return _driven(system, result, drives, loads, tol, None, engine, None)
+
+
+def _driven(system: System, result: KinematicResult, drives: Drives,
+            loads: Sequence[ExternalLoad], tol: float, batched: bool | None, engine: str,
+            cutoff: float | None) -> Dynamics:
+    """The classical ``system`` driven by ``drives`` from the run's body coordinates, and its
+    inverse dynamics (:func:`classical_dynamics`)."""
     compiled = kernels_for(system, engine)
     if batched is None:
         batched = compiled or system.n_rows == system.nq
-    n_body = system.layout.n_body_q
-    body_q = result.q[:, :n_body]
-    base = Stacked(system).base_reference(body_q)
+    body_q = result.q[:, :system.layout.n_body_q]
     compiled = compiled and batched
     # the kernels solve the multipliers on the factor the drive leaves at each frame
     solved = KernelInverse.prepare(system, loads, len(body_q)) if compiled else None
-    if drives is None:
-        drives = drivers_from(system, result.time, result.theta, base, cutoff, order)
     if batched:
         kinematics = solve_ad_batched(system, result.time, drives, body_q, tol=tol,
                                       compiled=compiled,

@@ -31,6 +31,7 @@ than ``WALKING`` m/s (the gait analysis measures strides along the pelvis's own 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -126,7 +127,7 @@ def _up_of(gravity: tuple[float, float, float]) -> np.ndarray | None:
 
 def screen_cue(path: str) -> Cue | None:
     """POINT:Y_SCREEN of a C3D, the axis its software draws upwards (None without one)."""
-    if not path.lower().endswith(".c3d"):
+    if not path.lower().endswith(".c3d") or not Path(path).is_file():
         return None
     from fccgrb_cli.io.c3d_header import read_parameters
 
@@ -140,8 +141,8 @@ def screen_cue(path: str) -> Cue | None:
 
 def plate_cue(model: Model, trial: Trial) -> Cue | None:
     """The plates' normals signed by the force on the subject over their loaded frames."""
-    if not trial.path.lower().endswith(".c3d"):
-        return None
+    if not trial.path.lower().endswith(".c3d") or not Path(trial.path).is_file():
+        return None  # a trial made in memory has no plates
     from fccgrb_cli.io.c3d_header import WORD_LIMIT, read_layout, read_parameters
     from fccgrb_cli.io.forceplates import plate_normal, read_force_plates
 
