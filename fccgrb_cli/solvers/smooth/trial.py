@@ -272,7 +272,7 @@ def _chains(time: np.ndarray, A: np.ndarray, b: np.ndarray, strengths: tuple[Str
     means, covs = zip(*(initial_state(time, np.where(seen[:, k], est.z[:, k], 0.0),
                                       variance[:, k], ORDER, scale[k]) for k in range(n)),
                       strict=True)
-    return reference.Chains.build(ORDER, dt, scale, density(cutoffs, r, dt), np.array(means),
+    return reference.Chains.build(ORDER, dt, scale, density(cutoffs, r, dt, ORDER), np.array(means),
                                   np.array(covs))
 
 
