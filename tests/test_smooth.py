@@ -317,3 +317,92 @@ def test_moment_jacobian_against_full_finite_differences() -> None:
                   - moments_at(co, co.positions(minus[0], lin.q), *minus)) / (2 * h)
             col = j * co.n + k
             assert np.abs(T[:, :, col] - fd).max() < 1e-5 * max(scale[col], 1.0)
+
+
+def test_trial_smoother_is_stationary_for_the_nonlinear_objective() -> None:
+    """The whole-trial smoother's answer (Gauss–Newton on the nonlinear markers) is a
+    stationary point of the MAP objective: the prior's quadratic plus ½ Σ_f ‖y_f − p(d_f)‖²/σ²,
+    p the markers of the positions solved afresh by Newton–Raphson at each d. One Gauss–Newton
+    step from it — the markers' Jacobian by central differences of p (not the code's H), the
+    linear problem solved by the reference smoother, itself checked against the dense normal
+    equations above — moves none of d, ḋ, d̈: the gradient vanishes there. (The dense normal
+    equations of this trial are too stiff to evaluate the gradient itself: Q⁻¹ ~ 10¹⁸ at
+    200 Hz.)"""
+    from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
+    from fccgrb_cli.solvers.smooth import trial
+
+    model, synth = _five_bar(duration=0.15)
+    rng = np.random.default_rng(8)
+    markers = synth.markers + rng.normal(scale=1e-3, size=synth.markers.shape)
+    time = synth.result.time
+    nrm = solve_nrm(compile_system(model, angles="coordinate", track=True), time, markers,
+                    NrmSettings())
+    system = compile_system(model, angles="driver")
+    use = np.ones(len(time), bool)
+    motion = trial.smooth_motion(system, time, markers, use, nrm.q, SmoothSettings(noise=1e-3))
+    assert not motion.extra_sd.any()  # the objective below has no coordinate noise
+    co, sigma, d = motion.coordinates, motion.noise, motion.d
+    # the prior the smoother built at its first linearization (the frames' own solutions)
+    data = trial._Data(co, time, markers, np.ones((len(time), markers.shape[1] * 3)),
+                       trial._passes("numpy"), False)
+    _, A0, b0, _ = trial._linearized(data, slice(None), co.from_mixed(nrm.q),
+                                     nrm.q[:, :system.layout.n_body_q], sigma)
+    chains = trial._chains(time, A0, b0, motion.strengths)
+    N, n = d.shape
+    q = co.positions(d, motion.q)
+    r = (markers - co.markers(q)).reshape(N, -1)
+    H = np.empty((N, r.shape[1], n))
+    h = 1e-6
+    for k in range(n):
+        step = np.zeros_like(d)
+        step[:, k] = h
+        H[:, :, k] = (co.markers(co.positions(d + step, q))
+                      - co.markers(co.positions(d - step, q))).reshape(N, -1) / (2 * h)
+    A = np.einsum("fri,frj->fij", H, H) / sigma**2
+    b = np.einsum("fri,fr->fi", H, r) / sigma**2 + np.einsum("fij,fj->fi", A, d)
+    step = reference.smooth(chains, A, b, covariance=False).values
+    for j, smoothed in enumerate((d, motion.d_d, motion.d_dd)):
+        moved = np.abs(step[:, j] - smoothed).max()
+        assert moved < 1e-6 * np.abs(smoothed).max(), (j, moved)
+
+
+def test_a_coordinates_own_noise_adds_to_its_information() -> None:
+    """with_extra_noise against the covariance sum it stands for: a frame whose estimate
+    z = A⁻¹ b also carries white noise Σ on the coordinates carries information (A⁻¹ + Σ)⁻¹
+    and (A⁻¹ + Σ)⁻¹ z; and where A is singular, the limit of that as A's null space fills."""
+    from fccgrb_cli.solvers.smooth.trial import with_extra_noise
+
+    rng = np.random.default_rng(12)
+    H = rng.normal(size=(5, 7, 3))
+    A = np.einsum("fri,frj->fij", H, H)
+    b = rng.normal(size=(5, 3))
+    extra = np.array([0.3, 0.0, 2.0])
+    A_new, b_new = with_extra_noise(A, b, extra)
+    want = np.linalg.inv(np.linalg.inv(A) + np.diag(extra))
+    np.testing.assert_allclose(A_new, want, rtol=1e-10)
+    z = np.linalg.solve(A, b[..., None])[..., 0]
+    np.testing.assert_allclose(b_new, np.einsum("fij,fj->fi", want, z), rtol=1e-10)
+    H[:, :, 2] = H[:, :, 0] + H[:, :, 1]
+    singular = np.einsum("fri,frj->fij", H, H)  # rank two
+    got, _ = with_extra_noise(singular, b, extra)
+    near = np.linalg.inv(np.linalg.inv(singular + 1e-9 * np.eye(3)) + np.diag(extra))
+    np.testing.assert_allclose(got, near, atol=1e-6 * np.abs(near).max())
+
+
+def test_likelihood_finds_a_coordinates_own_noise() -> None:
+    """A process drawn from the prior (4 Hz at 200 Hz) whose frame estimates carry white noise
+    of 10 times the variance their stated one says: the maximum likelihood keeps that extra
+    noise (within 40 %) and the cutoff (within 25 %)."""
+    rng = np.random.default_rng(6)
+    order, dt, N, r, fc = 5, 0.005, 2000, 1e-6, 4.0
+    omega = 2 * np.pi * fc
+    F, C = transition(order, dt, omega), noise_shape(order, dt, omega)
+    L = np.linalg.cholesky(density(fc, 11 * r, dt, order) * C + 1e-30 * np.eye(order))
+    x = np.zeros(order)
+    z = np.empty(N)
+    for f in range(N):
+        x = F @ x + L @ rng.normal(size=order)
+        z[f] = x[0] + np.sqrt(11 * r) * rng.normal()
+    found = strength(np.arange(N) * dt, z, np.full(N, r), kernels.log_likelihood)
+    assert abs(found.extra / (10 * r) - 1) < 0.4
+    assert abs(found.cutoff / fc - 1) < 0.25
