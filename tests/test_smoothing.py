@@ -77,16 +77,25 @@ def test_smoothed_motion_keeps_the_topology_and_consistent_rates(five_bar, tmp_p
 
 def test_moments_and_their_standard_deviations_against_seeds(five_bar) -> None:
     """Twelve noise seeds at 1 mm: the smoothed moments beat the central differences tenfold,
-    and per angle the predicted standard deviation of the moment matches the seeds' scatter
-    about the truth (median over frames within 35 %), the 95 % bands covering 85–99.5 %."""
+    and per angle the predicted standard deviation of the moment, the angle and its rate
+    matches the seeds' scatter about the truth (median over frames within 35 %), the 95 %
+    bands covering 85–99.5 %. The acceleration's is looser (within a factor of 2: on this
+    0.75 s trial each seed's strength comes from 150 frames, and where it comes out low the
+    smoother's bias, which its noise-part covariance leaves out, is the larger part of θ̈'s
+    error); the 100-seed check on 3 s (``benchmarks/smoothing.py --monte-carlo 100``) holds
+    every one of them to 25 %."""
     model, synth = five_bar
     truth = _truth_moments(model, synth)
     errors, sds, raw = [], [], []
+    kinematics = {"theta": [], "theta_d": [], "theta_dd": []}
     for seed in range(12):
         trial = _trial(synth, _noisy(synth, 1e-3, seed))
         run = fc.solve(model, trial, smooth="auto")
         errors.append(run.dynamics.inverse.joint_moments - truth)
         sds.append(run.uncertainty.moments_sd)
+        for key, rows in kinematics.items():
+            rows.append((getattr(run.result, key) - getattr(synth.result, key),
+                         getattr(run.uncertainty, f"{key}_sd")))
         if seed < 2:
             plain = fc.solve(model, trial, smooth="none")
             raw.append(plain.dynamics.inverse.joint_moments - truth)
@@ -96,6 +105,12 @@ def test_moments_and_their_standard_deviations_against_seeds(five_bar) -> None:
     assert np.all(np.abs(ratio - 1.0) < 0.35), ratio
     cover = np.mean(np.abs(e) <= 1.96 * s)
     assert 0.85 < cover < 0.995, cover
+    for key, rows in kinematics.items():
+        e, s = (np.array(part) for part in zip(*rows, strict=True))
+        ratio = np.median(np.sqrt(np.mean(s**2, axis=0)) / np.sqrt(np.mean(e**2, axis=0)),
+                          axis=0)
+        low, high = (0.5, 2.0) if key == "theta_dd" else (0.65, 1.35)
+        assert np.all((ratio > low) & (ratio < high)), (key, ratio)
 
 
 def test_a_gap_is_bridged_by_the_prior(five_bar) -> None:
@@ -140,7 +155,7 @@ def test_a_long_trial_in_spans_equals_the_whole(monkeypatch) -> None:
     use = np.ones(len(markers), bool)
     whole = smooth_trial.smooth_motion(system, synth.result.time, markers, use, nrm.q)
     overlap = smooth_trial._overlap(whole.strengths, 0.01)
-    monkeypatch.setattr(smooth_trial, "SPAN", 150)
+    monkeypatch.setattr(smooth_trial, "span_frames", lambda n: 150)
     assert len(markers) > 150 + 2 * overlap
     parts = smooth_trial.smooth_motion(system, synth.result.time, markers, use, nrm.q)
     for key, tol in (("d", 1e-9), ("d_dd", 1e-8), ("q", 1e-9), ("covariance", 1e-5)):
