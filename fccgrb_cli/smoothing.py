@@ -36,12 +36,15 @@ from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.dynamics.uncertainty import moment_uncertainty
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.model import Model
-from fccgrb_cli.solvers.batched import Drives, Stacked, factor
+from fccgrb_cli.solvers.batched import Drives, Stacked, blocks
+from fccgrb_cli.solvers.rates import consistent_rates
 from fccgrb_cli.solvers.result import KinematicResult
 from fccgrb_cli.solvers.smooth import Motion, SmoothSettings, smooth_motion
+from fccgrb_cli.solvers.smooth.coordinates import Coordinates
 from fccgrb_cli.solvers.smooth.signal import smoothed_signal
-from fccgrb_cli.system import Drive, System, compile_system
+from fccgrb_cli.system import System, compile_system
 from fccgrb_cli.system.constraints import joint_neighbours
+from fccgrb_cli.system.sparse import supported
 
 
 @dataclass(frozen=True)
@@ -167,36 +170,54 @@ def smooth(model: Model, result: KinematicResult, markers: np.ndarray,
     seconds = clock.perf_counter() - started
     co = motion.coordinates
     drives = co.drives(motion.d, motion.d_d, motion.d_dd)
-    stacked = Stacked(system)
-    rates = factor(stacked.jacobian(motion.q))
-    qd_b = rates.solve(stacked.nu(drives))
-    qdd_b = rates.solve(stacked.gamma(motion.q, qd_b, drives))
+    mixed = compile_system(model, angles="coordinate", track=True)
     na = co.n_angles
     q = np.concatenate([motion.q, motion.d[:, :na]], axis=1)
-    qd = np.concatenate([qd_b, motion.d_d[:, :na]], axis=1)
-    qdd = np.concatenate([qdd_b, motion.d_dd[:, :na]], axis=1)
-    phi_norm, phi_top = _residuals(model, q, markers)
+    qd, qdd = consistent_rates(mixed, q, motion.d_d[:, :na], motion.d_dd[:, :na],
+                               _base_rates(co, drives),
+                               compiled=settings.engine == "compiled" and supported(mixed))
+    phi_norm, phi_top = _residuals(mixed, q, markers)
     smoothed = replace(result, q=q, qd=qd, qdd=qdd, theta=q[:, -na:] if na else q[:, :0],
                        theta_d=motion.d_d[:, :na], theta_dd=motion.d_dd[:, :na],
                        phi_norm=phi_norm, phi_top_max=phi_top)
     return Smoothing(motion, smoothed, drives, system, seconds)
 
 
-def _residuals(model: Model, q: np.ndarray, markers: np.ndarray
+def _base_rates(co: Coordinates, drives: Drives
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Each floating base's q columns (r, u, v, w) with the smoothed rates of those features
+    (ṙ, u̇ = ω × u, …; their second derivatives): the rows rates.consistent_rates adds to the
+    topology for what it leaves free (None without a base)."""
+    if not co.bases:
+        return None
+    columns = np.concatenate([chart.columns.ravel() for chart in co.bases])
+    slots = np.concatenate([chart.slots for chart in co.bases])
+    n = len(drives.theta)
+    return (columns, drives.ref_d[:, slots].reshape(n, -1),
+            drives.ref_dd[:, slots].reshape(n, -1))
+
+
+def _residuals(mixed: System, q: np.ndarray, markers: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray]:
-    """‖Φ‖ over the rows a frame's markers keep, and max |Φ_top|, of the mixed system at q."""
-    mixed = compile_system(model, angles="coordinate", track=True)
-    top = mixed.masks()["topology"]
-    trk = mixed.masks()["tracking"]
+    """‖Φ‖ over the rows a frame's markers keep, and max |Φ_top|, of the mixed system at q
+    (every frame at once: batched.Stacked with the angles as its drives)."""
+    masks = mixed.masks()
+    top, tracking = masks["topology"], np.flatnonzero(masks["tracking"])
+    n_body = mixed.layout.n_body_q
     norm, top_max = np.empty(len(q)), np.empty(len(q))
-    for f in range(len(q)):
-        present = np.isfinite(markers[f]).all(axis=1)
-        ref = np.where(present[:, None], markers[f], 0.0)
-        phi = mixed.residual(q[f], Drive(ref=ref))
-        keep = top.copy()
-        keep[np.flatnonzero(trk)] = np.repeat(present, 3)
-        norm[f] = np.linalg.norm(phi[keep])
-        top_max[f] = np.abs(phi[top]).max()
+    stacked = Stacked(mixed)
+    for block in blocks(len(q)):
+        present = np.isfinite(markers[block]).all(axis=2)
+        ref = np.where(present[..., None], markers[block], 0.0)
+        theta = q[block, n_body:]
+        still = np.zeros_like(ref)
+        phi = stacked.residual(q[block, :n_body], Drives(theta, np.zeros_like(theta),
+                                                          np.zeros_like(theta), ref, still,
+                                                          still))
+        keep = np.broadcast_to(top, phi.shape).copy()
+        keep[:, tracking] = np.repeat(present, 3, axis=1)
+        norm[block] = np.sqrt(np.sum(np.where(keep, phi, 0.0) ** 2, axis=1))
+        top_max[block] = np.abs(phi[:, top]).max(axis=1)
     return norm, top_max
 
 

@@ -40,7 +40,7 @@ from fccgrb_cli.solvers.smooth.start import WINDOW, initial_state
 from fccgrb_cli.system import System
 from fccgrb_cli.system.sparse import compilable
 
-SPAN = 4000  # frames smoothed at once in a long trial
+SPAN_BYTES = 5e8  # the passes' arrays of one span of a long trial, at most
 DECAY = 20.0  # e-folds of the smoother's influence a span's overlap covers
 STEP = 1e-6  # rad or m: Gauss–Newton stops when d moves less (its next step is ~1e-8)
 ITERATIONS = 8
@@ -124,7 +124,7 @@ def smooth_motion(system: System, time: np.ndarray, markers: np.ndarray, use: np
     whose markers may be used, ``mixed_q`` each frame's mixed-coordinate solution (NaN where
     unsolved): the start of the iteration.
 
-    A trial longer than ``SPAN`` frames plus twice the overlap is smoothed span by span, each
+    A trial longer than ``span_frames`` plus twice the overlap is smoothed span by span, each
     with ``overlap`` frames of the neighbouring spans on either side that it computes and
     discards: the smoother's influence decays as e^(−ω_c sin(π/2p) |t|), so an overlap of
     ``DECAY`` / (ω_c sin(π/2p)) for the lowest cutoff leaves each span's answer within e^−20 of
@@ -149,12 +149,13 @@ def smooth_motion(system: System, time: np.ndarray, markers: np.ndarray, use: np
     middle = _middle(n, min(n, ESTIMATE_FRAMES))
     strength = _estimate(data, middle, d[middle], q[middle], settings)
     overlap = _overlap(strength.strengths, float(time[1] - time[0]))
-    if n <= SPAN + 2 * overlap:
+    span = span_frames(coordinates.n)
+    if n <= span + 2 * overlap:
         out = _span(data, slice(0, n), d, q, strength)
         return replace(out, used=usable, estimated=settings.cutoff is None)
     parts = []
-    for start in range(0, n, SPAN):
-        stop = min(n, start + SPAN)
+    for start in range(0, n, span):
+        stop = min(n, start + span)
         part = slice(max(0, start - overlap), min(n, stop + overlap))
         keep = slice(start - part.start, stop - part.start)
         parts.append((_span(data, part, d[part], q[part], strength), keep))
@@ -162,6 +163,16 @@ def smooth_motion(system: System, time: np.ndarray, markers: np.ndarray, use: np
                                  for key in ("d", "d_d", "d_dd", "covariance", "q")),
                   usable, strength.noise, strength.strengths, settings.cutoff is None,
                   max(m.iterations for m, _ in parts))
+
+
+def span_frames(n: int) -> int:
+    """Frames a span of a long trial holds: the passes keep ~(4p + 24) n² numbers a frame for n
+    coordinates (the output rows of P⁻, U, M, N, the covariances; p the prior's order), so that
+    one span's arrays take ``SPAN_BYTES``: ~4400 frames of a lower limb with its floating
+    pelvis (n = 18), ~17,500 of the five-bar (n = 9). The fewer the spans the less is smoothed
+    twice: each overlap's frames are (10,000 frames of the five-bar in spans of 4000 cost 40 %
+    more than at once)."""
+    return max(1000, int(SPAN_BYTES / (8 * (4 * ORDER + 24) * n * n)))
 
 
 def _middle(n: int, frames: int) -> slice:
@@ -204,25 +215,31 @@ def _estimate(data: _Data, part: slice, d: np.ndarray, q: np.ndarray,
 
 def _span(data: _Data, part: slice, d: np.ndarray, q: np.ndarray, strength: _Strength
           ) -> Motion:
-    """Gauss–Newton over the frames ``part`` (see the module's docstring)."""
+    """Gauss–Newton over the frames ``part`` (see the module's docstring). The covariance
+    (3.5 times a pass without it) is asked of the pass expected to be the last: the one whose
+    step the contraction so far puts below ``STEP`` (the five-bar's steps shrink ~100-fold per
+    iteration, the walking trial's ~5-fold), else of one more pass at the linearization that
+    converged."""
     time = data.time[part]
     extra = np.array([s.extra for s in strength.strengths])
     chains = None
+    steps = [np.inf, np.inf]
     for iteration in range(ITERATIONS + 1):
         lin, A, b, _ = _linearized(data, part, d, q, strength.noise)
         if chains is None:
             chains = _chains(time, A, b, strength.strengths)
         A_info, b_info = with_extra_noise(A, b, extra)
-        last = iteration == ITERATIONS
-        values, cov = data.passes(chains, A_info, b_info, last)
-        step = float(np.abs(values[:, 0] - d).max())
+        contraction = steps[-1] / steps[-2] if np.isfinite(steps[-2]) else 1.0
+        expected = steps[-1] * min(1.0, contraction) < STEP
+        covariance = iteration == ITERATIONS or expected
+        values, cov = data.passes(chains, A_info, b_info, covariance)
+        steps.append(float(np.abs(values[:, 0] - d).max()))
         q = lin.q + np.einsum("fqk,fk->fq", lin.S, values[:, 0] - d)  # the next guesses
         d = values[:, 0]
-        if last:
-            break
-        if step < STEP:  # one more pass at this linearization, with the covariance
+        if steps[-1] < STEP and not covariance:  # at this linearization, with the covariance
             values, cov = data.passes(chains, A_info, b_info, True)
             d = values[:, 0]
+        if steps[-1] < STEP or iteration == ITERATIONS:
             break
     q = data.coordinates.linearize(d, q, data.compiled).q
     return Motion(data.coordinates, d, values[:, 1], values[:, 2], cov, q,
