@@ -10,6 +10,10 @@ per coordinate), and the 7.5 mm soft-tissue artefact of ``--perturb 7.5`` where 
 are the moments' RMS / max (N·m) over frames 10…590 and over every frame.
 
 ``--orders``: the same at white 1 mm with priors of order 3 to 6.
+``--floor SEEDS``: the artefact case's floor over artefact seeds: each frame's exact fit to the
+artefact alone differenced, the smoother on it with white 0.5 mm, and the smoother told the
+strength it finds on that noise without the artefact (what a user who knew the motion's band
+could set).
 ``--monte-carlo N``: N noise seeds at white 1 mm; per angle, the smoother's predicted standard
 deviation of the angle, its rate, its acceleration and its joint moment against the empirical
 one (the RMS error over the seeds; the median over frames of predicted / empirical), and how
@@ -19,6 +23,14 @@ smoother and of the moments' uncertainty, measured in the same minutes (best of 
 ``--figure PATH``: the Qualisys walking trial (calibrated as the README's gait example):
 sagittal joint moments around the right heel strike with the 6 Hz filter and with the
 smoother (its 95 % band shaded).
+``--gait SEEDS``: walking with a known truth, for the default's choice: the Qualisys trial's
+per-frame coordinates (NRM-WLS, --smooth none) low-passed at 6, 12 and 20 Hz (zero-lag
+Butterworth) and interpolated by a quintic spline (its rates exact) are the truth; the model's
+markers there, with the noise the smoother found on the real trial (white on the markers, and
+each coordinate's own), seeded, are the trial; its moments are compared with the truth's,
+once with the trial's force plates (raw in the truth; each method filters them its own way)
+and once without plates (the kinematics alone). RMS / max over every frame, over frames 10…n−10
+and over the right heel strike ±0.1 s.
 """
 
 from __future__ import annotations
@@ -29,6 +41,8 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -48,6 +62,8 @@ COLUMNS = (("raw differences", {"smooth": "none"}),
            ("15 Hz", {"smooth": "none", "filter_cutoff": 15.0}),
            ("--smooth auto", {"smooth": "auto"}))
 EDGE = 10
+GAIT_TRUTH_HZ = (6.0, 12.0, 20.0)
+STRIKE = 0.53  # s: the right foot's strike on plate 2 of Qualisys.c3d (the C3D's events)
 
 
 class FiveBar:
@@ -74,9 +90,10 @@ class FiveBar:
         return self.truth.markers + rng.normal(scale=1e-3 * white_mm,
                                                size=self.truth.markers.shape)
 
-    def solve(self, white_mm: float, artefact_mm: float, seed: int = 0, **options):
+    def solve(self, white_mm: float, artefact_mm: float, seed: int = 0, artefact_seed: int = 0,
+              **options):
         return fc.solve(self.model, self.trial(self.noisy(white_mm, seed)), method="nrm-wls",
-                        perturb_mm=artefact_mm, events="none", **options)
+                        perturb_mm=artefact_mm, seed=artefact_seed, events="none", **options)
 
 
 def errors(tau: np.ndarray, reference: np.ndarray) -> tuple[float, float, float, float]:
@@ -114,7 +131,7 @@ def monte_carlo(bar: FiveBar, seeds: int) -> None:
     err = {k: [] for k in truth}
     sd = {k: [] for k in truth}
     for seed in range(seeds):
-        run = bar.solve(1.0, 0.0, seed)
+        run = bar.solve(1.0, 0.0, seed, smooth="auto")
         u = run.uncertainty
         r = run.result
         values = {"θ": r.theta, "θ̇": r.theta_d, "θ̈": r.theta_dd,
@@ -144,6 +161,54 @@ def monte_carlo(bar: FiveBar, seeds: int) -> None:
               f"{100 * covers.min():.1f}–{100 * covers.max():.1f} %")
 
 
+@contextmanager
+def strengths_of(run: Callable[[], object]) -> Iterator[None]:
+    """Within: the smoother's strength (marker noise, each coordinate's cutoff and own noise)
+    is the one it finds on ``run()``, whatever the trial."""
+    from fccgrb_cli.solvers.smooth import trial
+
+    kept = trial._estimate
+    found = []
+    trial._estimate = lambda *args: found.append(kept(*args)) or found[-1]
+    try:
+        run()
+        trial._estimate = lambda *args: found[0]
+        yield
+    finally:
+        trial._estimate = kept
+
+
+def floor(bar: FiveBar, seeds: int) -> None:
+    """The 7.5 mm artefact's floor over artefact seeds (white 0.5 mm, noise seed 0)."""
+    n = len(bar.truth.time)
+    print(f"\nthe 7.5 mm artefact over {seeds} artefact seeds, moment error RMS / max (N·m), "
+          f"frames {EDGE}…{n - EDGE} | every frame: each frame's exact fit to the artefact "
+          "alone (CNO-SQP, no white noise) differenced; --smooth auto on it with white 0.5 mm; "
+          "the same with the strength --smooth auto finds on that noise without the artefact "
+          "(cutoffs told from the motion, which the data cannot tell)")
+    print(f"{'seed':>4}  {'exact fit, raw differences':>28}  {'--smooth auto':>28}  "
+          f"{'cutoffs without the artefact':>28}")
+    rows = []
+    for seed in range(seeds):
+        exact = fc.solve(bar.model, bar.trial(bar.truth.markers), method="cno-sqp",
+                         perturb_mm=7.5, seed=seed, events="none", smooth="none")
+        runs = [exact, bar.solve(0.5, 7.5, artefact_seed=seed, smooth="auto")]
+        with strengths_of(lambda: bar.solve(0.5, 0.0, smooth="auto")):
+            runs.append(bar.solve(0.5, 7.5, artefact_seed=seed, smooth="auto"))
+        cells = [errors(np.asarray(run.dynamics.inverse.joint_moments), bar.tau)
+                 for run in runs]
+        rows.append(cells)
+        print(f"{seed:>4}  " + "  ".join(f"{f'{r:.3f}/{m:.2f} | {ra:.3f}/{ma:.2f}':>28}"
+                                        for r, m, ra, ma in cells), flush=True)
+    every = np.array(rows)[:, :, 2]  # seeds × (fit, auto, told): every frame's RMS
+    gap = every[:, 1] - every[:, 0]
+    print(f"every frame's RMS over the seeds: the exact fit {every[:, 0].min():.3f}–"
+          f"{every[:, 0].max():.3f}, --smooth auto {every[:, 1].min():.3f}–"
+          f"{every[:, 1].max():.3f} (auto minus the fit {gap.min():+.3f} to {gap.max():+.3f});"
+          f" the exact fit above 0.35 N·m on {int((every[:, 0] > 0.35).sum())} of {seeds} "
+          "seeds")
+
+
 def orders(bar: FiveBar) -> None:
     """The moments' errors at white 1 mm with priors of order 3 to 6 (the smoother's ORDER)."""
     from fccgrb_cli.solvers.smooth import trial
@@ -153,7 +218,7 @@ def orders(bar: FiveBar) -> None:
     try:
         for order in (3, 4, 5, 6):
             trial.ORDER = order
-            run = bar.solve(1.0, 0.0)
+            run = bar.solve(1.0, 0.0, smooth="auto")
             r, m, ra, ma = errors(np.asarray(run.dynamics.inverse.joint_moments), bar.tau)
             print(f"  order {order}: {r:.3f}/{m:.2f} | {ra:.3f}/{ma:.2f}"
                   + ("  (the smoother's)" if order == kept else ""), flush=True)
@@ -214,7 +279,7 @@ def figure(output: Path) -> None:
     trial = fc.read_trial(QUALISYS)
     model = fc.calibrate(template, trial, mass=67)
     filtered = fc.solve(model, trial, filter_cutoff=6.0)
-    smoothed = fc.solve(model, trial)
+    smoothed = fc.solve(model, trial, smooth="auto")
     t = trial.time
     strike = 0.53  # s: the right foot's strike on plate 2 (the C3D's events)
     window = (t > strike - 0.12) & (t < strike + 0.25)
@@ -245,25 +310,127 @@ def figure(output: Path) -> None:
     print(f"wrote {output}")
 
 
+class Walking:
+    """The Qualisys trial calibrated as the README's gait example, its per-frame solution, the
+    noise the smoother finds on it, and truths made from it (see the module's docstring)."""
+
+    def __init__(self) -> None:
+        from fccgrb_cli.solvers.smooth.coordinates import Coordinates
+        from fccgrb_cli.system import compile_system
+
+        template = fc.load_model(ROOT / "configs" / "models" / "lower_limb.yaml")
+        self.measured = fc.read_trial(QUALISYS)
+        self.model = fc.calibrate(template, self.measured, mass=67)
+        self.per_frame = fc.solve(self.model, self.measured, smooth="none").result
+        self.found = fc.solve(self.model, self.measured, smooth="auto").uncertainty
+        self.system = compile_system(self.model, angles="driver")
+        self.co = Coordinates.build(self.system, self.per_frame.q,
+                                    np.arange(self.per_frame.n_frames))
+        self.labels = tuple(self.measured.find(m) for m in self.model.marker_labels)
+
+    def truth(self, cutoff: float) -> tuple[np.ndarray, ...]:
+        """d, ḋ, d̈ and q of the per-frame coordinates low-passed at ``cutoff`` Hz."""
+        from scipy.interpolate import make_interp_spline
+        from scipy.signal import butter, filtfilt
+
+        t = self.measured.time
+        b, a = butter(2, cutoff / (self.measured.rate / 2))
+        d = filtfilt(b, a, self.co.from_mixed(self.per_frame.q), axis=0)
+        spline = make_interp_spline(t, d, k=5)
+        d, d_d, d_dd = spline(t), spline(t, 1), spline(t, 2)
+        n_body = self.system.layout.n_body_q
+        return d, d_d, d_dd, self.co.positions(d, self.per_frame.q[:, :n_body])
+
+    def plates(self, q: np.ndarray) -> list:
+        """The trial's force plates as loads on the model at q (raw)."""
+        from fccgrb_cli.io.plate_loads import plate_loads
+        from fccgrb_cli.pipeline import points_along
+
+        model = self.model
+        contact = {body: points_along(self.system, q, [(body, p)
+                                                       for p in model.body(body).points])
+                   for body in model.contact_bodies}
+        return plate_loads(model, self.measured, [], contact)
+
+    def noisy(self, d: np.ndarray, q: np.ndarray, seed: int) -> np.ndarray:
+        """The model's markers at d with the coordinates' own noise, plus the markers'."""
+        rng = np.random.default_rng(seed)
+        moved = self.co.positions(d + rng.normal(size=d.shape) * self.found.extra_sd, q)
+        markers = self.co.markers(moved)
+        return markers + rng.normal(scale=self.found.noise_m, size=markers.shape)
+
+
+def gait(seeds: int) -> None:
+    """The default's choice on walking with a known truth (see the module's docstring)."""
+    from fccgrb_cli.dynamics.uncertainty import moments_at
+
+    walk = Walking()
+    t = walk.measured.time
+    strike = np.abs(t - STRIKE) < 0.1
+    methods = (("raw differences", {"smooth": "none"}),
+               ("Butterworth 6 Hz", {"filter_cutoff": 6.0}),
+               ("--smooth auto", {"smooth": "auto"}))
+    print(f"\nwalking with a known truth: the Qualisys trial's coordinates low-passed at "
+          f"{', '.join(f'{c:g}' for c in GAIT_TRUTH_HZ)} Hz, the model's {len(walk.labels)} "
+          f"markers there with the noise found on the real trial (white "
+          f"{1e3 * walk.found.noise_m:.2g} mm, the coordinates' own up to "
+          f"{np.degrees(walk.found.extra_sd.max()):.2g} deg), {seeds} seeds; joint moment "
+          f"error RMS / max (N·m, mean over the seeds), every frame | frames "
+          f"{EDGE}…{len(t) - EDGE} | the right heel strike ±0.1 s")
+    for cutoff in GAIT_TRUTH_HZ:
+        d, d_d, d_dd, q = walk.truth(cutoff)
+        for title, path, loads in (("with the force plates", str(QUALISYS), walk.plates(q)),
+                                   ("without plates", "walking.trc", [])):
+            truth = moments_at(walk.co, q, d, d_d, d_dd, loads)
+            print(f"  truth at {cutoff:g} Hz, {title} (RMS {_rms(truth):.1f} N·m, peak "
+                  f"{_largest(truth):.0f} N·m)")
+            rows = {name: [] for name, _ in methods}
+            for seed in range(seeds):
+                trial = Trial(path, walk.labels, walk.noisy(d, q, seed), walk.measured.rate)
+                for name, options in methods:
+                    run = fc.solve(walk.model, trial, **options)
+                    e = np.asarray(run.dynamics.inverse.joint_moments) - truth
+                    rows[name].append([f(part) for part in (e, e[EDGE:-EDGE], e[strike])
+                                       for f in (_rms, _largest)])
+            for name, values in rows.items():
+                cells = np.mean(values, axis=0).reshape(3, 2)
+                print(f"    {name:<18} " + " | ".join(f"{r:7.2f}/{m:<7.1f}" for r, m in cells),
+                      flush=True)
+
+
+def _rms(e: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(e**2)))
+
+
+def _largest(e: np.ndarray) -> float:
+    return float(np.abs(e).max())
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--monte-carlo", type=int, default=0, metavar="SEEDS")
     parser.add_argument("--cost", type=int, default=0, metavar="FRAMES")
     parser.add_argument("--figure", type=Path, default=None)
     parser.add_argument("--orders", action="store_true")
+    parser.add_argument("--gait", type=int, default=0, metavar="SEEDS")
+    parser.add_argument("--floor", type=int, default=0, metavar="SEEDS")
     parser.add_argument("--no-table", action="store_true")
     args = parser.parse_args()
     if args.figure is not None:
         figure(args.figure)
-    if not (args.no_table and not args.monte_carlo and not args.orders):
+    if not (args.no_table and not args.monte_carlo and not args.orders and not args.floor):
         with tempfile.TemporaryDirectory(prefix="fccgrb-smoothing-") as folder:
             bar = FiveBar(Path(folder))
             if not args.no_table:
                 table(bar)
+            if args.floor:
+                floor(bar, args.floor)
             if args.orders:
                 orders(bar)
             if args.monte_carlo:
                 monte_carlo(bar, args.monte_carlo)
+    if args.gait:
+        gait(args.gait)
     if args.cost:
         cost(args.cost)
 

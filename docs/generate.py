@@ -616,7 +616,7 @@ def bench_smoothing(ws: Workspace) -> list[Artifact]:
     _need_gait_trial()
     figure = ws.dir / "docs" / "smoothing_qualisys.png"
     figure.parent.mkdir(parents=True, exist_ok=True)
-    script = ("smoothing.py --orders --monte-carlo 100 --cost 10000 "
+    script = ("smoothing.py --orders --floor 10 --monte-carlo 100 --gait 3 --cost 10000 "
               f"--figure {figure}")
     blocks = _bench_console(ws, "bench-smoothing", script)
     text = blocks[0].text.replace(f"--figure {figure}", "--figure docs/smoothing_qualisys.png")
