@@ -27,9 +27,10 @@ import numpy as np
 
 ORDER = 5
 """p: the order of the prior (state d, ḋ, …, d⁗). Chosen by the benchmark (benchmarks/
-smoothing.py): on the five-bar at 200 Hz with 1 mm marker noise the joint moments' error over
-every frame falls from 0.21 (p = 3, a white-jerk prior: the quintic smoothing spline) to 0.074
-(p = 4) and 0.033 N·m RMS (p = 5), p = 6 no better (0.047) and each order costs more state."""
+smoothing.py --orders; here the median over 8 noise seeds): on the five-bar at 200 Hz with 1 mm
+marker noise the joint moments' error over every frame falls from 0.20 (p = 3, a white-jerk
+prior: the quintic smoothing spline) to 0.059 (p = 4) and 0.039 N·m RMS (p = 5); p = 6 is worse
+(0.055: its larger errors at the trial's ends) and each order costs more state."""
 
 DERIVATIVES = 3
 """The outputs per coordinate: d, ḋ and d̈ (what the classical model's drivers take)."""
