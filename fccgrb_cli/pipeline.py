@@ -99,8 +99,9 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
         bridged = result
         if smoothing is not None:  # checked again where the smoother put the model
             bridged = smoothing.result
-            smoothed = replace(_blank(bridged, _outside_the_data(no_data.frames)),
-                               messages=unassessed.messages)
+            # before the first and after the last frame the smoother used it had no data
+            outside = _outside_the_data(no_data.frames | ~smoothing.motion.used)
+            smoothed = replace(_blank(bridged, outside), messages=unassessed.messages)
             points = points_along(system, smoothed.q, which)
             fit = distances(points, inputs)
             found = kinematic_findings(model, smoothed, fit, options, truth is not None)
@@ -116,7 +117,6 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
                                     _Notes(warnings, notes, stance), smoothing)
         uncertainty = None
         if smoothing is not None:
-            outside = _outside_the_data(no_data.frames)
             uncertainty = _blank(smoothing.uncertainty(
                 None if solved_dynamics is None else solved_dynamics.kinematics.q,
                 () if solved_dynamics is None else solved_dynamics.loads), outside)

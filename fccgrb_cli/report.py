@@ -96,7 +96,7 @@ def _row(run, points: str, extra: str = "") -> Row:
     from fccgrb_cli.run import mean_jump
 
     values = {
-        "ms/frame": 1e3 * (wall / n if np.isfinite(wall) else float(np.mean(time_s))),
+        "ms/frame": 1e3 * (wall / n if np.isfinite(wall) else float(np.nanmean(time_s))),
         "iterations/frame": float(np.mean(run["iterations"][()])),
         "mean ‖Φ‖": float(np.nanmean(run["phi_norm"][()])),
         "max |Φ_top|": float(np.nanmax(run["phi_top_max"][()])),

@@ -44,16 +44,18 @@ def draw_residuals(runs: dict[str, tuple[ResidualReport, Reduction | None]], rat
                 ax.plot(time, curves[1], "--", color="tab:red", lw=1.2, label="first model")
             ax.plot(time, curves[0], color="tab:blue", lw=1.5,
                     label="reduced" if reduction is not None else name)
-            if report.measured.any():
-                top = max(float(c[report.measured].max()) for c in curves)
+            top = max((float(np.nanmax(c[report.measured], initial=0.0)) for c in curves),
+                      default=0.0)
+            if np.isfinite(top) and top > 0:
                 ax.set_ylim(0.0, 1.4 * top)
             ax.set_xlabel("time (s)")
             ax.set_ylabel(f"|residual {key}| ({unit})")
             ax.set_title(f"{name}: residual {key} (grey: a contact not measured)", fontsize=9)
             ax.legend(fontsize=8, loc="upper right")
-        right = row[0].twinx()
-        low, high = row[0].get_ylim()
-        right.set_ylim(100 * low / weight, 100 * high / weight)
-        right.set_ylabel("% body weight")
+        if np.isfinite(weight) and weight > 0:
+            right = row[0].twinx()
+            low, high = row[0].get_ylim()
+            right.set_ylim(100 * low / weight, 100 * high / weight)
+            right.set_ylabel("% body weight")
     fig.tight_layout()
     return fig

@@ -55,7 +55,7 @@ def residual_stage(model: Model, trial: Trial, result: KinematicResult,
     stage = Stage(trial.rate, options.filter_cutoff, options.filter_order, options.tol,
                   options.engine)
     if not options.reduce_residuals:
-        report = report_of(model, dynamics, stance, stage)
+        report = report_of(model, dynamics, stance, stage, result.trusted)
         _check_weight(report, warnings)
         return ResidualStage(report, None, dynamics)
     reduced = reduce_residuals(RunData(model, result, dynamics, stance, np.asarray(markers),

@@ -276,7 +276,7 @@ def summary(run: Run) -> dict[str, float | str | int]:
     """The one-row summary: method, ms/frame, iterations/frame, ‖Φ‖, topology, ED (mm)."""
     r = run.result
     ok = np.isfinite(run.ed).all(axis=1) & r.converged
-    per_frame = r.wall_s / r.n_frames if np.isfinite(r.wall_s) else float(np.mean(r.time_s))
+    per_frame = r.wall_s / r.n_frames if np.isfinite(r.wall_s) else float(np.nanmean(r.time_s))
     row: dict[str, float | str | int] = {
         "run": run.name, "method": r.method, "ms/frame": 1e3 * per_frame,
         "iter/frame": float(np.mean(r.iterations)),

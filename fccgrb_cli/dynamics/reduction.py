@@ -98,10 +98,12 @@ def states_of(model: Model, dynamics: Dynamics, stance: dict[str, np.ndarray],
 
 
 def report_of(model: Model, dynamics: Dynamics, stance: dict[str, np.ndarray],
-              stage: Stage) -> ResidualReport | None:
-    """A run's residual report (None without exactly one floating base)."""
+              stage: Stage, trusted: np.ndarray | None = None) -> ResidualReport | None:
+    """A run's residual report over the ``trusted`` frames (None without exactly one floating
+    base)."""
     motion, states = states_of(model, dynamics, stance, stage)
-    return residual_report(model, motion, mass_blocks(model), dynamics.loads, states)
+    return residual_report(model, motion, mass_blocks(model), dynamics.loads, states,
+                           trusted=trusted)
 
 
 def adjusted_model(model: Model, fit: InertiaFit) -> Model:
@@ -178,7 +180,8 @@ def reduce_residuals(run: RunData, stage: Stage) -> Reduced:
                          f"drivers give the residual); {model.source} has "
                          f"{len(model.floating_bases)}")
     motion, states = states_of(model, run.dynamics, run.stance, stage)
-    before = residual_report(model, motion, mass_blocks(model), loads, states)
+    before = residual_report(model, motion, mass_blocks(model), loads, states,
+                             trusted=run.result.trusted)
     if not before.measured.any():
         raise InputError(f"{run.trial}: --reduce-residuals: expected frames where every "
                          "contact with the ground is measured by a force plate; there are none")
@@ -205,7 +208,7 @@ def reduce_residuals(run: RunData, stage: Stage) -> Reduced:
     k = dynamics.kinematics
     motion = BodyMotion.of(system, k.q, k.qd, k.qdd)
     after = residual_report(adjusted, motion, mass_blocks(adjusted), loads, states,
-                            before.over_measured.weight)
+                            before.over_measured.weight, run.result.trusted)
     markers_after = _marker_rms(adjusted, motion, run.markers, before.measured)[:2]
     reduction = Reduction(adjusted_text(model, fit, run.trial), fit,
                           RigidCorrection(total[:, :3], total[:, 3:], step.centre), before,

@@ -290,18 +290,24 @@ class ResidualReport:
 
 def residual_report(model: Model, motion: BodyMotion, K: np.ndarray,
                     loads: Sequence[ExternalLoad], states: dict[str, np.ndarray],
-                    weight: float | None = None) -> ResidualReport | None:
+                    weight: float | None = None, trusted: np.ndarray | None = None
+                    ) -> ResidualReport | None:
     """The residual statistics of a motion with inertia coefficients K and the given contact
     states; None unless the model has exactly one floating base (its residual is the one
     reported). The body weight (N) the percentages refer to: ``weight``, else the plates' over
-    the measured frames when they load any, else the model's."""
+    the measured frames when they load any, else the model's. Only frames the dynamics ran on
+    and, given ``trusted``, whose kinematics the quality checks trust count as measured."""
     bases = model.floating_bases
     if len(bases) != 1:
         return None
     n = len(motion.X)
     force, moment = whole_body_residual(model, motion, K, loads)
-    measured = measured_frames(states, n)
-    single = single_support(states, n)
+    # a frame the dynamics did not run on (unsolved, outside the data) measures nothing
+    ran = np.isfinite(force[:, 0]).all(axis=1) & np.isfinite(moment[:, 0]).all(axis=1)
+    if trusted is not None:
+        ran &= trusted
+    measured = measured_frames(states, n) & ran
+    single = single_support(states, n) & ran
     mass = float(K[:, 0, 0].sum())
     loaded = any(np.abs(load.force[measured]).any() for load in loads)
     if weight is None:

@@ -40,6 +40,19 @@ POSITION_ITER = 20
 LARGEST_TURN = 1.8 * np.pi  # rad: the rotation-vector chart's reach from R₀ (singular at 2π)
 
 
+
+class AssemblyError(InputError):
+    """The model does not assemble at the smoothed coordinates of frame ``frame`` (counted
+    from the first frame of the arrays given; ``shifted`` counts it from an earlier one)."""
+
+    def __init__(self, frame: int) -> None:
+        super().__init__(f"--smooth auto: frame index {frame}: the model could not be "
+                         "assembled at the smoothed coordinates")
+        self.frame = frame
+
+    def shifted(self, by: int) -> AssemblyError:
+        return AssemblyError(self.frame + by)
+
 @dataclass(frozen=True)
 class BaseChart:
     """One floating base: its name, the columns of its r, u, v (, w) in q, the slots of its
@@ -184,9 +197,7 @@ class Coordinates:
         it = newton_stacked(Stacked(self.system), guesses, self.drives(d), POSITION_TOL,
                             POSITION_ITER)
         if not it.converged.all():
-            f = int(np.flatnonzero(~it.converged)[0])
-            raise InputError(f"--smooth auto: frame index {f}: the model could not be "
-                             "assembled at the smoothed coordinates")
+            raise AssemblyError(int(np.flatnonzero(~it.converged)[0]))
         return it.q
 
     def sensitivity(self, q: np.ndarray, d: np.ndarray) -> np.ndarray:

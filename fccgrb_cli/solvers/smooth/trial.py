@@ -27,7 +27,7 @@ import numpy as np
 
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.solvers.smooth import filter as reference
-from fccgrb_cli.solvers.smooth.coordinates import Coordinates
+from fccgrb_cli.solvers.smooth.coordinates import AssemblyError, Coordinates
 from fccgrb_cli.solvers.smooth.noise import (
     ESTIMATE_FRAMES,
     FrameEstimates,
@@ -136,6 +136,17 @@ def smooth_motion(system: System, time: np.ndarray, markers: np.ndarray, use: np
     if usable.sum() < need:
         raise InputError(f"--smooth auto: the trial has {int(usable.sum())} frames the markers "
                          f"determine and the quality checks trust; the smoother needs {need}")
+    known = np.flatnonzero(usable)
+    inner = slice(int(known[0]), int(known[-1]) + 1)
+    if inner.stop - inner.start < len(time):
+        # before the first and after the last frame it may use the smoother has no data: its
+        # prior would extrapolate from nothing (and the model need not assemble there)
+        try:
+            part = smooth_motion(system, time[inner], markers[inner], use[inner],
+                                 mixed_q[inner], settings)
+        except AssemblyError as error:
+            raise error.shifted(inner.start) from None
+        return _held(part, inner, len(time))
     coordinates = Coordinates.build(system, mixed_q, np.flatnonzero(usable))
     d = _bridged(time, coordinates.from_mixed(np.where(solved[:, None], mixed_q, 0.0)),
                  solved)
@@ -147,7 +158,10 @@ def smooth_motion(system: System, time: np.ndarray, markers: np.ndarray, use: np
                  passes.compiled and compilable(system))
     n = len(time)
     middle = _middle(n, min(n, ESTIMATE_FRAMES))
-    strength = _estimate(data, middle, d[middle], q[middle], settings)
+    try:
+        strength = _estimate(data, middle, d[middle], q[middle], settings)
+    except AssemblyError as error:
+        raise error.shifted(middle.start) from None
     overlap = _overlap(strength.strengths, float(time[1] - time[0]))
     span = span_frames(coordinates.n)
     if n <= span + 2 * overlap:
@@ -173,6 +187,21 @@ def span_frames(n: int) -> int:
     twice: each overlap's frames are (10,000 frames of the five-bar in spans of 4000 cost 40 %
     more than at once)."""
     return max(1000, int(SPAN_BYTES / (8 * (4 * ORDER + 24) * n * n)))
+
+
+def _held(motion: Motion, inner: slice, n: int) -> Motion:
+    """A motion smoothed on the frames ``inner`` of a trial of ``n`` frames, its values held
+    at the first and last of them on the frames outside (which it did not use: the caller
+    leaves them unsolved)."""
+    pad = ((inner.start, n - inner.stop),)
+
+    def held(values: np.ndarray) -> np.ndarray:
+        return np.pad(values, pad + ((0, 0),) * (values.ndim - 1), mode="edge")
+
+    used = np.zeros(n, dtype=bool)
+    used[inner] = motion.used
+    return replace(motion, d=held(motion.d), d_d=held(motion.d_d), d_dd=held(motion.d_dd),
+                   covariance=held(motion.covariance), q=held(motion.q), used=used)
 
 
 def _middle(n: int, frames: int) -> slice:
@@ -215,11 +244,20 @@ def _estimate(data: _Data, part: slice, d: np.ndarray, q: np.ndarray,
 
 def _span(data: _Data, part: slice, d: np.ndarray, q: np.ndarray, strength: _Strength
           ) -> Motion:
-    """Gauss–Newton over the frames ``part`` (see the module's docstring). The covariance
-    (3.5 times a pass without it) is asked of the pass expected to be the last: the one whose
-    step the contraction so far puts below ``STEP`` (the five-bar's steps shrink ~100-fold per
-    iteration, the walking trial's ~5-fold), else of one more pass at the linearization that
-    converged."""
+    """Gauss–Newton over the frames ``part`` (see the module's docstring)."""
+    try:
+        return _gauss_newton(data, part, d, q, strength)
+    except AssemblyError as error:
+        raise error.shifted(part.start) from None
+
+
+def _gauss_newton(data: _Data, part: slice, d: np.ndarray, q: np.ndarray,
+                  strength: _Strength) -> Motion:
+    """_span's iteration (frame indices in its errors counted from ``part.start``). The
+    covariance (3.5 times a pass without it) is asked of the pass expected to be the last: the
+    one whose step the contraction so far puts below ``STEP`` (the five-bar's steps shrink
+    ~100-fold per iteration, the walking trial's ~5-fold), else of one more pass at the
+    linearization that converged."""
     time = data.time[part]
     extra = np.array([s.extra for s in strength.strengths])
     chains = None
