@@ -105,7 +105,7 @@ def implausibilities(frames: dict[str, Frames], lengths: dict[str, float],
         if not low <= knee <= high:
             out.append(f"the {side} knee is flexed {knee:.0f}° in the calibration pose "
                        f"(expected {low:g}…{high:g}°): check the markers "
-                       f"{builders.get(f'thigh_{s}', '')} {builders.get(f'shank_{s}', '')}")
+                       f"{builders.get(f'thigh_{s}', '')}, {builders.get(f'shank_{s}', '')}")
     for body, length in lengths.items():
         low, high = FOOT_M if body.startswith("foot") else SEGMENT_M
         if not low <= length <= high:
