@@ -387,7 +387,7 @@ def _show(run: Run, output: str) -> None:
         click.echo(f"fccgrb: {message}", err=True)
     click.echo(format_summary(summary(run)))
     if run.clinical is not None:
-        click.echo(clinical_table(run.clinical))
+        click.echo(clinical_table(run.clinical, run.trusted))
     if run.residuals is not None:
         from fccgrb_cli.residual_table import residual_table
 

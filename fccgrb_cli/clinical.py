@@ -67,11 +67,12 @@ def distal_contact(model: Model, angle) -> str | None:
     return next((body for body in bodies if body in beyond), None)
 
 
-def clinical_table(c: ClinicalResults) -> str:
-    """One line per clinical angle: its range (deg) and its trusted moment's extremes (N·m/kg
-    when the subject's mass is known, else N·m) while a force plate loads the foot beyond it
-    (over every frame when none does: moments in stance off the plates lack the ground
-    reaction, and are not trusted); '–' when no moment there is trusted."""
+def clinical_table(c: ClinicalResults, trusted: np.ndarray | None = None) -> str:
+    """One line per clinical angle: its range (deg) over the ``trusted`` frames (every frame
+    when None) and its trusted moment's extremes (N·m/kg when the subject's mass is known, else
+    N·m) while a force plate loads the foot beyond it (over every frame when none does: moments
+    in stance off the plates lack the ground reaction, and are not trusted); '–' where no frame
+    or moment there is trusted."""
     per_kg = c.moments_per_kg
     moments, unit = (per_kg, "N·m/kg") if per_kg is not None else (c.moments, "N·m")
     width = max(len(n) for n in c.names)
@@ -80,8 +81,9 @@ def clinical_table(c: ClinicalResults) -> str:
         head += f"  {'min ' + unit:>12}  {'max ' + unit:>12}  {'over':>10}"
     lines = [head]
     for k, name in enumerate(c.names):
-        angle = c.angles[:, k]
-        line = f"{name:>{width}}  {np.nanmin(angle):8.1f}  {np.nanmax(angle):8.1f}"
+        angle = c.angles[:, k] if trusted is None else c.angles[trusted, k]
+        line = (f"{name:>{width}}  {np.nanmin(angle):8.1f}  {np.nanmax(angle):8.1f}"
+                if np.isfinite(angle).any() else f"{name:>{width}}  {'–':>8}  {'–':>8}")
         if moments is not None:
             stance = c.stance_of(k)
             over = stance if stance is not None and stance.any() else \

@@ -554,3 +554,48 @@ def test_the_kkt_check_wants_non_negative_multipliers_where_some_exist():
     assert kkt_satisfied(np.array([1.0, 0.0]), *no_equality, *active)
     assert not kkt_satisfied(np.array([-1.0, 0.0]), *no_equality, *active)
     assert not kkt_satisfied(np.array([1.0, 0.5]), *no_equality, *active)  # ∇f off their span
+
+
+def test_the_clinical_table_ranges_over_trusted_frames_only():
+    """The summary's clinical table: an angle's range over the trusted frames (a poorly fitting
+    stretch put −5,288,815° into a vendor trial's ankle inversion, flagged but printed), '–'
+    where no frame is trusted; the ranges computed here from the frames the mask keeps."""
+    from fccgrb_cli.clinical import ClinicalResults, clinical_table
+
+    rng = np.random.default_rng(3)
+    angles = rng.uniform(-30, 30, size=(50, 2))
+    angles[10:15, 0] = -5.3e6
+    angles[:, 1] = np.nan
+    trusted = np.ones(50, dtype=bool)
+    trusted[10:15] = False
+    c = ClinicalResults(("ankle_inversion_r", "knee_flexion_r"), angles, None, None, {})
+    rows = {line.split()[0]: line.split()[1:] for line in clinical_table(c, trusted)
+            .splitlines()[1:]}
+    kept = np.delete(angles[:, 0], range(10, 15))
+    assert rows["ankle_inversion_r"] == [f"{kept.min():.1f}", f"{kept.max():.1f}"]
+    assert rows["knee_flexion_r"] == ["–", "–"]
+    assert "-5300000.0" in clinical_table(c)  # without a mask: every frame, as before
+
+
+@needs_shared
+def test_a_late_start_is_smoothed_and_its_residual_is_over_frames_with_dynamics(tmp_path):
+    """Qualisys with its first 100 frames blank, solved with the defaults (the whole-trial
+    smoother): the smoother runs from the first frame with data (its prior extrapolated over
+    the blank frames failed to assemble there, which switched smoothing off for the trial), the
+    blank frames stay unsolved, and the floating base's residual is taken over frames where the
+    dynamics ran and the kinematics are trusted (it printed NaN, then 1e9 N, on a vendor file)."""
+    trial = blanked(QUALISYS, tmp_path / "late.c3d", slice(0, 100))
+    run = fc.solve(qualisys_model(), fc.read_trial(trial), method="nrm-wls",
+                   skip_unsolvable=True)
+    assert run.uncertainty is not None, said(run)
+    assert "could not be assembled" not in said(run)
+    assert np.isnan(run.result.q[:100]).all() and not run.trusted[:100].any()
+    report = run.residuals
+    measured = report.measured
+    assert measured.any() and not measured[:100].any()
+    assert run.trusted[measured].all()
+    assert np.isfinite(report.force[measured]).all()
+    force = np.linalg.norm(report.force[measured], axis=1)
+    assert report.over_measured.force_rms == pytest.approx(np.sqrt(np.mean(force**2)))
+    assert report.over_measured.frames == int(measured.sum())
+    assert 40 < report.over_measured.weight / 9.81 < 100  # the plates weigh the 67 kg subject
