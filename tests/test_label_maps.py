@@ -73,3 +73,17 @@ def test_a_malformed_map_file_is_one_line(renamed: Path, tmp_path: Path, text: s
 def test_a_missing_map_file_is_one_line(renamed: Path, tmp_path: Path):
     one_error_line(run_cli("solve", MODEL, renamed, "--map", tmp_path / "none.yaml", "-o",
                            tmp_path / "x.h5"), "none.yaml", "label map not found")
+
+
+def test_a_file_without_points_says_so():
+    """A C3D with no 3D points at all (Theia's rotations-only files, an analog-only capture):
+    one line saying the file holds none and naming the markers the model wants, instead of a
+    'closest: none' for each of them."""
+    from fccgrb_cli.io.labels import match_labels
+    from fccgrb_cli.io.trial import Trial
+
+    model = fc.load_model(ROOT / "configs" / "models" / "pendulum.yaml")
+    empty = Trial("rotations.c3d", (), np.zeros((50, 0, 3)), 100.0)
+    with pytest.raises(fc.InputError, match=r"^rotations\.c3d: the file holds no marker "
+                                            r"trajectories.*P1, P2, P3$"):
+        match_labels(model, empty, {})

@@ -26,6 +26,10 @@ def match_labels(model: Model, trial: Trial, mapping: dict[str, str]) -> list[st
         if label is None:
             missing.append(wanted)
         out.append(label)
+    if missing and not trial.labels:
+        raise InputError(f"{trial.path}: the file holds no marker trajectories (no 3D point "
+                         f"labels); expected the markers tracked by {model.source}: "
+                         f"{', '.join(missing[:12])}{' …' if len(missing) > 12 else ''}")
     if missing:
         free = [label for label in trial.labels if label not in out]
         shown = ", ".join(free[:12]) + (" …" if len(free) > 12 else "")
