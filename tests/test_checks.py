@@ -171,20 +171,26 @@ def test_a_leading_second_without_markers_gives_no_event_and_no_stride_there(tmp
 
 
 @needs_shared
-def test_a_gap_in_one_foot_leaves_the_dynamics_on_elsewhere(tmp_path):
+@pytest.mark.parametrize("smoothed", [False, True], ids=["6Hz", "smoothed"])
+def test_a_gap_in_one_foot_leaves_the_dynamics_on_elsewhere(tmp_path, smoothed):
     """Ten frames (100–109, in the left foot's swing) without the left foot's markers: the
     foot cannot be determined there, so those frames are unsolved and reported, and everything
-    else — moments on at least 90 % of the frames, both plates' events, the strides — stays."""
+    else — moments on at least 90 % of the frames, both plates' events, the strides — stays.
+    Filtered, the dynamics run stretch by stretch and leave the gap out; smoothed (the default),
+    the smoother bridges it, and its frames' moments are there but not trusted."""
     trial = blanked(QUALISYS, tmp_path / "gap.c3d", slice(100, 110),
                     ["L_FCC", "L_FM1", "L_FM5"])
     run = fc.solve(qualisys_model(), fc.read_trial(trial), method="nrm-wls",
-                   skip_unsolvable=True, filter_cutoff=6.0)
+                   skip_unsolvable=True, **({} if smoothed else {"filter_cutoff": 6.0}))
+    assert (run.uncertainty is not None) == smoothed
     assert not run.result.converged[100:110].any()
     assert run.result.converged[:100].all() and run.result.converged[110:].all()
     moments = run.moments.values
     has_moment = np.isfinite(moments).all(axis=1)
     assert has_moment.mean() >= 0.9, has_moment.mean()
-    assert not has_moment[100:110].any()
+    assert not run.moments_trusted[100:110].any()
+    if not smoothed:
+        assert not has_moment[100:110].any()
     plates = run.gait.found["plates"]
     assert {side for side in plates.side} == {"left", "right"}
     assert "frame index 100" in said(run) and "10 frames" in said(run)
