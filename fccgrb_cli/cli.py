@@ -505,7 +505,7 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
     _template_labels(template, labels)
     result = personalize(template, data, _frame_range(frames), mass, measured, labels,
                          vertical)
-    if result.axes is not None:  # None: a template without legs keeps its own gravity
+    if result.axes is not None:
         for message in result.axes.warnings:
             click.echo(f"fccgrb: warning: {message}", err=True)
         click.echo(f"fccgrb: {result.axes.note()}", err=True)

@@ -35,7 +35,7 @@ def rotated_c3d(source: Path, target: Path, rotation: np.ndarray,
     points[:3, gaps] = 0.0  # a gap stays a gap (its residual says so)
     c3d["data"]["points"] = points
     platforms = c3d["parameters"]["FORCE_PLATFORM"]
-    if "CORNERS" in platforms:
+    if "CORNERS" in platforms and np.size(platforms["CORNERS"]["value"]):  # plates
         corners = np.asarray(platforms["CORNERS"]["value"], dtype=float)  # 3 × 4 × plates
         c3d["parameters"]["FORCE_PLATFORM"]["CORNERS"]["value"] = np.einsum(
             "ij,jcp->icp", rotation, corners)

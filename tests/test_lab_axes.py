@@ -185,3 +185,76 @@ def test_a_mechanism_keeps_its_own_frame(tmp_path: Path):
                    "--vertical +y", "five_bar.yaml", "ties its bodies to the ground",
                    "joint", "expected --vertical auto or +z")
     assert not (tmp_path / "r.h5").exists()
+
+
+# ---- a template without legs (an upper limb on a pelvis) -------------------------------------
+
+UPPER = ROOT / "configs" / "models" / "upper_limb.yaml"
+
+
+def _upper_static(path: Path, lean_deg: float) -> Path:
+    """A still subject in the upper-limb template's own pose (z up, facing +x), leaning
+    forward by ``lean_deg`` about the lab's y axis: every landmark and tracked marker where the
+    template puts it (the acromion 40 mm above the shoulder centre), 30 frames with 0.5 mm
+    noise, written as a z-up C3D (POINT:Y_SCREEN +Z, as Nexus writes)."""
+    from fccgrb_cli.io.c3d import write_markers
+
+    model = fc.load_model(UPPER)
+    where: dict[str, np.ndarray] = {}
+    for body in model.bodies:
+        pose = body.pose
+        frame = np.column_stack([pose.u, pose.v, pose.w])
+        for name, point in body.points.items():
+            where[name] = np.asarray(pose.r) + frame @ np.asarray(point.local)
+        if body.name == "thorax":
+            where["ACRO_tip"] = np.asarray(pose.r) + frame @ (
+                np.asarray(body.points["GH_r"].local) + [0.0, 0.04, 0.0])
+    labels = sorted({*model.marker_labels, *model.landmarks.values()})
+    a = np.radians(lean_deg)
+    lean = np.array([[np.cos(a), 0.0, np.sin(a)], [0.0, 1.0, 0.0], [-np.sin(a), 0.0, np.cos(a)]])
+    pivot = where["ASISr"] * [1, 0, 1]
+    points = np.array([pivot + lean @ (where[label] - pivot) for label in labels])
+    rng = np.random.default_rng(7)
+    markers = points[None] + rng.normal(0.0, 5e-4, size=(30, *points.shape))
+    write_markers(path, labels, markers, 100.0)
+    c3d = ezc3d.c3d(str(path))
+    c3d.add_parameter("POINT", "X_SCREEN", ["+X"])
+    c3d.add_parameter("POINT", "Y_SCREEN", ["+Z"])
+    c3d.write(str(path))
+    return path
+
+
+@pytest.mark.parametrize("lean, screen, vertical, expected_up", [
+    (0.0, None, "auto", "+y"),         # the markers alone tell
+    (35.0, ("+X", "+Y"), "auto", "+y"),  # leaning: the markers lean to +y, Y_SCREEN confirms
+    (35.0, None, "auto", None),        # leaning, no screen axis: nothing tells (warned)
+    (35.0, ("+X", "+Z"), "auto", None),  # the screen names another axis: nothing tells
+    (35.0, None, "+y", "+y"),          # stated
+], ids=["upright", "leaning-screen", "leaning-alone", "leaning-screen-disagrees", "stated"])
+def test_an_upper_limb_calibrated_in_a_y_up_lab_gets_its_gravity(
+        tmp_path: Path, lean, screen, vertical, expected_up):
+    """The upper-limb template (no legs: the pelvis calibrated alone) from a still subject in
+    a y-up copy of a z-up static: the personal model's gravity points down +y, whether the
+    markers tell it alone or, leaning 35° (past the 25° a cue may be off an axis), with
+    POINT:Y_SCREEN naming the axis they lean to; stated by --vertical; and where nothing tells,
+    the template's −z stays with a warning. It used to stay −z in every case, silently."""
+    from fccgrb_cli.anatomy.full_body import personalize
+    from fccgrb_cli.model import parse_model
+
+    static = _upper_static(tmp_path / "z_up.c3d", lean)
+    copy = rotated_c3d(static, tmp_path / "y_up.c3d", Y_UP, screen)
+    if screen is None:  # a lab whose software wrote no screen axes
+        c3d = ezc3d.c3d(str(copy))
+        for key in ("X_SCREEN", "Y_SCREEN"):
+            c3d["parameters"]["POINT"][key]["value"] = [""]
+        c3d.write(str(copy))
+    result = personalize(fc.load_model(UPPER), fc.read_trial(copy), mass=70.0,
+                         vertical=vertical)
+    personal = parse_model(result.text, str(tmp_path / "personal.yaml"))
+    if expected_up is None:
+        np.testing.assert_allclose(personal.gravity, (0.0, 0.0, -9.81))
+        assert any("nothing tells the lab's vertical" in w for w in result.axes.warnings)
+    else:
+        np.testing.assert_allclose(personal.gravity, (0.0, -9.81, 0.0), atol=1e-12)
+        assert result.axes.vertical == expected_up
+    assert result.text.splitlines()[2].startswith("# lab axes: vertical ")

@@ -266,7 +266,7 @@ def _pose(frames: Frames) -> dict:
             "v": _round(axes[:, 1], 9), "w": _round(axes[:, 2], 9)}
 
 
-def _tracked_markers(model: Model, trial: Trial, window: slice,
+def tracked_markers(model: Model, trial: Trial, window: slice,
                      mapping: dict[str, str]) -> np.ndarray:
     """The template's tracked markers over the window (frames × points × 3, NaN where the
     trial lacks one)."""
@@ -307,7 +307,7 @@ def calibrate(model: Model, trial: Trial, frames: tuple[int, int] | None = None,
                          f"{', '.join(BODIES)}; missing {', '.join(absent)}")
     window = slice(start, stop)
     lm = read_landmarks(model, trial, window, METHODS[method], mapping)
-    axes = lab_axes(model, trial, _tracked_markers(model, trial, window, mapping), vertical)
+    axes = lab_axes(model, trial, tracked_markers(model, trial, window, mapping), vertical)
     if method == "davis":
         measurements = measurements or Measurements()
         anatomy = davis_segment_frames(lm, measurements)

@@ -36,6 +36,7 @@ from fccgrb_cli.anatomy.calibrate import (
     read_landmarks,
     read_marker,
     segment_frames,
+    tracked_markers,
 )
 from fccgrb_cli.anatomy.frames import Frames, harrington_hip_centre, pelvis_frames
 from fccgrb_cli.anatomy.upper_body import (
@@ -47,6 +48,7 @@ from fccgrb_cli.anatomy.upper_body import (
     upper_arm_frames,
 )
 from fccgrb_cli.errors import InputError
+from fccgrb_cli.io.lab_axes import lab_axes
 from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.model import Model
 
@@ -99,7 +101,7 @@ def personalize(model: Model, trial: Trial, frames: tuple[int, int] | None = Non
     mapping = mapping or {}
     legs = all(b in names for b in LOWER_BODIES)
     lower = (calibrate(model, trial, frames, mass, measurements, mapping, vertical) if legs
-             else _pelvis_alone(model, trial, frames, mass, mapping))
+             else _pelvis_alone(model, trial, frames, mass, mapping, vertical))
     lumped = LUMPED in names
     needed = TRUNK_LANDMARKS
     if not lumped:
@@ -138,6 +140,7 @@ def personalize(model: Model, trial: Trial, frames: tuple[int, int] | None = Non
     text = (header[0] + "\n" + header[1].rstrip(".") + "; shoulder centres: Rab et al. "
             "(2002); upper body: ISB (Wu et al. 2005), de Leva (1996) trunk split (fccgrb_cli/"
             "anatomy/full_body.py).\n"
+            + (f"# {lower.axes.note()}\n" if lower.axes is not None else "")
             + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=100))
     return replace(lower, text=text, lengths=lengths)
 
@@ -153,9 +156,11 @@ def _pelvis_frames(lm: dict[str, np.ndarray]) -> tuple[Frames, float, float]:
 
 
 def _pelvis_alone(model: Model, trial: Trial, frames: tuple[int, int] | None,
-                  mass: float | None, mapping: dict[str, str]) -> Calibration:
+                  mass: float | None, mapping: dict[str, str], vertical: str) -> Calibration:
     """A template without legs: the pelvis alone from its landmarks (ASIS and PSIS, or the
-    sacrum), its markers, and the hip centres (Harrington et al. 2007) as points of it."""
+    sacrum), its markers, and the hip centres (Harrington et al. 2007) as points of it; the
+    gravity down the lab's vertical (``io.lab_axes``; ``vertical``: 'auto' or the axis up), as
+    a lower-limb template's (a y-up lab's upper-limb trial kept the template's −z)."""
     start, stop = frames if frames is not None else (0, trial.n_frames)
     if not 0 <= start < stop <= trial.n_frames:
         raise InputError(f"--frames: expected A:B with 0 ≤ A < B ≤ {trial.n_frames} (frame "
@@ -170,7 +175,10 @@ def _pelvis_alone(model: Model, trial: Trial, frames: tuple[int, int] | None,
                          f"landmarks {', '.join(absent)} mapped to trial labels")
     window = slice(start, stop)
     pelvis, width, depth = _pelvis_frames(read_landmarks(model, trial, window, names, mapping))
+    axes = lab_axes(model, trial, tracked_markers(model, trial, window, mapping), vertical)
     doc = yaml.safe_load(model.text)
+    if tuple(axes.gravity) != tuple(model.gravity):
+        doc["gravity"] = _round(axes.gravity, 9)
     part = Part(pelvis, {f"HJC_{s}": harrington_hip_centre(width, depth, s) for s in SIDES})
     for tp in model.tracked_points:
         if tp.body == "pelvis":
@@ -183,8 +191,9 @@ def _pelvis_alone(model: Model, trial: Trial, frames: tuple[int, int] | None,
     text = (f"# {doc.get('name', 'model')} personalized by `fccgrb calibrate` from {trial.path}, "
             f"frame indices {start}:{stop}\n# from the template {model.source}. Hip centres: "
             "Harrington et al. (2007); inertia: de Leva (1996).\n"
+            f"# {axes.note()}\n"
             + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=100))
-    return Calibration(text, (start, stop), {}, width, depth, mass)
+    return Calibration(text, (start, stop), {}, width, depth, mass, axes=axes)
 
 
 def _parts(lm: dict[str, np.ndarray], pelvis: Frames, doc: dict, lower: Calibration,

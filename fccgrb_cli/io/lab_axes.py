@@ -42,6 +42,7 @@ from fccgrb_cli.options import AXES
 
 VERTICALS = ("auto", *AXES)
 SNAP_DEG = 25.0      # a cue within this angle of a lab axis names that axis
+LEANING_DEG = 45.0   # a weaker one, confirmed by POINT:Y_SCREEN naming the same axis
 AGREEMENT = 0.9      # least length of the mean of the frames' unit up vectors (markers)
 FIT_FRAMES = 200     # frames the model's pose is fitted to, evenly spread over the trial
 WALKING = 0.15       # m/s: the least mean marker speed that gives a direction of walking
@@ -74,11 +75,14 @@ def _direction_text(v: np.ndarray) -> str:
 
 @dataclass(frozen=True)
 class Cue:
-    """What one source says: ``axis`` up (None when it cannot tell) and why."""
+    """What one source says: ``axis`` up (None when it cannot tell) and why; ``leaning``: the
+    axis a cue too weak to tell on its own is nearest to (within ``LEANING_DEG``), which
+    POINT:Y_SCREEN naming the same axis confirms."""
 
     source: str
     axis: str | None
     detail: str
+    leaning: str | None = None
 
 
 @dataclass(frozen=True)
@@ -216,13 +220,14 @@ def marker_cue(model: Model, markers: np.ndarray, model_up: np.ndarray | None) -
         return Cue("markers", None, "markers: the tracked markers seen lie on a line")
     mean = np.mean(ups, axis=0)
     agreement = float(np.linalg.norm(mean))
+    label, off = nearest_axis(mean) if agreement > 0 else ("", 180.0)
+    leaning = label if off <= LEANING_DEG else None
     if agreement < AGREEMENT:
         return Cue("markers", None, f"markers: the model's pose fitted to them turns its up "
-                                    f"from frame to frame (agreement {agreement:.2f})")
-    label, off = nearest_axis(mean)
+                                    f"from frame to frame (agreement {agreement:.2f})", leaning)
     if off > SNAP_DEG:
         return Cue("markers", None, f"markers: the model's pose fitted to them puts its up "
-                                    f"{off:.0f}° from the nearest axis {label}")
+                                    f"{off:.0f}° from the nearest axis {label}", leaning)
     return Cue("markers", label, f"markers: the model's pose fitted on {len(ups)} frames puts "
                                  f"its up {off:.0f}° from {label}")
 
@@ -302,6 +307,12 @@ def _decide(cues: list[Cue], vertical: str, path: str
                          + "; ".join(c.detail for c in data)
                          + f"; expected one; pass --vertical {'|'.join(AXES)}")
     if not axes:
+        weak = [c for c in cues if c.axis is None and c.leaning is not None]
+        if screen is not None and weak and all(c.leaning == screen.axis for c in weak):
+            # two cues, neither decisive alone, that agree
+            return screen.axis, "file", "; ".join(
+                [f"{screen.detail}, confirmed by the {c.source}" for c in weak[:1]]
+                + [c.detail for c in weak]), warnings
         return None, "model", "", warnings
     chosen = axes.pop()
     parts = [c.detail for c in data]
