@@ -208,7 +208,7 @@ def _upper_static(path: Path, lean_deg: float) -> Path:
             where[name] = np.asarray(pose.r) + frame @ np.asarray(point.local)
         if body.name == "thorax":
             where["ACRO_tip"] = np.asarray(pose.r) + frame @ (
-                np.asarray(body.points["GH_r"].local) + [0.0, 0.04, 0.0])
+                np.asarray(body.points["GH_r"].local) + np.array([0.0, 0.04, 0.0]))
     labels = sorted({*model.marker_labels, *model.landmarks.values()})
     a = np.radians(lean_deg)
     lean = np.array([[np.cos(a), 0.0, np.sin(a)], [0.0, 1.0, 0.0], [-np.sin(a), 0.0, np.cos(a)]])
