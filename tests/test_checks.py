@@ -191,6 +191,9 @@ def test_a_gap_in_one_foot_leaves_the_dynamics_on_elsewhere(tmp_path, smoothed):
     assert not run.moments_trusted[100:110].any()
     if not smoothed:
         assert not has_moment[100:110].any()
+    # the floating base's residual only over frames the checks trust
+    measured = run.residuals.measured
+    assert measured.any() and not measured[~run.trusted].any()
     plates = run.gait.found["plates"]
     assert {side for side in plates.side} == {"left", "right"}
     assert "frame index 100" in said(run) and "10 frames" in said(run)
@@ -246,14 +249,17 @@ def test_synth_follows_the_parallelogram_branch_through_its_change_points(tmp_pa
     np.testing.assert_allclose(pin_b - pivot_d, crank, atol=1e-9)
 
 
-@pytest.mark.parametrize("method", ["nrm-wls", "cno-sqp"])
-def test_parallelogram_moments_are_right_or_flagged(method, tmp_path_factory):
+@pytest.mark.parametrize(("method", "smooth"), [("nrm-wls", "auto"), ("cno-sqp", "auto"),
+                                               ("nrm-wls", "none")])
+def test_parallelogram_moments_are_right_or_flagged(method, smooth, tmp_path_factory):
     """Through both change points: every frame within 2° of one is flagged; no moment it trusts
     is more than 10× the true peak (in fact each trusted one is within 2 % of the peak of the
-    closed form), and the classical model stays on the mixed solution's branch on every frame."""
+    closed form), and the classical model stays on the mixed solution's branch on every frame:
+    assembled by the smoother from the mixed solution (the default), or, without it, solved
+    from each frame's mixed configuration (dynamics/convert.py)."""
     trial = parallelogram_trial(str(tmp_path_factory.mktemp("parallelogram")))
     model = fc.load_model(PARALLELOGRAM)
-    run = fc.solve(model, fc.read_trial(trial), method=method)
+    run = fc.solve(model, fc.read_trial(trial), method=method, smooth=smooth)
     theta = run.result.theta[:, 0]
     truth = parallelogram_torque(model, theta, run.result.theta_dd[:, 0])
     peak = np.abs(truth).max()
