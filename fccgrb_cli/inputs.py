@@ -154,8 +154,8 @@ def check_name(value: Any, what: str) -> str:
         problem = "a non-empty name"
     elif "/" in value or "\\" in value:
         problem = "a name without '/' or '\\' (it names one file or HDF5 group)"
-    elif value in (".", ".."):
-        problem = "a name other than '.' or '..'"
+    elif not value.strip("."):  # '.', '..', and '....', which Windows reads as ''
+        problem = "a name other than dots alone ('.', '..')"
     elif value != value.strip() or any(ord(c) < 32 or ord(c) == 127 for c in value):
         problem = "a name without leading or trailing blanks or control characters"
     elif len(value) > MAX_NAME:

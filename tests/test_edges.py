@@ -208,8 +208,8 @@ def test_the_lock_serializes_writers_and_names_the_holder(tmp_path: Path) -> Non
 # --- names and outputs ----------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("name", ["/reference", "a/b", "../../x", ".", "..", "", " ", "x\ty",
-                                  "a\\b", " lead", "x" * 201, 7])
+@pytest.mark.parametrize("name", ["/reference", "a/b", "../../x", ".", "..", "....", "", " ",
+                                  "x\ty", "a\\b", " lead", "x" * 201, 7])
 def test_names_that_would_leave_their_group_are_refused(name) -> None:
     with pytest.raises(InputError, match="--name: expected"):
         check_name(name, "--name")
