@@ -108,11 +108,13 @@ MOMENT_BITS = (
     Bit("kinematics", KINEMATICS, "the frame, or a neighbour its central differences reach, is "
         "flagged"),
     Bit("no_dynamics", NO_DYNAMICS, "outside the stretches where the inverse dynamics ran "
-        "(unsolved frames, or solved stretches too short for the rates)"),
+        "(frames outside the data; unsmoothed, also unsolved frames and solved stretches too "
+        "short for the rates)"),
     Bit("contact", CONTACT, "a contact body beyond the joint may be on the ground where no "
         "force plate measures it (stance off the plates, a trial without plates)"),
     Bit("noisy_rates", NOISY, f"more than {100 * NOISE_SHARE:.0f} % of the angular "
-        "accelerations' RMS above 15 Hz: differentiated marker noise (no --filter-cutoff)"),
+        "accelerations' RMS above 15 Hz: differentiated marker noise (neither smoothed nor "
+        "filtered)"),
 )
 
 
