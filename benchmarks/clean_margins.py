@@ -4,10 +4,10 @@ frame, and on the broken cases the checks exist for.
 
     python benchmarks/clean_margins.py [--heldout FOLDER]
 
-Clean: the Qualisys walking trial (calibrated from itself; 6 Hz, and smoothed as by default),
+Clean: the Qualisys walking trial (calibrated from itself; 6 Hz, and with --smooth auto),
 the Plug-in Gait child's walking trial (Helen Hayes model calibrated from the child's static,
 6 Hz), the five-bar at 30 mm (NRM-WLS and CNO-SQP), the crank-rocker at 10 mm. Broken: the
-Qualisys trial neither filtered nor smoothed (``smooth="none"``: noise), the uncalibrated
+Qualisys trial neither filtered nor smoothed (noise), the uncalibrated
 template on it, the parallelogram through its change points. With
 ``--heldout`` every Plug-in Gait subject of another collection in that folder (files
 ``<subject>A01.c3d`` static, the others walking) is run too, one line each: they are not part
@@ -168,8 +168,8 @@ def main() -> int:
                 fc.solve(personal, trial, method="nrm-wls", filter_cutoff=6.0))))
             print(row("Qualisys cno-sqp 6 Hz", measures(
                 fc.solve(personal, trial, method="cno-sqp", filter_cutoff=6.0))))
-            print(row("Qualisys nrm-wls smoothed (default)", measures(
-                fc.solve(personal, trial, method="nrm-wls"))))
+            print(row("Qualisys nrm-wls smoothed", measures(
+                fc.solve(personal, trial, method="nrm-wls", smooth="auto"))))
             print(row("broken: Qualisys unfiltered", measures(
                 fc.solve(personal, trial, method="nrm-wls", smooth="none"))))
             print(row("broken: template on Qualisys", measures(

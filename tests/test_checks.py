@@ -176,12 +176,14 @@ def test_a_gap_in_one_foot_leaves_the_dynamics_on_elsewhere(tmp_path, smoothed):
     """Ten frames (100–109, in the left foot's swing) without the left foot's markers: the
     foot cannot be determined there, so those frames are unsolved and reported, and everything
     else — moments on at least 90 % of the frames, both plates' events, the strides — stays.
-    Filtered, the dynamics run stretch by stretch and leave the gap out; smoothed (the default),
-    the smoother bridges it, and its frames' moments are there but not trusted."""
+    Filtered, the dynamics run stretch by stretch and leave the gap out; smoothed
+    (--smooth auto), the smoother bridges it, and its frames' moments are there but not
+    trusted."""
     trial = blanked(QUALISYS, tmp_path / "gap.c3d", slice(100, 110),
                     ["L_FCC", "L_FM1", "L_FM5"])
     run = fc.solve(qualisys_model(), fc.read_trial(trial), method="nrm-wls",
-                   skip_unsolvable=True, **({} if smoothed else {"filter_cutoff": 6.0}))
+                   skip_unsolvable=True,
+                   **({"smooth": "auto"} if smoothed else {"filter_cutoff": 6.0}))
     assert (run.uncertainty is not None) == smoothed
     assert not run.result.converged[100:110].any()
     assert run.result.converged[:100].all() and run.result.converged[110:].all()
@@ -591,14 +593,14 @@ def test_the_clinical_table_ranges_over_trusted_frames_only():
 
 @needs_shared
 def test_a_late_start_is_smoothed_and_its_residual_is_over_frames_with_dynamics(tmp_path):
-    """Qualisys with its first 100 frames blank, solved with the defaults (the whole-trial
-    smoother): the smoother runs from the first frame with data (its prior extrapolated over
+    """Qualisys with its first 100 frames blank, solved with the whole-trial smoother
+    (--smooth auto): the smoother runs from the first frame with data (its prior extrapolated over
     the blank frames failed to assemble there, which switched smoothing off for the trial), the
     blank frames stay unsolved, and the floating base's residual is taken over frames where the
     dynamics ran and the kinematics are trusted (it printed NaN, then 1e9 N, on a vendor file)."""
     trial = blanked(QUALISYS, tmp_path / "late.c3d", slice(0, 100))
     run = fc.solve(qualisys_model(), fc.read_trial(trial), method="nrm-wls",
-                   skip_unsolvable=True)
+                   skip_unsolvable=True, smooth="auto")
     assert run.uncertainty is not None, said(run)
     assert "could not be assembled" not in said(run)
     assert np.isnan(run.result.q[:100]).all() and not run.trusted[:100].any()
