@@ -120,6 +120,39 @@ def test_progression_frame():
     assert np.allclose(g[:, 0], [0, 1, 0])
 
 
+def body_axes(pig: np.ndarray) -> np.ndarray:
+    """A body's (u, v, w) from Plug-in Gait's axes (x, y, z): u = x, v = z, w = −y."""
+    return np.stack([pig[..., 0], pig[..., 2], -pig[..., 1]], axis=-1)
+
+
+def test_angles_run_on_through_the_sequences_lock():
+    """A thigh abducted from 0 to 120° (through the y–x–z sequence's lock at 90°) with
+    constant flexion and rotation: Plug-in Gait's outputs follow the generating angles on past
+    90° (the other reading, X + 180°, 180° − Y, Z + 180°, taken where it lies nearer the
+    previous frame, as Vicon does), where a frame-by-frame decomposition would fold the
+    abduction back and jump flexion and rotation by 180°; a second frame whose angles run on
+    past ±180° is shifted by whole turns."""
+    n = 121
+    b = np.radians(np.linspace(0.0, 120.0, n))
+    a, c = np.radians(10.0), np.radians(-35.0)
+    eye = np.broadcast_to(np.eye(3), (n, 3, 3))
+    frames = {"pelvis": body_axes(eye)}
+    for s in ("r", "l"):
+        frames[f"thigh_{s}"] = body_axes(np.stack([rot(1, a) @ rot(0, b[k]) @ rot(2, c)
+                                                    for k in range(n)]))
+        frames[f"shank_{s}"] = frames[f"thigh_{s}"]
+        frames[f"foot_{s}"] = frames["pelvis"]
+    got = pig_angles(frames, {"l": 0.0, "r": 0.0}, np.eye(3))
+    for side, sign in (("R", 1.0), ("L", -1.0)):
+        expected = np.degrees(np.column_stack([np.full(n, -a), sign * b, np.full(n, sign * c)]))
+        np.testing.assert_allclose(got[f"{side}HipAngles"], expected, atol=1e-9)
+        assert np.abs(np.diff(got[f"{side}KneeAngles"], axis=0)).max() < 1e-9
+    flexion = np.radians(np.linspace(160.0, 200.0, n))  # through ±180°
+    frames["thigh_r"] = body_axes(np.stack([rot(1, f) @ rot(0, 0.2) for f in flexion]))
+    got = pig_angles(frames, {"l": 0.0, "r": 0.0}, np.eye(3))["RHipAngles"]
+    np.testing.assert_allclose(got[:, 0], -np.degrees(flexion), atol=1e-9)
+
+
 def read(path: Path) -> tuple[dict[str, np.ndarray], dict[str, float]]:
     c3d = ezc3d.c3d(str(path))
     labels = [s.strip() for s in c3d["parameters"]["POINT"]["LABELS"]["value"]]

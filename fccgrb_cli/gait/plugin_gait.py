@@ -18,8 +18,9 @@ distal's long axis), and then, per output (X, Y, Z), with the signs Plug-in Gait
 
 The progression frame is the laboratory's horizontal axis (±x or ±y) the pelvis travels along
 over the trial, with the laboratory's up as z; a trial without travel (a static) takes the axis
-nearest the pelvis's mean anterior axis. Angles are continuous over the frames (no wrap at
-±180°, as Vicon writes them), within ±180° at the first frame to be trusted.
+nearest the pelvis's mean anterior axis. Angles are continuous over the frames as Vicon writes
+them (no wrap at ±180°, and the other Cardan reading where it lies nearer the previous frame's:
+:func:`_continuous`).
 
 The model bodies' frames are the segments' in this project's order (u anterior, v superior, w
 to the subject's right): Plug-in Gait's axes are x = u, y = −w, z = v (foot: x = v, y = −w,
@@ -83,26 +84,36 @@ def progression_frame(pelvis_origin: np.ndarray, pelvis_anterior: np.ndarray,
     return np.stack([x, np.cross(up, x), up], axis=1)
 
 
-def _continuous(degrees: np.ndarray, anchor: int) -> np.ndarray:
-    """Each column unwrapped over the frames (gaps kept), shifted by whole turns so that its
-    value at frame ``anchor`` lies within ±180°."""
+def _continuous(degrees: np.ndarray) -> np.ndarray:
+    """Plug-in Gait's continuity, frame by frame (Vicon's; pyCGM2's ``wrapEulerTo`` does the
+    same): from (0, 0, 0) before the first frame with values, each frame's output (X, Y, Z)
+    or its other reading (X + 180°, 180° − Y, Z + 180°), each component shifted by whole turns
+    to lie nearest the previous frame's value, whichever lies nearer (its largest component
+    difference the smaller; the first reading on a tie). Where the middle Cardan angle is Y
+    (pelvis, hip, knee) the other reading is the same rotation; for the ankle and the foot
+    progression (middle angle in Z) it is not, and Vicon writes it all the same: a foot
+    turned ~90° from the progression axis at the first frame starts on it. Frames without
+    values stay NaN; the next frame continues from the last one with values."""
     out = np.array(degrees, dtype=float)
-    for j in range(out.shape[1]):
-        ok = np.flatnonzero(np.isfinite(out[:, j]))
-        if ok.size:
-            out[ok, j] = np.degrees(np.unwrap(np.radians(out[ok, j])))
-            if np.isfinite(out[anchor, j]):
-                out[:, j] -= 360.0 * np.round(out[anchor, j] / 360.0)
+    previous = np.zeros(3)
+    for f in np.flatnonzero(np.isfinite(out).all(axis=1)):
+        best = None
+        for reading in (out[f], out[f] * [1.0, -1.0, 1.0] + 180.0):
+            shifted = reading + 360.0 * np.floor((previous - reading + 180.0) / 360.0)
+            distance = np.max(np.abs(shifted - previous))
+            if best is None or distance < best[0]:
+                best = (distance, shifted)
+        out[f] = previous = best[1]
     return out
 
 
 def pig_angles(frames: dict[str, np.ndarray], torsion: dict[str, float],
-               progression: np.ndarray, anchor: int = 0) -> dict[str, np.ndarray]:
+               progression: np.ndarray) -> dict[str, np.ndarray]:
     """Plug-in Gait's angles (name → frames × 3, deg) from the bodies' axes ``frames`` (body
     name → frames × 3 × 3, columns u, v, w: pelvis, thigh_s, shank_s, foot_s for s = l, r; the
     shank is the proximal tibia), the tibial torsion per side (rad) and the progression frame
-    (3 × 3, :func:`progression_frame`); continuous over the frames, within ±180° at frame
-    ``anchor`` (the first frame to be trusted)."""
+    (3 × 3, :func:`progression_frame`); continuous over the frames as Plug-in Gait writes them
+    (:func:`_continuous`)."""
     n = len(frames["pelvis"])
     lab = np.broadcast_to(progression, (n, 3, 3))
     pelvis = pig_axes(frames["pelvis"])
@@ -126,4 +137,4 @@ def pig_angles(frames: dict[str, np.ndarray], torsion: dict[str, float],
             [-deg(a[:, 0]) - 90.0, sign * deg(a[:, 2]), sign * deg(a[:, 1])])
         out[f"{prefix}FootProgressAngles"] = np.column_stack(
             [deg(f[:, 0]), -sign * deg(f[:, 2]), sign * deg(f[:, 1])])
-    return {name: _continuous(out[name], anchor) for name in output_names()}
+    return {name: _continuous(out[name]) for name in output_names()}

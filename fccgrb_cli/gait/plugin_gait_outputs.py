@@ -69,8 +69,7 @@ def plugin_gait_results(model: Model, q: np.ndarray, trusted: np.ndarray,
     lab = progression_frame(pelvis, frames["pelvis"][trusted, :, 0], up)
     torsion = {"l": model.measurements.tibial_torsion.left or 0.0,
                "r": model.measurements.tibial_torsion.right or 0.0}
-    anchor = int(np.argmax(trusted)) if trusted.any() else 0
-    angles = pig_angles(frames, torsion, lab, anchor)
+    angles = pig_angles(frames, torsion, lab)
     moments: dict[str, np.ndarray] = {}
     powers: dict[str, np.ndarray] = {}
     if dynamics is not None and model.subject_mass is not None:
