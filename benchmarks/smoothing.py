@@ -243,13 +243,13 @@ def cost(frames: int) -> None:
     options = SolveOptions(engine="compiled")
     warm = slice(0, 1200)
     nrm = solve_nrm(mixed, time_[warm], markers[warm], settings)  # loads the kernels
-    smooth(model, nrm, markers[warm], settings_of(options))
+    smooth(model, nrm, markers[warm], settings_of(options, model))
     best = {"solve": np.inf, "smoother": np.inf, "uncertainty": np.inf}
     for _ in range(2):
         started = time.perf_counter()
         nrm = solve_nrm(mixed, time_, markers, settings)
         t1 = time.perf_counter()
-        s = smooth(model, nrm, markers, settings_of(options))
+        s = smooth(model, nrm, markers, settings_of(options, model))
         t2 = time.perf_counter()
         m = s.motion
         lin = m.coordinates.linearize(m.d, m.q, True)

@@ -169,8 +169,9 @@ class SolveOptions:
              "gain is 1/2 there), instead of estimated.")
     smooth_noise: float | None = _option(
         None, unit="mm", low=0.0, low_open=True, high=1000.0, metavar="MM",
-        help="With {smooth} auto: the markers' noise (standard deviation per coordinate) as "
-             "given, instead of estimated from the residuals.")
+        help="With {smooth} auto: the markers' noise (standard deviation per coordinate; the "
+             "heaviest markers' where the model weighs its tracked points) as given, instead "
+             "of estimated from the residuals.")
     # --- gait ----------------------------------------------------------------------------
     events: str = _option(
         "auto", choices=("auto", "c3d", "plates", "kinematic", "none"),

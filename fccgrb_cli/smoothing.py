@@ -232,11 +232,23 @@ def applies(options, model: Model) -> str | None:
     return None
 
 
-def settings_of(options) -> SmoothSettings:
-    """The smoother's settings from a solve's options."""
+def settings_of(options, model: Model) -> SmoothSettings:
+    """The smoother's settings from a solve's options and its model."""
     noise = None if options.smooth_noise is None else 1e-3 * options.smooth_noise
     engine = "numpy" if options.engine == "numpy" else "compiled"
-    return SmoothSettings(noise=noise, cutoff=options.smooth_cutoff, engine=engine)
+    return SmoothSettings(noise=noise, cutoff=options.smooth_cutoff, engine=engine,
+                          weights=marker_weights(model, options))
+
+
+def marker_weights(model: Model, options) -> tuple[float, ...] | None:
+    """Each tracked point's weight as the frames' own solve gave it, so that the smoother
+    fits the markers as that solve did (None: all equal): NRM-LS none (W = I), NRM-WLS the
+    point's own weight or --tracking-weight, the optimizers the point's own or 1."""
+    if options.method == "nrm-ls":
+        return None
+    default = options.tracking_weight if options.method == "nrm-wls" else 1.0
+    weights = tuple(default if tp.weight is None else tp.weight for tp in model.tracked_points)
+    return None if len(set(weights)) <= 1 else weights
 
 
 def smoothed_or_warned(model: Model, result: KinematicResult, markers: np.ndarray,
@@ -250,7 +262,7 @@ def smoothed_or_warned(model: Model, result: KinematicResult, markers: np.ndarra
         warnings.append(f"--smooth auto not applied: {why}")
         return None
     try:
-        return smooth(model, result, markers, settings_of(options))
+        return smooth(model, result, markers, settings_of(options, model))
     except InputError as error:
         warnings.append(f"{error}; the rates come from central differences instead")
         return None

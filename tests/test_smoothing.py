@@ -188,3 +188,29 @@ def test_a_plate_takes_the_cutoffs_of_the_coordinates_that_move_its_body() -> No
     picked = {names[k] for k in chain_coordinates(model, "foot_r", names)}
     assert {"hip_flexion_r", "knee_flexion_r", "ankle_dorsiflexion_r", "pelvis.r.z"} <= picked
     assert not any(name.endswith("_l") for name in picked)
+
+
+def test_the_smoother_weighs_the_markers_as_the_frames_solve_did() -> None:
+    """The markers' relative weights are the ones the per-frame solve put on its tracking rows
+    (its own row weights, solvers/nrm/problem.py, read here from the solver): a point's own
+    weight or --tracking-weight for NRM-WLS, none for NRM-LS; the optimizers count a point
+    without one as 1."""
+    from fccgrb_cli.model import parse_model
+    from fccgrb_cli.options import SolveOptions
+    from fccgrb_cli.smoothing import marker_weights
+    from fccgrb_cli.solvers.nrm.problem import row_weights
+
+    text = open(FIVE_BAR, encoding="utf-8").read()
+    text = text.replace("{marker: P3, point: B2.P3}", "{marker: P3, point: B2.P3, weight: 4.0e-3}")
+    text = text.replace("{marker: P7, point: B3.P7}", "{marker: P7, point: B3.P7, weight: 1.0e-4}")
+    model = parse_model(text, "five_bar_weighted.yaml")
+    system = compile_system(model, angles="coordinate", track=True)
+    tracking = system.masks()["tracking"]
+    for weight in (1e-3, 2e-2):
+        rows = row_weights(system, weight)[tracking][::3]
+        got = marker_weights(model, SolveOptions(method="nrm-wls", tracking_weight=weight))
+        np.testing.assert_allclose(got, rows, rtol=1e-12)
+    assert marker_weights(model, SolveOptions(method="nrm-ls")) is None
+    own = marker_weights(model, SolveOptions(method="cno-sqp"))
+    assert own[2] == 4e-3 and own[6] == 1e-4 and own.count(1.0) == 7
+    assert marker_weights(fc.load_model(FIVE_BAR), SolveOptions()) is None

@@ -2,7 +2,9 @@
 
 The unknowns are the driver coordinates d(t) of every frame (``coordinates.py``) with their
 derivatives; the prior says each coordinate is an integrated Wiener process of order p
-(``prior.py``), the markers say y_f = p(d_f) + noise of σ per coordinate. Each iteration
+(``prior.py``), the markers say y_f = p(d_f) + noise of σ/√w_i per coordinate of marker i, w_i
+its weight relative to the largest (1 for every marker unless the model weighs its tracked
+points: the per-frame weighted least squares the smoother replaces, formulation §3). Each iteration
 linearizes p at the current d (positions by the topological equations, so every iterate is an
 assembled mechanism), and the linear smoother (``filter.py``, compiled in ``kernels.py``) solves
 the linearized problem over all frames in O(frames); the iteration stops when d moves less than
@@ -48,13 +50,15 @@ ITERATIONS = 8
 
 @dataclass(frozen=True)
 class SmoothSettings:
-    """The smoother's options: the markers' noise σ (m) and each coordinate's equivalent
-    cutoff (Hz), None to estimate them from the data; the engine ('compiled': the numba
-    passes, 'numpy': the reference)."""
+    """The smoother's options: the markers' noise σ (m; of the markers of the largest weight)
+    and each coordinate's equivalent cutoff (Hz), None to estimate them from the data; the
+    engine ('compiled': the numba passes, 'numpy': the reference); each tracked point's
+    weight (None: all equal; a marker of weight w has noise σ √(w_max / w))."""
 
     noise: float | None = None
     cutoff: float | None = None
     engine: str = "compiled"
+    weights: tuple[float, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -98,8 +102,8 @@ class Motion:
 @dataclass(frozen=True)
 class _Data:
     """What every span of the trial reads: the coordinates, the frame times, the markers
-    (frames × 3 markers, 0 where missing) and their weights W (1 present, 0 not), and the
-    passes' engine."""
+    (frames × 3 markers, 0 where missing) and their weights W (the marker's relative weight
+    where present, 0 where not), and the passes' engine."""
 
     coordinates: Coordinates
     time: np.ndarray
@@ -154,7 +158,8 @@ def smooth_motion(system: System, time: np.ndarray, markers: np.ndarray, use: np
     present = np.isfinite(markers).all(axis=2) & usable[:, None]
     passes = _passes(settings.engine)
     data = _Data(coordinates, time, np.where(present[..., None], markers, 0.0),
-                 np.repeat(present, 3, axis=1).astype(float), passes,
+                 np.repeat(present * _relative(settings.weights, markers.shape[1]), 3, axis=1),
+                 passes,
                  passes.compiled and compilable(system))
     n = len(time)
     middle = _middle(n, min(n, ESTIMATE_FRAMES))
@@ -204,6 +209,14 @@ def _held(motion: Motion, inner: slice, n: int) -> Motion:
                    covariance=held(motion.covariance), q=held(motion.q), used=used)
 
 
+def _relative(weights: tuple[float, ...] | None, n: int) -> np.ndarray:
+    """Each marker's weight over the largest (all 1 without weights)."""
+    if weights is None:
+        return np.ones(n)
+    w = np.asarray(weights, dtype=float)
+    return w / w.max()
+
+
 def _middle(n: int, frames: int) -> slice:
     start = max(0, (n - frames) // 2)
     return slice(start, start + frames)
@@ -217,11 +230,12 @@ def _overlap(strengths: tuple[Strength, ...], dt: float) -> int:
 
 def _linearized(data: _Data, part: slice, d: np.ndarray, q: np.ndarray, noise: float
                 ) -> tuple:
-    """The frames' measurement model at d: the linearization and the information A, b
-    (unscaled by σ² where ``noise`` is 1)."""
+    """The frames' measurement model at d: the linearization, the information A = HᵀWH / σ²,
+    b = HᵀW(r + H d) / σ² (unscaled by σ² where ``noise`` is 1), and the residuals r = y − p(d)
+    (0 where a marker is missing)."""
     lin = data.coordinates.linearize(d, q, data.compiled)
     W = data.W[part]
-    r = (data.y[part] - lin.points).reshape(len(d), -1) * W
+    r = np.where(W > 0, (data.y[part] - lin.points).reshape(len(d), -1), 0.0)
     HW = lin.H * W[:, :, None]
     A = np.einsum("fri,frj->fij", HW, lin.H)
     b = np.einsum("fri,fr->fi", HW, r) + np.einsum("fij,fj->fi", A, d)
@@ -287,16 +301,18 @@ def _gauss_newton(data: _Data, part: slice, d: np.ndarray, q: np.ndarray,
 
 def _noise(A: np.ndarray, b: np.ndarray, d: np.ndarray, H: np.ndarray, r: np.ndarray,
            W: np.ndarray) -> float:
-    """σ from the residuals of each frame's own fit (noise.marker_noise)."""
+    """σ from the residuals of each frame's own fit (noise.marker_noise), each row scaled by
+    √W: a row of weight W has residual variance σ² (1 − h)/W, h = W Hᵣ A⁻¹ Hᵣᵀ its leverage."""
     est = FrameEstimates.of(A, b)
     full = np.isfinite(est.z).all(axis=1)
     step = np.where(full[:, None], est.z - d, 0.0)
     e = r - np.einsum("fri,fi->fr", H, step)
     inverse = np.zeros_like(A)
     inverse[full] = np.linalg.inv(A[full])
-    leverage = np.einsum("fri,fij,frj->fr", H, inverse, H)
+    leverage = W * np.einsum("fri,fij,frj->fr", H, inverse, H)
     keep = (W > 0) & full[:, None]
-    return marker_noise(np.where(keep, e, np.nan), np.where(keep, leverage, np.nan))
+    return marker_noise(np.where(keep, e * np.sqrt(W), np.nan),
+                        np.where(keep, leverage, np.nan))
 
 
 def with_extra_noise(A: np.ndarray, b: np.ndarray, extra: np.ndarray
