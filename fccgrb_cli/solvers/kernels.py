@@ -225,6 +225,7 @@ def gauss_newton(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, w: np.ndarray
     jacobian(s, q, F, values)
     cost = cost_of(phi, w)
     size = previous = np.inf
+    full = True
     exact = hessian == 1
     for k in range(1, max_iter + 1):
         largest = 0.0
@@ -249,7 +250,7 @@ def gauss_newton(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, w: np.ndarray
             ok = cholesky_solve(s.first, N, L, g, step_p)
         if not ok:
             return k, False
-        previous, size = size, 0.0
+        previous, size = size if full else np.inf, 0.0
         slope = 0.0
         for p in range(nq):
             step[s.perm[p]] = step_p[p]
@@ -272,6 +273,7 @@ def gauss_newton(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, w: np.ndarray
                 trial[i] = q[i] + alpha * step[i]
             residual(s, trial, trial[s.nb:], ref, F, trial_phi)
             trial_cost = cost_of(trial_phi, w)
+        full = alpha == 1.0
         q[:] = trial
         phi[:] = trial_phi
         cost = trial_cost

@@ -60,7 +60,8 @@ HESSIANS = ("auto", "gauss-newton", "exact")
 # and an Armijo test that ignored it would shrink converging steps a thousandfold.
 ROUNDING = 1e-12
 # 'auto' turns to the exact matrix once a step is below NEAR (m and rad: near the optimum) or
-# shrinks by less than 1/SLOW (Gauss–Newton's linear rate on a large-residual problem).
+# shrinks by less than 1/SLOW after a full step (Gauss–Newton's linear rate on a
+# large-residual problem).
 NEAR = 1e-3
 SLOW = 0.25
 # ... near the optimum only where the residuals are large enough for Σ wΦ∇²Φ to matter: on
@@ -79,9 +80,10 @@ def gauss_newton(system: System, q0: np.ndarray, drive: Drive, weights: np.ndarr
     Newton's method on the weighted least-squares objective, quadratic instead of linear
     convergence when noisy markers leave large residuals), or 'auto': Gauss–Newton until a
     step is below ``NEAR`` (1 mm / 1 mrad) with some weighted residual above ``LARGE`` (noisy
-    markers), or shrinks by less than 4× (the linear rate of a large residual: markers a model
-    cannot follow), exact from then on. The exact matrix pays
-    only near the optimum: from a warm start on the five-bar at P30 a first exact step often
+    markers), or shrinks by less than 4× after a full step (the linear rate of a large residual:
+    markers a model cannot follow; after a step the line search shortened, the next is as long
+    as the part not taken, which says nothing of the rate), exact from then on. The exact matrix
+    pays only near the optimum: from a warm start on the five-bar at P30 a first exact step often
     overshoots (its residual term is built from the guess's residuals), while Gauss–Newton
     then Newton meets 1e-10 in 4.1 iterations per frame instead of Gauss–Newton's 12.8 (P7.5:
     3.1 instead of 6.3; P0: 2.2 either way). Where the exact matrix is not positive definite the
@@ -92,6 +94,7 @@ def gauss_newton(system: System, q0: np.ndarray, drive: Drive, weights: np.ndarr
     phi, J = system.evaluate(q, drive)
     cost = float(phi @ (weights * phi))
     size = previous = np.inf
+    full = True
     exact = hessian == "exact"
     for k in range(1, max_iter + 1):
         near = size < NEAR and np.abs(weights * phi).max() > LARGE
@@ -107,7 +110,7 @@ def gauss_newton(system: System, q0: np.ndarray, drive: Drive, weights: np.ndarr
             _, step, info = lapack.dposv(normal, -gradient)
         if info != 0:
             return Iterate(q, k, False)
-        previous, size = size, np.abs(step).max()
+        previous, size = size if full else np.inf, np.abs(step).max()
         if not np.isfinite(size):
             return Iterate(q, k, False)
         if size < tol:
@@ -123,6 +126,7 @@ def gauss_newton(system: System, q0: np.ndarray, drive: Drive, weights: np.ndarr
             trial_phi = system.residual(trial, drive)
             trial_cost = float(trial_phi @ (weights * trial_phi))
             trial_J = None
+        full = alpha == 1.0
         q, phi, cost = trial, trial_phi, trial_cost
         J = system.jacobian(q) if trial_J is None else trial_J
     return Iterate(q, max_iter, False)
