@@ -136,6 +136,11 @@ def test_plugin_gait_c3d_export_reads_back_in_plugin_gaits_layout(solved, tmp_pa
             np.testing.assert_allclose(stored, values, rtol=1e-6, atol=1e-3)
     assert len(pig.angles) == 10 and len(pig.moments) == 6 and len(pig.powers) == 6
     theirs, _ = vicon(WALK)
+    for name in ("LKneeAngles", "RHipAngles", "LKneeMoment", "RAnklePower"):  # Vicon's units
+        stored, k = xyz[:, labels.index(name), :].T, 2 if name.endswith("Power") else 0
+        ok = np.isfinite(theirs[name]).all(axis=1) & np.any(theirs[name] != 0, axis=1)
+        peak = np.abs(theirs[name][ok, k]).max()
+        assert 0.5 * peak <= np.abs(stored[ok, k]).max() <= 2.0 * peak, name
     np.testing.assert_array_equal(xyz[:, labels.index("LASI"), :].T, theirs["LASI"])
     assert back["header"]["points"]["first_frame"] == original["header"]["points"]["first_frame"]
     np.testing.assert_array_equal(np.asarray(back["parameters"]["EVENT"]["TIMES"]["value"]),
@@ -170,16 +175,24 @@ def test_opensim_mot_on_the_trials_clock(solved, tmp_path):
 
 
 def test_opensim_rebuilds_the_solved_pelvis_and_thighs_from_the_mot(solved, tmp_path):
-    """An OpenSim model with the pelvis's and hips' custom joints as OpenSim's gait models
-    define them (pelvis: rotations about Z, X, Y of ground, then the translations; hips: Z, X,
-    Y on the right, Z, −X, −Y on the left), driven by the .mot, puts the pelvis and both thighs
-    where the solve did (their axes in OpenSim's ground: X progression, Y up, Z right)."""
+    """OpenSim reads the .mot (its own TimeSeriesTable: every column, the trial's clock, in
+    degrees), and an OpenSim model with the pelvis's and hips' custom joints as OpenSim's gait
+    models define them (pelvis: rotations about Z, X, Y of ground, then the translations; hips:
+    Z, X, Y on the right, Z, −X, −Y on the left), driven by what it read, puts the pelvis and
+    both thighs where the solve did (their axes in OpenSim's ground: X progression, Y up, Z
+    right)."""
     osim = pytest.importorskip("opensim")
     personal, run = solved
     target = tmp_path / "walk.mot"
     run_cli("export", personal.parent / "walk.h5", "--format", "mot", "--convention",
             "opensim", "-o", target)
-    labels, rows = storage(target)
+    ours, rows = storage(target)
+    table = osim.TimeSeriesTable(str(target))
+    labels = ["time", *table.getColumnLabels()]
+    assert labels == ours and table.getTableMetaDataAsString("inDegrees") == "yes"
+    np.testing.assert_allclose(np.array(table.getIndependentColumn()), rows[:, 0], atol=1e-9)
+    rows = np.column_stack([rows[:, 0], *(table.getDependentColumn(name).to_numpy()
+                                          for name in labels[1:])])
     model = osim.Model()
 
     def body(name: str, parent, coordinates: list[str], axes: list[tuple]) -> osim.Body:
