@@ -200,7 +200,8 @@ def test_the_smoother_weighs_the_markers_as_the_frames_solve_did() -> None:
     from fccgrb_cli.smoothing import marker_weights
     from fccgrb_cli.solvers.nrm.problem import row_weights
 
-    text = open(FIVE_BAR, encoding="utf-8").read()
+    with open(FIVE_BAR, encoding="utf-8") as handle:
+        text = handle.read()
     text = text.replace("{marker: P3, point: B2.P3}", "{marker: P3, point: B2.P3, weight: 4.0e-3}")
     text = text.replace("{marker: P7, point: B3.P7}", "{marker: P7, point: B3.P7, weight: 1.0e-4}")
     model = parse_model(text, "five_bar_weighted.yaml")
