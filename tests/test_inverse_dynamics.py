@@ -586,9 +586,14 @@ def test_results_file_holds_the_plate_loads(tmp_path: Path) -> None:
         assert list(g["loads"]) == ["plate1"]
         load = g["loads/plate1"]
         assert load.attrs["body"] == "link2"
-        assert np.array_equal(load["force"][()], plate.force)
-        assert np.array_equal(load["point"][()], plate.cop)
-        assert np.array_equal(load["moment"][()], plate.free_moment)
+        # frames outside the stretches the dynamics ran on (unsolved here: three leg markers
+        # do not always determine a pendulum) hold no load, as they hold no moment
+        ran = np.isfinite(g["joint_moments"][()]).all(axis=1)
+        assert ran.mean() > 0.9
+        for key, measured in (("force", plate.force), ("point", plate.cop),
+                              ("moment", plate.free_moment)):
+            assert np.array_equal(load[key][()][ran], measured[ran])
+            assert np.isnan(load[key][()][~ran]).all()
         assert g["joint_moments"].shape == (340, 4)
         assert np.abs(g["energy/external_power"][()]).any()
 
