@@ -121,14 +121,13 @@ class NormalForce:
 def _plate_normal_forces(path: str | Path, n_frames: int) -> list[NormalForce | None]:
     """Each plate's force normal to it (None for a plate whose corners do not give a normal,
     or with fewer samples than frames)."""
-    import ezc3d
+    from fccgrb_cli.io.forceplates import plate_file
 
-    c3d = ezc3d.c3d(str(path), extract_forceplat_data=True)
     out: list[NormalForce | None] = []
-    for raw in c3d["data"].get("platform", []):
-        corners = np.asarray(raw["corners"], dtype=float).T
+    for raw in plate_file(path).plates:
+        corners = raw.corners.T
         normal = np.cross(corners[2] - corners[0], corners[3] - corners[1])
-        force = np.asarray(raw["force"], dtype=float)
+        force = raw.force
         per = force.shape[1] // n_frames if n_frames else 0
         if per < 1 or not np.isfinite(normal).all() or not np.linalg.norm(normal):
             out.append(None)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -125,42 +126,91 @@ def unloaded_under_a_foot(corners: np.ndarray, normal_force: np.ndarray, markers
             "channels look wrong)")
 
 
-def _file_markers(c3d, n_frames: int) -> tuple[np.ndarray, list[str], float]:
-    """The C3D's own markers (frames × markers × 3, m; NaN where missing), labels and rate."""
+@dataclass(frozen=True)
+class RawPlate:
+    """One platform as ezc3d extracts it, in the file's units: corners (4 × 3), force, centre
+    of pressure and free moment Tz per analog sample (3 × samples each)."""
+
+    corners: np.ndarray
+    force: np.ndarray
+    cop: np.ndarray
+    free: np.ndarray
+    unit_position: str
+    unit_moment: str
+
+
+@dataclass(frozen=True)
+class PlateFile:
+    """What the stages read of a C3D's platforms: each plate's raw data, and the file's own
+    markers (frames × markers × 3, m; NaN where missing), labels and point rate."""
+
+    plates: tuple[RawPlate, ...]
+    markers: np.ndarray
+    labels: list[str]
+    rate: float
+
+
+def plate_file(path: str | Path) -> PlateFile:
+    """The file's platforms, read once per file and process: the lab's axes, the loads and the
+    gait events each ask for them, and ezc3d's read with the platforms' extraction costs ~0.1 s a
+    trial (a third of a gait trial's whole solve). Keyed by the file's identity (its resolved
+    path, inode, size and modification time), so a file rewritten in between is read again; the
+    arrays are read-only."""
+    import os
+
+    real = os.path.realpath(path)
+    stat = os.stat(real)
+    return _read_plate_file(real, (stat.st_ino, stat.st_size, stat.st_mtime_ns), str(path))
+
+
+@lru_cache(maxsize=1)
+def _read_plate_file(real: str, identity: tuple[int, int, int], shown: str) -> PlateFile:
+    """plate_file's read (``identity`` in the key only; ``shown``: the path as the user gave
+    it, for messages)."""
+    import ezc3d
+
+    try:
+        c3d = ezc3d.c3d(real, extract_forceplat_data=True)
+    except Exception as exc:  # ezc3d raises plain RuntimeErrors for unreadable platform data
+        reason = str(exc).strip() or exc.__class__.__name__
+        raise InputError(f"{shown}: cannot read the force platforms ({reason})") from None
+    plates = tuple(RawPlate(*(_frozen(np.asarray(raw[key], dtype=float)) for key in
+                              ("corners", "force", "center_of_pressure", "Tz")),
+                            str(raw["unit_position"]), str(raw["unit_moment"]))
+                   for raw in c3d["data"].get("platform", []))
     point = c3d["parameters"]["POINT"]
     unit = str(point["UNITS"]["value"][0]).strip() if point.get("UNITS", {}).get("value") \
         else "mm"
     xyz = np.asarray(c3d["data"]["points"][:3], dtype=float) * _LENGTH.get(unit, 1e-3)
-    xyz = np.transpose(xyz, (2, 1, 0))[:n_frames]  # 3 × markers × frames → frames × markers × 3
+    xyz = np.transpose(xyz, (2, 1, 0))  # 3 × markers × frames → frames × markers × 3
     xyz[(xyz == 0).all(axis=2)] = np.nan
     labels = [str(x).strip() for x in point["LABELS"]["value"]]
-    return xyz, labels, float(point["RATE"]["value"][0])
+    return PlateFile(plates, _frozen(xyz), labels, float(point["RATE"]["value"][0]))
+
+
+def _frozen(values: np.ndarray) -> np.ndarray:
+    values.flags.writeable = False
+    return values
 
 
 def read_force_plates(path: str | Path, n_frames: int, threshold: float = 20.0
                       ) -> list[ForcePlate]:
     """Every plate of the file; frames whose force normal to the plate is below ``threshold`` N
     carry no load (the centre of pressure is then undefined and set to the plate centre)."""
-    import ezc3d
-
-    try:
-        c3d = ezc3d.c3d(str(path), extract_forceplat_data=True)
-    except Exception as exc:  # ezc3d raises plain RuntimeErrors for unreadable platform data
-        reason = str(exc).strip() or exc.__class__.__name__
-        raise InputError(f"{path}: cannot read the force platforms ({reason})") from None
-    markers, labels, rate = _file_markers(c3d, n_frames)
+    found = plate_file(path)
+    markers = found.markers[:n_frames]
     plates = []
-    for k, raw in enumerate(c3d["data"].get("platform", []), start=1):
-        length = _LENGTH.get(str(raw["unit_position"]).strip(), 1e-3)
-        moment = _MOMENT.get(str(raw["unit_moment"]).strip().replace(" ", ""), 1e-3)
-        corners = np.asarray(raw["corners"], dtype=float).T * length
-        force = _blocks(np.asarray(raw["force"], dtype=float), n_frames)
-        cop = _blocks(np.asarray(raw["center_of_pressure"], dtype=float), n_frames) * length
-        free = _blocks(np.nan_to_num(np.asarray(raw["Tz"], dtype=float)), n_frames) * moment
+    for k, raw in enumerate(found.plates, start=1):
+        length = _LENGTH.get(raw.unit_position.strip(), 1e-3)
+        moment = _MOMENT.get(raw.unit_moment.strip().replace(" ", ""), 1e-3)
+        corners = raw.corners.T * length
+        force = _blocks(raw.force, n_frames)
+        cop = _blocks(raw.cop, n_frames) * length
+        free = _blocks(np.nan_to_num(raw.free), n_frames) * moment
         problem = plausibility(corners, force)
         if problem is None:
-            problem = unloaded_under_a_foot(corners, force @ plate_normal(corners), markers, labels,
-                                            rate)
+            problem = unloaded_under_a_foot(corners, force @ plate_normal(corners), markers,
+                                            found.labels, found.rate)
         loaded = np.abs(force @ plate_normal(corners)) >= threshold if problem is None else \
             np.zeros(n_frames, dtype=bool)
         centre = corners.mean(axis=0) if np.isfinite(corners).all() else np.zeros(3)
