@@ -129,3 +129,38 @@ def test_optimizer_runs_keep_every_frame_status(tmp_path: Path) -> None:
             assert g["converged"][()].all(), run
             assert np.abs(g["theta"][()] - truth).max() < 1e-5, run
             assert 1e3 * g["ed"][()].max() < 1e-3, run
+
+
+def test_reverse_cuthill_mckee_is_scipys_order(monkeypatch):
+    """The factor's order (system/sparse.py writes the ordering out instead of importing
+    scipy.sparse) against scipy.sparse.csgraph.reverse_cuthill_mckee: random symmetric patterns
+    with and without diagonals, disconnected parts, ties; and every template's normal matrix,
+    mixed and classical."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+    from fccgrb_cli.system import compile_system, sparse
+    from fccgrb_cli.system.sparse import _reverse_cuthill_mckee
+
+    def scipys(graph):
+        return np.asarray(reverse_cuthill_mckee(csr_matrix(graph), symmetric_mode=True))
+
+    rng = np.random.default_rng(5)
+    for _ in range(400):
+        n = int(rng.integers(1, 50))
+        graph = rng.random((n, n)) < rng.uniform(0.0, 0.3)
+        graph |= graph.T
+        np.fill_diagonal(graph, rng.random(n) < rng.choice([0.0, 0.5, 1.0]))
+        assert np.array_equal(_reverse_cuthill_mckee(graph), scipys(graph))
+    graphs = []
+    monkeypatch.setattr(sparse, "_reverse_cuthill_mckee",
+                        lambda graph: graphs.append(graph) or _reverse_cuthill_mckee(graph))
+    for path in sorted((ROOT / "configs" / "models").glob("*.yaml")):
+        model = load_model(path)
+        for system in (compile_system(model, angles="coordinate", track=True),
+                       compile_system(model, angles="driver")):
+            if sparse.compilable(system):
+                sparse.sparse_system(system)
+    assert len(graphs) > 10
+    for graph in graphs:
+        assert np.array_equal(_reverse_cuthill_mckee(graph), scipys(graph))
