@@ -79,3 +79,78 @@ def test_solve_reports_the_kernels_load_apart_and_compile_prepares_them(tmp_path
     numpy = run_cli("solve", MODEL, TRIAL, "--engine", "numpy", "-o", tmp_path / "n.h5")
     assert numpy.exit_code == 0, numpy.output
     assert "compiled kernels" not in numpy.stderr
+
+
+# A numba dispatcher that gains a compiled overload (loaded from numba's cache, or compiled) in
+# a process: one line "pid kernel" in FCCGRB_LOAD_LOG. As a sitecustomize, every process of
+# the command counts, whichever way a pool starts its workers.
+_COUNTING = """
+import os
+
+from numba.core import dispatcher
+
+_compile = dispatcher.Dispatcher.compile
+
+
+def compile(self, sig):
+    before = len(self.overloads)
+    out = _compile(self, sig)
+    if len(self.overloads) > before:
+        with open(os.environ["FCCGRB_LOAD_LOG"], "a") as log:
+            log.write(f"{os.getpid()} {self.py_func.__module__}.{self.py_func.__qualname__}\\n")
+    return out
+
+
+dispatcher.Dispatcher.compile = compile
+"""
+
+
+def _loads(tmp_path: Path, *args: object) -> list[tuple[str, str]]:
+    """(pid, kernel) of every kernel load of an ``fccgrb`` command run in a fresh process."""
+    import os
+    import shutil
+    import subprocess
+
+    log = tmp_path / "loads.txt"
+    log.write_text("")
+    hook = tmp_path / "hook"
+    hook.mkdir(exist_ok=True)
+    (hook / "sitecustomize.py").write_text(_COUNTING)
+    env = {**os.environ, "FCCGRB_LOAD_LOG": str(log),
+           "PYTHONPATH": os.pathsep.join([str(hook), os.environ.get("PYTHONPATH", "")])}
+    done = subprocess.run([shutil.which("fccgrb") or "fccgrb", *map(str, args)],
+                          capture_output=True, text=True, cwd=ROOT, env=env)
+    assert done.returncode == 0, done.stderr
+    return [tuple(line.split()) for line in log.read_text().splitlines()]
+
+
+@pytest.mark.skipif(not numba_available(), reason="numba is not installed")
+def test_batches_load_each_kernel_once_per_process(tmp_path):
+    """A sweep of 6 compiled cells over 2 workers loads each kernel at most once in each
+    process, in at most the 2 workers and the parent (a pool that started a process per cell,
+    or a dispatcher rebuilt per solve, would load it again); one solve of several trials loads
+    each kernel once."""
+    import yaml
+
+    config = tmp_path / "sweep.yaml"
+    config.write_text(yaml.safe_dump({
+        "name": "loads", "model": str(ROOT / "configs" / "models" / "pendulum.yaml"),
+        "trial": {"synth": {"duration": 0.5, "rate": 100}}, "seed": 0,
+        "cells": [{"smooth": "none", "method": ["nrm-ls", "nrm-wls", "cno-sqp"],
+                   "level": [0, 30], "engine": "compiled"}]}))
+    loads = _loads(tmp_path, "sweep", config, "-o", tmp_path / "sweep.h5", "--workers", "2")
+    assert loads, "no kernel loaded: the sweep did not run compiled"
+    assert len(set(loads)) == len(loads), sorted(loads)
+    assert len({pid for pid, _ in loads}) <= 3
+    kernels = {kernel for _, kernel in loads}
+    assert any(kernel.endswith("solve_frames") for kernel in kernels), kernels
+
+    trials = []
+    for k in range(3):
+        trials.append(tmp_path / f"t{k}.c3d")
+        ok = run_cli("synth", MODEL, "-o", trials[-1], "--duration", 0.3 + 0.1 * k)
+        assert ok.exit_code == 0, ok.output
+    loads = _loads(tmp_path, "solve", MODEL, *trials, "-o", tmp_path / "trials.h5",
+                   "--engine", "compiled")
+    assert loads and len(set(loads)) == len(loads), sorted(loads)
+    assert len({pid for pid, _ in loads}) == 1
