@@ -1,7 +1,21 @@
-"""fccgrb against OpenSim's inverse kinematics on the same five-bar and the same markers, in one
-run (issue 13, item 7).
+"""fccgrb against OpenSim's inverse kinematics on the same five-bar and the same markers, and on
+the gait example's lower limb and walking trial, in one run (issue 13, item 7; issue 27).
 
-    python benchmarks/peers.py [--frames 300] [--repeat 3]
+    python benchmarks/peers.py [--frames 300] [--repeat 3] [--no-gait] [--no-cli]
+
+Gait: the lower-limb template calibrated on ../shared/data/c3d/Qualisys.c3d (as
+benchmarks/gait.py does: 340 frames at 200 Hz, 28 markers, skipped without the shared data),
+built in OpenSim the same way, its floating pelvis on a ``FreeJoint`` at its YAML pose, each
+joint turning about each body's own axis (the calibrated pose satisfies the joints only
+approximately). OpenSim's IK and CNO-SQP reach the same optimum there too (tests/test_peers.py).
+
+The default command line: after the in-process table, each trial again through ``fccgrb solve
+MODEL TRIAL --method M -o out.h5`` in a fresh process (every other option at its default: the
+auto engine, the whole-trial smoother, the inverse dynamics, the results file; the five-bar's
+trial written by ``fccgrb synth`` and perturbed with ``--perturb``): ms/frame from the solve's
+own summary (the per-frame position solve, which leaves the process's start-up, the kernels'
+load and the later stages out), beside the whole process's wall time and the kernels' load the
+command reports apart; 'OpenSim/this' against the in-process OpenSim row of the same trial.
 
 The five-bar's YAML (configs/models/five_bar.yaml) is built a second time in OpenSim 4.6
 (``pip install '.[peers]'``): one ``opensim.Body`` per body (the YAML's mass, centre of mass and
@@ -59,6 +73,11 @@ import fccgrb_cli  # noqa: F401  (first: pins BLAS to one thread before numpy lo
 import argparse
 import importlib
 import importlib.util
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -67,7 +86,10 @@ from typing import Any
 
 import numpy as np
 
-from fccgrb_cli.model import GROUND, Model, load_model
+from fccgrb_cli.anatomy.calibrate import calibrate
+from fccgrb_cli.io.labels import match_labels
+from fccgrb_cli.io.trial import read_trial
+from fccgrb_cli.model import GROUND, Model, load_model, parse_model
 from fccgrb_cli.perturb import perturb
 from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
 from fccgrb_cli.solvers.optimize.solve import Settings, solve_optimization
@@ -78,6 +100,9 @@ ROOT = Path(__file__).resolve().parents[1]
 LEVELS_MM = (0.0, 7.5, 30.0)
 ACCURACIES = (1e-10, 1e-5)
 REFERENCE_ACCURACY = 1e-10
+GAIT_TEMPLATE = ROOT / "configs" / "models" / "lower_limb.yaml"
+GAIT_TRIAL = ROOT.parent / "shared" / "data" / "c3d" / "Qualisys.c3d"
+METHODS = ("nrm-wls", "cno-sqp")
 
 
 @dataclass(frozen=True)
@@ -141,8 +166,10 @@ def points_from_poses(model: Model, poses: np.ndarray) -> np.ndarray:
 
 
 def marker_fit(model: Model, poses: np.ndarray, markers: np.ndarray) -> np.ndarray:
-    """Per frame, the mean distance (m) from each tracked model point to its marker."""
-    return np.linalg.norm(points_from_poses(model, poses) - markers, axis=-1).mean(axis=-1)
+    """Per frame, the mean distance (m) from each tracked model point to its marker (over the
+    markers the frame has)."""
+    return np.nanmean(np.linalg.norm(points_from_poses(model, poses) - markers, axis=-1),
+                      axis=-1)
 
 
 # --- fccgrb --------------------------------------------------------------------------------------
@@ -211,6 +238,26 @@ def _joint_frame(model: Model, joint: Any) -> np.ndarray:
     return np.column_stack([s_i, s_j, np.cross(s_i, s_j)])
 
 
+def _exact(frame: np.ndarray, axis: np.ndarray, k: int) -> np.ndarray:
+    """The right-handed orthonormal frame (columns) nearest ``frame`` whose column ``k`` is the
+    body's own joint axis: a calibrated model's pose need not satisfy its joints (the gait
+    model's knee axes lie up to 3.2° apart there, its ankle arms 1.7° off perpendicular), and
+    OpenSim's joint must turn about the axes fccgrb's constraints use. The five-bar's pose is
+    exact: its frames stay as they are, to rounding."""
+    a = axis / np.linalg.norm(axis)
+    b = frame[:, (k + 1) % 3] - (frame[:, (k + 1) % 3] @ a) * a
+    b /= np.linalg.norm(b)
+    out = np.empty((3, 3))
+    out[:, k], out[:, (k + 1) % 3], out[:, (k + 2) % 3] = a, b, np.cross(a, b)
+    return out
+
+
+def floating_bodies(model: Model) -> list[str]:
+    """The bodies no joint makes a child of (a gait model's pelvis)."""
+    children = {joint.bodies[1] for joint in model.joints}
+    return [b.name for b in model.bodies if b.name not in children]
+
+
 def build_opensim_model(osim: ModuleType, model: Model) -> Any:
     """The model as an ``opensim.Model`` (see the module's docstring). Each joint's parent and
     child frames get the same global orientation G at the YAML pose (R_i^T G in body i,
@@ -235,12 +282,22 @@ def build_opensim_model(osim: ModuleType, model: Model) -> Any:
                              f"(expected one of {sorted(joint_classes)})")
         (bi, bj), G = joint.bodies, _joint_frame(model, joint)
         parent = out.getGround() if bi == GROUND else bodies[bi]
+        in_i, in_j = _rotation(model, bi).T @ G, _rotation(model, bj).T @ G
+        if joint.type != "spherical":  # each body's own axis, whatever the pose's rounding
+            turning = {"revolute": (2, 2), "universal": (0, 1)}[joint.type]
+            in_i = _exact(in_i, _local(model, bi, "vectors", joint.axes[0]), turning[0])
+            in_j = _exact(in_j, _local(model, bj, "vectors", joint.axes[1]), turning[1])
         out.addJoint(joint_classes[joint.type](
             joint.name,
             parent, osim.Vec3(*_local(model, bi, "points", joint.points[0])),
-            _euler_xyz(osim, _rotation(model, bi).T @ G),
+            _euler_xyz(osim, in_i),
             bodies[bj], osim.Vec3(*_local(model, bj, "points", joint.points[1])),
-            _euler_xyz(osim, _rotation(model, bj).T @ G)))
+            _euler_xyz(osim, in_j)))
+    for name in floating_bodies(model):  # markers fix its 6 degrees of freedom: a FreeJoint
+        out.addJoint(osim.FreeJoint(
+            f"{name}_free", out.getGround(), osim.Vec3(*model.body(name).pose.r),
+            _euler_xyz(osim, _rotation(model, name)), bodies[name], osim.Vec3(0, 0, 0),
+            osim.Vec3(0, 0, 0)))
     for tp in model.tracked_points:
         out.addMarker(osim.Marker(tp.marker, bodies[tp.body],
                                   osim.Vec3(*_local(model, tp.body, "points", tp.point))))
@@ -309,7 +366,7 @@ def run_opensim(osim: ModuleType, osim_model: Any, model: Model, table: Any,
         solver.computeCurrentSquaredMarkerErrors(squared)
         by_name = {solver.getMarkerNameForIndex(k): squared.getElt(k)
                    for k in range(solver.getNumMarkersInUse())}
-        errors[f] = np.sqrt([by_name[tp.marker] for tp in model.tracked_points])
+        errors[f] = np.sqrt([by_name.get(tp.marker, np.nan) for tp in model.tracked_points])
         read_out += time.perf_counter() - tock
     call = time.perf_counter() - started - read_out
     return Solved(f"OpenSim {accuracy:.0e}", poses, seconds, call, float("nan")), errors
@@ -328,33 +385,80 @@ def best_of(repeat: int, run: Any) -> Any:
     return best[1]
 
 
-def warm_up(system: System, truth: Synthesis, frames: int) -> None:
-    """One untimed solve of each fccgrb method on the exact markers (see the timings above)."""
-    for method in ("nrm-wls", "cno-sqp"):
-        run_fccgrb(method, system, truth.result.time[:frames], truth.markers[:frames])
+@dataclass(frozen=True)
+class Case:
+    """One trial every solver gets: a name for the table, the model, the frames' times and the
+    markers (frames × tracked points × 3, m, NaN where missing), with their labels and rate;
+    ``cli``: how ``fccgrb solve`` reads the same trial (model file, trial file, options)."""
+
+    name: str
+    model: Model
+    time_s: np.ndarray
+    markers: np.ndarray
+    labels: tuple[str, ...]
+    rate: float
+    cli: tuple[str, ...]
 
 
-def compare_level(model: Model, system: System, truth: Synthesis, level_mm: float, frames: int,
-                  repeat: int, osim: ModuleType | None) -> tuple[np.ndarray, list[Solved]]:
-    """Every solver on the synthesized trial's (``truth``) first ``frames`` frames perturbed at
-    ``level_mm`` (seed 0): the markers and the solvers' answers (fccgrb's first, then OpenSim
-    at each accuracy of ACCURACIES, when OpenSim is importable)."""
-    time_s = truth.result.time[:frames]
-    markers = perturb(truth.markers, truth.labels, truth.rate, level_mm * 1e-3, seed=0)[:frames]
-    solved = [best_of(repeat, lambda m=method: run_fccgrb(m, system, time_s, markers))
-              for method in ("nrm-wls", "cno-sqp")]
+def five_bar_cases(model: Model, truth: Synthesis, frames: int, trial: Path) -> list[Case]:
+    """The synthesized trial's first ``frames`` frames perturbed at each level (seed 0); the
+    command line reads ``trial`` (``fccgrb synth``'s file of the same motion) with
+    ``--perturb``."""
+    out = []
+    for level in LEVELS_MM:
+        markers = perturb(truth.markers, truth.labels, truth.rate, level * 1e-3, seed=0)[:frames]
+        out.append(Case(f"P{level:g}", model, truth.result.time[:frames], markers, truth.labels,
+                        truth.rate, (str(ROOT / "configs" / "models" / "five_bar.yaml"),
+                                     str(trial), "--perturb", f"{level:g}")))
+    return out
+
+
+def gait_case(folder: Path) -> Case | None:
+    """The gait example's trial (the lower-limb template calibrated on Qualisys.c3d, as
+    benchmarks/gait.py does; its 28 markers as the file has them), or None without the shared
+    data. The personalized model is written to ``folder`` for the command line."""
+    if not GAIT_TRIAL.exists():
+        return None
+    trial = read_trial(GAIT_TRIAL)
+    text = calibrate(load_model(GAIT_TEMPLATE), trial, mass=67.0).text
+    path = folder / "personal.yaml"
+    path.write_text(text, encoding="utf-8")
+    model = parse_model(text, str(path))
+    labels = match_labels(model, trial, {})
+    return Case("gait", model, trial.time, trial.select(labels), tuple(labels), trial.rate,
+                (str(path), str(GAIT_TRIAL)))
+
+
+def warm_up(case: Case) -> None:
+    """One untimed solve of each fccgrb method (see the timings above)."""
+    system = compile_system(case.model, angles="coordinate", track=True)
+    for method in METHODS:
+        run_fccgrb(method, system, case.time_s, case.markers)
+
+
+def compare(case: Case, repeat: int, osim: ModuleType | None) -> list[Solved]:
+    """Every solver on the case's markers: fccgrb's first, then OpenSim at each accuracy of
+    ACCURACIES (when OpenSim is importable)."""
+    system = compile_system(case.model, angles="coordinate", track=True)
+    solved = [best_of(repeat, lambda m=method: run_fccgrb(m, system, case.time_s, case.markers))
+              for method in METHODS]
     if osim is not None:
-        osim_model = build_opensim_model(osim, model)
-        table = marker_table(osim, truth.labels, time_s, markers, truth.rate)
+        osim_model = build_opensim_model(osim, case.model)
+        table = marker_table(osim, case.labels, case.time_s, case.markers, case.rate)
         for accuracy in ACCURACIES:
             solved.append(best_of(repeat, lambda a=accuracy: run_opensim(
-                osim, osim_model, model, table, time_s, a))[0])
-    return markers, solved
+                osim, osim_model, case.model, table, case.time_s, a))[0])
+    return solved
 
 
-def table_rows(model: Model, level_mm: float, markers: np.ndarray,
-               solved: list[Solved]) -> list[str]:
-    """The table's rows for one level."""
+def reference_ms(solved: list[Solved]) -> float | None:
+    """OpenSim's ms/frame at the reference accuracy, when it ran."""
+    found = [s for s in solved if s.label == f"OpenSim {REFERENCE_ACCURACY:.0e}"]
+    return 1e3 * found[0].seconds.mean() if found else None
+
+
+def table_rows(case: Case, solved: list[Solved]) -> list[str]:
+    """The table's rows for one case."""
     reference = next((s for s in solved if s.label == f"OpenSim {REFERENCE_ACCURACY:.0e}"), None)
     rows = []
     for s in solved:
@@ -364,13 +468,59 @@ def table_rows(model: Model, level_mm: float, markers: np.ndarray,
         if reference is not None:
             ratio = f"{1e3 * reference.seconds.mean() / ms:.2f}"
             if s is not reference:
-                diff = angles_from_poses(model, s.poses) - angles_from_poses(model,
-                                                                             reference.poses)
+                diff = angles_from_poses(case.model, s.poses) - angles_from_poses(
+                    case.model, reference.poses)
                 dtheta = f"{np.degrees(np.abs(diff).max()):.2e}"
-        fit = 1e3 * marker_fit(model, s.poses, markers).mean()
+        fit = 1e3 * np.nanmean(marker_fit(case.model, s.poses, case.markers))
         fit_text = f"{fit:.4f}" if fit >= 0.01 else f"{fit:.1e}"
-        rows.append(f"P{level_mm:<5g} {s.label:16} {ms:9.3f} {1e3 * s.call_s / len(markers):9.3f} "
-                    f"{iterations:>10} {ratio:>12} {fit_text:>9} {dtheta:>11}")
+        rows.append(f"{case.name:6} {s.label:16} {ms:9.3f} "
+                    f"{1e3 * s.call_s / len(case.markers):9.3f} {iterations:>10} {ratio:>12} "
+                    f"{fit_text:>9} {dtheta:>11}")
+    return rows
+
+
+@dataclass(frozen=True)
+class CliRun:
+    """One ``fccgrb solve`` process: its summary's ms/frame (the per-frame position solve, which
+    leaves out start-up, loading the kernels and the later stages), the process's wall time
+    from start to exit, and the kernels' load it reported apart (0 on the numpy engine)."""
+
+    ms_per_frame: float
+    wall_s: float
+    kernels_s: float
+
+
+def run_cli(case: Case, method: str, folder: Path) -> CliRun:
+    """The default ``fccgrb solve`` (every option at its default but ``--method``: the auto
+    engine, the whole-trial smoother, the inverse dynamics, the results file) on the case's
+    trial, in a fresh process."""
+    out = folder / "cli.h5"
+    out.unlink(missing_ok=True)
+    command = [shutil.which("fccgrb") or str(Path(sys.executable).with_name("fccgrb")), "solve",
+               case.cli[0], case.cli[1], *case.cli[2:], "--method", method, "-o", str(out)]
+    started = time.perf_counter()
+    done = subprocess.run(command, capture_output=True, text=True)
+    wall = time.perf_counter() - started
+    if done.returncode:
+        raise RuntimeError(f"{' '.join(command)}: {done.stderr.strip()}")
+    lines = done.stdout.splitlines()
+    header = next(k for k, line in enumerate(lines) if "ms/frame" in line.split())
+    column = lines[header].split().index("ms/frame")
+    loaded = re.search(r"compiled kernels loaded in ([0-9.]+) s", done.stderr)
+    return CliRun(float(lines[header + 1].split()[column]), wall,
+                  float(loaded.group(1)) if loaded else 0.0)
+
+
+def cli_rows(case: Case, repeat: int, folder: Path, reference: float | None) -> list[str]:
+    """The default command line's rows for one case: best of ``repeat`` processes by ms/frame
+    (wall and load from that process)."""
+    rows = []
+    for method in METHODS:
+        best = min((run_cli(case, method, folder) for _ in range(repeat)),
+                   key=lambda r: r.ms_per_frame)
+        ratio = "-" if reference is None else f"{reference / best.ms_per_frame:.2f}"
+        rows.append(f"{case.name:6} {'fccgrb ' + method:16} {best.ms_per_frame:9.3f} "
+                    f"{ratio:>12} {best.wall_s:9.2f} {best.kernels_s:10.2f}")
     return rows
 
 
@@ -378,9 +528,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=300)
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--no-gait", action="store_true", help="leave the gait trial out")
+    parser.add_argument("--no-cli", action="store_true",
+                        help="leave the command line's table out")
     args = parser.parse_args()
     model = load_model(ROOT / "configs" / "models" / "five_bar.yaml")
-    system = compile_system(model, angles="coordinate", track=True)
     osim = load_opensim()
     if osim is None:
         print("opensim: not installed (pip install '.[peers]'), skipped")
@@ -391,17 +543,42 @@ def main() -> None:
         print("biorbd: not installed, skipped")
     else:
         print("biorbd: installed, but no biorbd model is built here yet, skipped")
-    print(f"{model.name}: {args.frames} frames, best of {args.repeat}; "
-          f"'OpenSim/this' = OpenSim {REFERENCE_ACCURACY:g} ms/frame over this row's; "
-          f"'max|Δθ|' against OpenSim {REFERENCE_ACCURACY:g}")
-    print(f"{'level':6} {'solver':16} {'ms/frame':>9} {'call ms/f':>9} {'iter/frame':>10} "
-          f"{'OpenSim/this':>12} {'fit mm':>9} {'max|Δθ| deg':>11}")
-    truth = synthesize(model)
-    warm_up(system, truth, args.frames)
-    for level in LEVELS_MM:
-        markers, solved = compare_level(model, system, truth, level, args.frames, args.repeat,
-                                        osim)
-        print("\n".join(table_rows(model, level, markers, solved)), flush=True)
+    with tempfile.TemporaryDirectory(prefix="fccgrb-peers-") as scratch:
+        folder = Path(scratch)
+        trial = folder / "five_bar.c3d"
+        subprocess.run([shutil.which("fccgrb") or str(Path(sys.executable).with_name("fccgrb")),
+                        "synth", str(ROOT / "configs" / "models" / "five_bar.yaml"), "-o",
+                        str(trial), "--duration", f"{args.frames / 100:g}"],
+                       check=True, capture_output=True)
+        truth = synthesize(model)
+        cases = five_bar_cases(model, truth, args.frames, trial)
+        gait = None if args.no_gait else gait_case(folder)
+        print(f"five_bar: {args.frames} frames (P0, P7.5, P30); "
+              + (f"gait: the lower limb on Qualisys.c3d, {len(gait.markers)} frames, "
+                 f"{len(gait.labels)} markers" if gait is not None else
+                 "gait: left out" if args.no_gait else f"gait: {GAIT_TRIAL} not found, skipped")
+              + f"; best of {args.repeat}; 'OpenSim/this' = OpenSim {REFERENCE_ACCURACY:g} "
+              f"ms/frame over this row's; 'max|Δθ|' against OpenSim {REFERENCE_ACCURACY:g}")
+        print(f"{'case':6} {'solver':16} {'ms/frame':>9} {'call ms/f':>9} {'iter/frame':>10} "
+              f"{'OpenSim/this':>12} {'fit mm':>9} {'max|Δθ| deg':>11}")
+        references = {}
+        for case in [*cases, *([gait] if gait is not None else [])]:
+            if case is cases[0] or case is gait:
+                warm_up(case)
+            solved = compare(case, args.repeat, osim)
+            references[case.name] = reference_ms(solved)
+            print("\n".join(table_rows(case, solved)), flush=True)
+        if args.no_cli:
+            return
+        print("\nthe default command line: 'fccgrb solve MODEL TRIAL --method M -o out.h5' in a "
+              "fresh process per trial (auto engine, --smooth auto, inverse dynamics, HDF5); "
+              "ms/frame from its summary (the per-frame solve: start-up, the kernels' load and "
+              "the later stages are in 'wall s' only, the load also in 'kernels s')")
+        print(f"{'case':6} {'solver':16} {'ms/frame':>9} {'OpenSim/this':>12} {'wall s':>9} "
+              f"{'kernels s':>10}")
+        for case in [*cases, *([gait] if gait is not None else [])]:
+            print("\n".join(cli_rows(case, args.repeat, folder, references[case.name])),
+                  flush=True)
 
 
 if __name__ == "__main__":
