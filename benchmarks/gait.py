@@ -1,13 +1,18 @@
 """Speed on a real walking trial: calibrate the lower-limb template on Qualisys.c3d (200 Hz,
-340 frames, 28 tracked markers), then solve it with NRM-WLS and CNO-SQP and the inverse
-dynamics, and compare with real time (the trial's own frame rate).
+340 frames, 28 tracked markers), then solve it with NRM-WLS and CNO-SQP, and compare with real
+time (the trial's own frame rate).
 
     python benchmarks/gait.py [--repeat 3] [--trial ../shared/data/c3d/Qualisys.c3d]
 
-Figures are the whole solve per frame (wall clock, best of ``--repeat``): the per-frame position
-solves plus velocities, accelerations and bookkeeping; 'solve ms/f' is the position solve alone
-(what the solvers record in ``time_s``), for the numpy and the compiled engine. Speed goals live
-here, never in tests.
+Each method and engine runs three ways ('stages'): the positions alone (no dynamics,
+``smooth: none``); with the inverse dynamics on the angles low-passed at 6 Hz (the classical
+route, no smoother); and as ``fccgrb solve`` does by default, the whole-trial smoother then the
+inverse dynamics on its rates (``smooth: auto``). The last two rows' difference is the
+smoother's cost. Figures are the whole solve per frame (wall clock, best of ``--repeat``, the
+kernels loaded before): the per-frame position solves plus velocities, accelerations, the later
+stages and bookkeeping; 'solve ms/f' is the position solve alone (what the solvers record in
+``time_s``, what ``fccgrb solve`` reports as ms/frame), for the numpy and the compiled engine.
+Speed goals live here, never in tests.
 """
 
 from __future__ import annotations
@@ -51,18 +56,20 @@ def main() -> None:
     model = parse_model(cal.text, "personal.yaml")
     n = trial.n_frames
     print(f"{args.trial.name}: {n} frames at {trial.rate:g} Hz; calibrate {1e3 * seconds:.0f} ms")
-    print(f"{'method':>8} {'engine':>9} {'dynamics':>9} {'ms/frame':>9} {'solve ms/f':>11} "
+    print(f"{'method':>8} {'engine':>9} {'stages':>11} {'ms/frame':>9} {'solve ms/f':>11} "
           f"{'frames/s':>9} {'x real time':>12} {'iter/frame':>11} {'mean ED mm':>11}")
+    stages = (("positions", {"dynamics": False, "smooth": "none"}),
+              ("+ID 6 Hz", {"dynamics": True, "filter_cutoff": 6.0}),
+              ("+smooth+ID", {"dynamics": True, "smooth": "auto"}))
     for method in ("nrm-wls", "cno-sqp"):
         for engine in ("numpy", "compiled"):
-            for dynamics in (False, True):
-                options = SolveOptions(method=method, dynamics=dynamics, engine=engine,
-                                       filter_cutoff=6.0 if dynamics else None)
+            for stage, chosen in stages:
+                options = SolveOptions(method=method, engine=engine, **chosen)
                 if engine == "compiled":  # load the kernels outside the timing
                     solve_trial(model, trial, options)
                 seconds, run = timed(args.repeat, lambda o=options: solve_trial(model, trial, o))
                 fps = n / seconds
-                print(f"{method:>8} {engine:>9} {'yes' if dynamics else 'no':>9} "
+                print(f"{method:>8} {engine:>9} {stage:>11} "
                       f"{1e3 * seconds / n:9.2f} {1e3 * np.mean(run.result.time_s):11.3f} "
                       f"{fps:9.0f} {fps / trial.rate:12.1f} "
                       f"{np.mean(run.result.iterations):11.1f} {1e3 * np.mean(run.ed):11.2f}")

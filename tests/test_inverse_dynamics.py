@@ -327,6 +327,45 @@ def test_lowpass_refuses_cutoffs_outside_zero_to_nyquist(cutoff: float) -> None:
 # ---- 6. Force plates from the real C3D files -----------------------------------------------------
 
 @needs_qualisys
+def test_force_plates_are_read_once_per_file_and_again_when_it_changes(tmp_path):
+    """A gait solve asks for the plates three times (the lab's axes, the loads, the events):
+    ezc3d opens the file once, and again for a file rewritten in place (a copy with its force
+    doubled, by ezc3d); the plates read are read-only, and what read_force_plates returns
+    equals what a fresh read gives."""
+    import ezc3d
+
+    from fccgrb_cli.io import forceplates
+
+    forceplates._read_plate_file.cache_clear()
+    fresh = read_force_plates(QUALISYS, 340)
+    forceplates._read_plate_file.cache_clear()
+
+    def opened() -> int:
+        return forceplates._read_plate_file.cache_info().misses
+
+    trial = tmp_path / "trial.c3d"
+    trial.write_bytes(QUALISYS.read_bytes())
+    first = read_force_plates(trial, 340)
+    again = read_force_plates(trial, 340)
+    assert opened() == 1
+    for a, b, c in zip(fresh, first, again, strict=True):
+        np.testing.assert_array_equal(a.force, b.force)
+        np.testing.assert_array_equal(b.cop, c.cop)
+    raw = forceplates.plate_file(trial).plates[0].force
+    with pytest.raises(ValueError):
+        raw[0, 0] = 1.0
+    c3d = ezc3d.c3d(str(trial))
+    c3d["data"]["analogs"] = c3d["data"]["analogs"] * 2.0
+    c3d.write(str(tmp_path / "doubled.c3d"))
+    (tmp_path / "doubled.c3d").replace(trial)
+    doubled = read_force_plates(trial, 340)
+    assert opened() == 2
+    loaded = np.abs(fresh[0].force).sum(axis=1) > 0
+    np.testing.assert_allclose(doubled[0].force[loaded], 2.0 * fresh[0].force[loaded],
+                               rtol=1e-6)
+
+
+@needs_qualisys
 def test_qualisys_force_plates_are_plausible() -> None:
     import ezc3d
 
