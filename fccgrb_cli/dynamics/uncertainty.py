@@ -11,8 +11,10 @@ column:
   central difference with a unit step is exact;
 * d: forward differentiation along the motion q' = S_k (S = ∂q/∂d), d' = e_k, on the same
   factor: q̇' = Φ_q⁻¹ (ν' − Φ_q' q̇), q̈' = Φ_q⁻¹ (γ' − Φ_q' q̈), λ' = Φ_q⁻ᵀ (b' − Φ_q'ᵀ λ)
-  with b = Q − M q̈, the explicit functions' derivatives (Φ_q, ν, γ, b: no solve inside) by
-  central differences of step h = ``STEP`` (exact for Φ_q, linear in q; O(h²) for the rest).
+  with b = Q − M q̈, the explicit functions' derivatives (ν, γ, b: no solve inside) by
+  central differences of step h = ``STEP`` (O(h²)); Φ_q', linear in q' for fully-defined
+  bodies, in closed form from the features of S_k (:class:`_Along`; reduced bodies: central
+  differences too).
   Where Φ_q is taller (a floating base's drivers), λ' is the minimum-norm solution: it may
   differ from the minimum-norm λ's derivative by a multiplier of the redundant base rows,
   which no joint's moment reads.
@@ -178,20 +180,19 @@ def _position_columns(frames: _Frames, S: np.ndarray, state: tuple[np.ndarray, .
     steps = np.concatenate([sign * h * np.eye(n) for sign in (1.0, -1.0)])
     drives = co.drives((d[None] + steps[:, None]).reshape(2 * n * B, n),
                        np.tile(d_d, (2 * n, 1)), np.tile(d_dd, (2 * n, 1)))
-    J = stacked.jacobian(moved).reshape(2, n, B, *frames.J.shape[1:])
-    Jd = (J[0] - J[1]) / (2 * h)  # n × B × rows × nq
+    along = _Along(frames, S, moved)
     nu = stacked.nu(drives).reshape(2, n, B, -1)
     nu_d = (nu[0] - nu[1]) / (2 * h)
-    rhs = nu_d - np.einsum("kfrq,fq->kfr", Jd, qd)
+    rhs = nu_d - along.times(qd)
     qd_d = np.moveaxis(frames.solve(np.moveaxis(rhs, 0, -1)), -1, 0)  # n × B × nq
     qd_moved = np.concatenate([qd[None] + sign * h * qd_d for sign in (1.0, -1.0)])
     gamma = stacked.gamma(moved, qd_moved.reshape(2 * n * B, -1), drives).reshape(2, n, B, -1)
-    rhs = (gamma[0] - gamma[1]) / (2 * h) - np.einsum("kfrq,fq->kfr", Jd, qdd)
+    rhs = (gamma[0] - gamma[1]) / (2 * h) - along.times(qdd)
     qdd_d = np.moveaxis(frames.solve(np.moveaxis(rhs, 0, -1)), -1, 0)
     qdd_moved = np.concatenate([qdd[None] + sign * h * qdd_d for sign in (1.0, -1.0)])
     b = frames.balance(moved, qd_moved.reshape(2 * n * B, -1),
                        qdd_moved.reshape(2 * n * B, -1)).reshape(2, n, B, -1)
-    rhs = (b[0] - b[1]) / (2 * h) - np.einsum("kfrq,fr->kfq", Jd, lam)
+    rhs = (b[0] - b[1]) / (2 * h) - along.transposed_times(lam)
     lam_d = np.moveaxis(frames.solve_transposed(np.moveaxis(rhs, 0, -1)), -1, 0)
     out = np.empty((B, len(system.angle_rows), n))
     theta = drives.theta.reshape(2, n, B, -1)
@@ -199,6 +200,52 @@ def _position_columns(frames: _Frames, S: np.ndarray, state: tuple[np.ndarray, .
         out[:, :, k] = (_joint_moments(system, lam + h * lam_d[k], theta[0, k])
                         - _joint_moments(system, lam - h * lam_d[k], theta[1, k])) / (2 * h)
     return out
+
+
+class _Along:
+    """Φ_q' = ∂Φ_q/∂d_k along q' = S_k for every k (n × frames × rows × nq), as products.
+    Fully-defined bodies: Φ_q = Φ_x is affine in x = q, the linear rows constant and a dot
+    row's F_bᵀA_a + F_aᵀA_b (Eq. 2–3), so Φ_q' is exactly the dot rows' G_bᵀA_a + G_aᵀA_b with
+    G = A S_k, and its products with a vector v or with λ follow from the features of v without
+    forming the matrices (a block's 2n moved Jacobians took two thirds of the uncertainty's
+    time on the gait trial). Reduced bodies (X_q depends on q): the central difference of the
+    moved Jacobians (step ``STEP``)."""
+
+    def __init__(self, frames: _Frames, S: np.ndarray, moved: np.ndarray) -> None:
+        stacked = frames.stacked
+        system = stacked.system
+        self.system, self.n_lin = system, system.n_linear_rows
+        self.exact = stacked.expand_jacobian(frames.q[:1]) is None and \
+            system.nq == system.layout.nx
+        n, B = S.shape[2], len(frames.q)
+        if self.exact:  # G = A S_k: frames' features of each direction, without f0
+            self.G = (np.moveaxis(S, 2, 0) @ system.A_flat.T).reshape(n, B, -1, 3)
+            self.blocks = stacked._dot_blocks.reshape(len(system.dot_a) * 6, -1)
+        else:
+            J = stacked.jacobian(moved).reshape(2, n, B, *frames.J.shape[1:])
+            self.Jd = (J[0] - J[1]) / (2 * STEP)
+
+    def times(self, v: np.ndarray) -> np.ndarray:
+        """Φ_q' v (n × frames × rows) for v (frames × nq)."""
+        if not self.exact:
+            return np.einsum("kfrq,fq->kfr", self.Jd, v)
+        s = self.system
+        Fv = (v @ s.A_flat.T).reshape(len(v), -1, 3)
+        out = np.zeros((*self.G.shape[:2], s.n_rows))
+        out[:, :, self.n_lin:] = (np.einsum("kfdj,fdj->kfd", self.G[:, :, s.dot_b], Fv[:, s.dot_a])
+                                  + np.einsum("kfdj,fdj->kfd", self.G[:, :, s.dot_a],
+                                              Fv[:, s.dot_b]))
+        return out
+
+    def transposed_times(self, lam: np.ndarray) -> np.ndarray:
+        """Φ_q'ᵀ λ (n × frames × nq) for λ (frames × rows)."""
+        if not self.exact:
+            return np.einsum("kfrq,fr->kfq", self.Jd, lam)
+        s = self.system
+        partners = np.concatenate([self.G[:, :, s.dot_b], self.G[:, :, s.dot_a]], axis=3)
+        weighted = partners * lam[None, :, self.n_lin:, None]
+        n, B = weighted.shape[:2]
+        return (weighted.reshape(n * B, -1) @ self.blocks).reshape(n, B, -1)
 
 
 def moment_jacobian(coordinates: Coordinates, q: np.ndarray, S: np.ndarray, d: np.ndarray,
@@ -218,6 +265,7 @@ def moment_jacobian(coordinates: Coordinates, q: np.ndarray, S: np.ndarray, d: n
 def moment_uncertainty(coordinates: Coordinates, q: np.ndarray, S: np.ndarray, d: np.ndarray,
                        d_d: np.ndarray, d_dd: np.ndarray, covariance: np.ndarray,
                        loads: Sequence[ExternalLoad] = ()) -> MomentUncertainty:
-    """The moments' covariance T Σ Tᵀ of every frame."""
+    """The moments' covariance T Σ Tᵀ of every frame (two stacked matrix products: einsum's
+    three-operand loop took 0.17 s on the gait trial)."""
     T = moment_jacobian(coordinates, q, S, d, d_d, d_dd, loads)
-    return MomentUncertainty(T, np.einsum("fai,fij,fbj->fab", T, covariance, T))
+    return MomentUncertainty(T, T @ covariance @ T.transpose(0, 2, 1))
