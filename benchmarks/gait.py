@@ -6,8 +6,8 @@ time (the trial's own frame rate).
 
 Each method and engine runs three ways ('stages'): the positions alone (no dynamics,
 ``smooth: none``); with the inverse dynamics on the angles low-passed at 6 Hz (the classical
-route, no smoother); and as ``fccgrb solve`` does by default, the whole-trial smoother then the
-inverse dynamics on its rates (``smooth: auto``). The last two rows' difference is the
+route, no smoother); and with the whole-trial smoother, then the inverse dynamics on its rates
+(``smooth: auto``, ``fccgrb solve --smooth auto``). The last two rows' difference is the
 smoother's cost. Figures are the whole solve per frame (wall clock, best of ``--repeat``, the
 kernels loaded before): the per-frame position solves plus velocities, accelerations, the later
 stages and bookkeeping; 'solve ms/f' is the position solve alone (what the solvers record in

@@ -11,7 +11,8 @@ approximately). OpenSim's IK and CNO-SQP reach the same optimum there too (tests
 
 The default command line: after the in-process table, each trial again through ``fccgrb solve
 MODEL TRIAL --method M -o out.h5`` in a fresh process (every other option at its default: the
-auto engine, the whole-trial smoother, the inverse dynamics, the results file; the five-bar's
+auto engine, each frame's own solution and its rates (``--smooth none``), the inverse dynamics,
+the results file; the five-bar's
 trial written by ``fccgrb synth`` and perturbed with ``--perturb``): ms/frame from the solve's
 own summary (the per-frame position solve, which leaves the process's start-up, the kernels'
 load and the later stages out), beside the whole process's wall time and the kernels' load the
@@ -492,7 +493,7 @@ class CliRun:
 
 def run_cli(case: Case, method: str, folder: Path) -> CliRun:
     """The default ``fccgrb solve`` (every option at its default but ``--method``: the auto
-    engine, the whole-trial smoother, the inverse dynamics, the results file) on the case's
+    engine, per-frame rates, the inverse dynamics, the results file) on the case's
     trial, in a fresh process."""
     out = folder / "cli.h5"
     out.unlink(missing_ok=True)
@@ -571,7 +572,7 @@ def main() -> None:
         if args.no_cli:
             return
         print("\nthe default command line: 'fccgrb solve MODEL TRIAL --method M -o out.h5' in a "
-              "fresh process per trial (auto engine, --smooth auto, inverse dynamics, HDF5); "
+              "fresh process per trial (auto engine, per-frame rates, inverse dynamics, HDF5); "
               "ms/frame from its summary (the per-frame solve: start-up, the kernels' load and "
               "the later stages are in 'wall s' only, the load also in 'kernels s')")
         print(f"{'case':6} {'solver':16} {'ms/frame':>9} {'OpenSim/this':>12} {'wall s':>9} "
