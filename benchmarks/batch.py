@@ -9,7 +9,8 @@ frames; lower-limb template, calibrated from its first trial, 67 kg) and a child
 (plugin_gait/HC030A05.c3d, 100 Hz, 197 frames; Helen Hayes template, calibrated from
 HC030A01.c3d with the measurements of its PROCESSING group); every trial a copy of its subject's
 walking trial with every marker perturbed by the soft-tissue artefact of ``fccgrb perturb``
-(``fccgrb_cli.perturb.artefact``, 2–10 mm, its own seed), so that no two trials are the same,
+(``fccgrb_cli.signals.artefact.artefact``, 2–10 mm, its own seed), so that no two trials are
+the same,
 written into a copy of the original C3D so that its force plates and events stay (``fccgrb
 perturb`` writes the markers alone). Options as the README's gait example (NRM-WLS, 6 Hz).
 'per trial' is the whole batch's wall time over the trials; 'solve s' each trial's own solve in
@@ -47,8 +48,8 @@ def perturbed_copy(source: Path, target: Path, level_mm: float, seed: int) -> No
     """``source`` with every point's soft-tissue artefact added (its units), all else kept."""
     import ezc3d
 
-    from fccgrb_cli.io.c3d import UNIT_SCALE
-    from fccgrb_cli.perturb import artefact
+    from fccgrb_cli.trial.c3d import UNIT_SCALE
+    from fccgrb_cli.signals.artefact import artefact
 
     c3d = ezc3d.c3d(str(source))
     point = c3d["parameters"]["POINT"]

@@ -28,11 +28,11 @@ import numpy as np
 
 import fccgrb_cli as fc
 from fccgrb_cli.anatomy.calibrate import Calibration, Measurements, calibrate
-from fccgrb_cli.io.trial import Trial
+from fccgrb_cli.trial.record import Trial
 from fccgrb_cli.model import parse_model
 from fccgrb_cli.anatomy.plausibility import ASYMMETRY, FOOT_M, KNEE_FLEXION_DEG, SEGMENT_M
 from fccgrb_cli.anatomy.plausibility import TWIST_DEG
-from fccgrb_cli.filtering import noise_share
+from fccgrb_cli.signals.butterworth import noise_share
 from fccgrb_cli.solvers import quality
 from fccgrb_cli.solvers.conditioning import SINGULAR_RATIO, conditioning
 
@@ -88,7 +88,7 @@ def measures(run: fc.Run) -> list[float]:
 
 def synth(model: Path, trial: Path) -> None:
     """``fccgrb synth MODEL -o TRIAL``."""
-    subprocess.run([sys.executable, "-c", "from fccgrb_cli.cli import main; main()", "synth",
+    subprocess.run([sys.executable, "-c", "from fccgrb_cli.cli.main import main; main()", "synth",
                     str(model), "-o", str(trial)], check=True, capture_output=True)
 
 

@@ -23,12 +23,12 @@ from unittest import mock
 
 import numpy as np
 
-from fccgrb_cli import pipeline
+from fccgrb_cli.pipeline import solve as pipeline
 from fccgrb_cli.anatomy.calibrate import calibrate
 from fccgrb_cli.dynamics import convert
-from fccgrb_cli.io.trial import read_trial
+from fccgrb_cli.trial.record import read_trial
 from fccgrb_cli.model import Model, load_model, parse_model
-from fccgrb_cli.options import SolveOptions, prepared
+from fccgrb_cli.pipeline.options import SolveOptions, prepared
 from fccgrb_cli.system import compile_system
 
 ROOT = Path(__file__).resolve().parents[1]

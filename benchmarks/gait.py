@@ -25,10 +25,10 @@ from pathlib import Path
 import numpy as np
 
 from fccgrb_cli.anatomy.calibrate import calibrate
-from fccgrb_cli.io.trial import read_trial
+from fccgrb_cli.trial.record import read_trial
 from fccgrb_cli.model import load_model, parse_model
-from fccgrb_cli.options import SolveOptions
-from fccgrb_cli.pipeline import solve_trial
+from fccgrb_cli.pipeline.options import SolveOptions
+from fccgrb_cli.pipeline.solve import solve_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 TRIAL = ROOT.parent / "shared" / "data" / "c3d" / "Qualisys.c3d"

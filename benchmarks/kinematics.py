@@ -22,11 +22,11 @@ from pathlib import Path
 import numpy as np
 
 from fccgrb_cli.model import load_model
-from fccgrb_cli.perturb import perturb
+from fccgrb_cli.signals.artefact import perturb
 from fccgrb_cli.solvers import solve_ad
 from fccgrb_cli.solvers.ad.solve import stacked_drives
 from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
-from fccgrb_cli.synth import synthesize
+from fccgrb_cli.pipeline.synth import synthesize
 from fccgrb_cli.system import compile_system
 
 ROOT = Path(__file__).resolve().parents[1]

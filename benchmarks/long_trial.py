@@ -31,8 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from fccgrb_cli.anatomy.calibrate import calibrate
-from fccgrb_cli.io.c3d import save
-from fccgrb_cli.io.trial import Trial, read_trial
+from fccgrb_cli.trial.c3d import save
+from fccgrb_cli.trial.record import Trial, read_trial
 from fccgrb_cli.model import load_model
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -80,7 +80,7 @@ def tiled(trial: Trial, frames: int) -> tuple[np.ndarray, float, float]:
 def write_walk(path: Path, labels: tuple[str, ...], markers: np.ndarray, rate: float) -> None:
     """The markers (frames × markers × 3, m) as C3D points in mm, with the frame range in
     TRIAL:ACTUAL_START_FIELD/ACTUAL_END_FIELD (two 16-bit words each, low first), where
-    POINT:FRAMES (one word) stops at 65535 (see fccgrb_cli/io/c3d_header.py)."""
+    POINT:FRAMES (one word) stops at 65535 (see fccgrb_cli/trial/c3d_header.py)."""
     import ezc3d
 
     c3d = ezc3d.c3d()

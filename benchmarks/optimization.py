@@ -21,9 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from fccgrb_cli.model import load_model
-from fccgrb_cli.perturb import perturb
+from fccgrb_cli.signals.artefact import perturb
 from fccgrb_cli.solvers.optimize.solve import Settings, solve_optimization
-from fccgrb_cli.synth import synthesize
+from fccgrb_cli.pipeline.synth import synthesize
 from fccgrb_cli.system import compile_system
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -88,13 +88,13 @@ from typing import Any
 import numpy as np
 
 from fccgrb_cli.anatomy.calibrate import calibrate
-from fccgrb_cli.io.labels import match_labels
-from fccgrb_cli.io.trial import read_trial
+from fccgrb_cli.trial.labels import match_labels
+from fccgrb_cli.trial.record import read_trial
 from fccgrb_cli.model import GROUND, Model, load_model, parse_model
-from fccgrb_cli.perturb import perturb
+from fccgrb_cli.signals.artefact import perturb
 from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
 from fccgrb_cli.solvers.optimize.solve import Settings, solve_optimization
-from fccgrb_cli.synth import Synthesis, synthesize
+from fccgrb_cli.pipeline.synth import Synthesis, synthesize
 from fccgrb_cli.system import System, compile_system
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -37,14 +37,14 @@ import ezc3d
 import numpy as np
 import yaml
 
-from fccgrb_cli.anatomy import plugin_gait as pg
-from fccgrb_cli.anatomy.pig_calibration import side_geometry
+from fccgrb_cli.plugin_gait import segments as pg
+from fccgrb_cli.plugin_gait.calibration import side_geometry
 from fccgrb_cli.api import calibrate
-from fccgrb_cli.gait.plugin_gait import JOINTS, pig_angles, progression_frame
-from fccgrb_cli.io.trial import read_trial
+from fccgrb_cli.plugin_gait.angles import JOINTS, pig_angles, progression_frame
+from fccgrb_cli.trial.record import read_trial
 from fccgrb_cli.model import load_model, parse_model
-from fccgrb_cli.options import SolveOptions
-from fccgrb_cli.pipeline import solve_trial
+from fccgrb_cli.pipeline.options import SolveOptions
+from fccgrb_cli.pipeline.solve import solve_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "data" / "c3d" / "plugin_gait"

@@ -48,8 +48,8 @@ from pathlib import Path
 import numpy as np
 
 import fccgrb_cli as fc
-from fccgrb_cli.io.trial import Trial
-from fccgrb_cli.io.truth import read_truth
+from fccgrb_cli.trial.record import Trial
+from fccgrb_cli.trial.truth import read_truth
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "configs" / "models" / "five_bar.yaml"
@@ -228,10 +228,10 @@ def orders(bar: FiveBar) -> None:
 
 def cost(frames: int) -> None:
     from fccgrb_cli.dynamics.uncertainty import moment_uncertainty
-    from fccgrb_cli.smoothing import smooth, settings_of
-    from fccgrb_cli.options import SolveOptions
+    from fccgrb_cli.pipeline.smoothing import smooth, settings_of
+    from fccgrb_cli.pipeline.options import SolveOptions
     from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
-    from fccgrb_cli.synth import synthesize
+    from fccgrb_cli.pipeline.synth import synthesize
     from fccgrb_cli.system import compile_system
 
     model = fc.load_model(MODEL)
@@ -273,7 +273,7 @@ def figure(output: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fccgrb_cli.plot import save
+    from fccgrb_cli.presentation.plot import save
 
     template = fc.load_model(ROOT / "configs" / "models" / "lower_limb.yaml")
     trial = fc.read_trial(QUALISYS)
@@ -343,8 +343,8 @@ class Walking:
 
     def plates(self, q: np.ndarray) -> list:
         """The trial's force plates as loads on the model at q (raw)."""
-        from fccgrb_cli.io.plate_loads import plate_loads
-        from fccgrb_cli.pipeline import points_along
+        from fccgrb_cli.dynamics.plate_loads import plate_loads
+        from fccgrb_cli.pipeline.solve import points_along
 
         model = self.model
         contact = {body: points_along(self.system, q, [(body, p)

@@ -24,7 +24,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 SOLVE = ["solve", str(ROOT / "configs" / "models" / "five_bar.yaml"),
          str(ROOT / "sample_data" / "five_bar.c3d"), "--perturb", "30"]
-IMPORTS_ONLY = "import fccgrb_cli.cli, fccgrb_cli.pipeline, fccgrb_cli.io.results"
+IMPORTS_ONLY = "import fccgrb_cli.cli.main, fccgrb_cli.pipeline.solve, fccgrb_cli.results.storage"
 
 
 def command() -> list[str]:
@@ -35,7 +35,8 @@ def command() -> list[str]:
         return [str(script)]
     found = shutil.which("fccgrb")
     return [found] if found else [sys.executable, "-c",
-                                  "import sys; from fccgrb_cli.cli import main; sys.exit(main())"]
+                                  "import sys; from fccgrb_cli.cli.main import main; "
+                                  "sys.exit(main())"]
 
 
 def best_wall(args: list[str], repeat: int, cwd: Path) -> float:
@@ -76,11 +77,11 @@ def heaviest_imports(code: str, count: int = 8) -> tuple[float, list[tuple[float
 def solve_steps() -> list[tuple[str, float]]:
     """Seconds of each step of one solve of the sample in this (warm) process."""
     import fccgrb_cli  # noqa: F401  (first: pins BLAS to one thread before numpy loads)
-    from fccgrb_cli import pipeline
-    from fccgrb_cli.io.results import write_run
-    from fccgrb_cli.io.trial import read_trial
+    from fccgrb_cli.pipeline import solve as pipeline
+    from fccgrb_cli.results.storage import write_run
+    from fccgrb_cli.trial.record import read_trial
     from fccgrb_cli.model import load_model
-    from fccgrb_cli.options import SolveOptions
+    from fccgrb_cli.pipeline.options import SolveOptions
 
     options = SolveOptions(perturb_mm=30.0)
     kinematics = SolveOptions(**{**options.__dict__, "dynamics": False})

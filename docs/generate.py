@@ -129,7 +129,7 @@ def _executable(name: str) -> str:
     return str(beside) if beside.exists() else (shutil.which(name) or name)
 
 
-# progress lines (fccgrb_cli.progress: "LABEL: [###...] frame|trial N/M (P %, T...) …"; the
+# progress lines (fccgrb_cli.core.progress: "LABEL: [###...] frame|trial N/M (P %, T...) …"; the
 # sweep's "sweep: N/M cells (…"): on stderr only when a run is slow, so never in a block
 PROGRESS = re.compile(r"^([\w .-]+: (\[[#.]*\] )?(frame|trial) \d+/\d+ \(\d+ %, .*"
                       r"|sweep: \d+/\d+ cells \(.*)$")

@@ -20,18 +20,19 @@ for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 __version__ = "0.2.0"
 __all__ = ["RESULTS_FORMAT", "InputError", "NamedArray", "Run", "SolveOptions", "calibrate",
-           "load_model", "read_results", "read_trial", "solve"]
+           "load_model", "read_results", "read_trial", "solve", "write_results"]
 
 # Loaded on first use, so that `fccgrb --help` and `import fccgrb_cli` stay fast.
-_PUBLIC = {**dict.fromkeys(("load_model", "read_trial", "solve", "calibrate", "read_results"),
+_PUBLIC = {**dict.fromkeys(("load_model", "read_trial", "solve", "calibrate", "read_results",
+                            "write_results"),
                            "fccgrb_cli.api"),
-           "SolveOptions": "fccgrb_cli.options", "Run": "fccgrb_cli.run",
-           "NamedArray": "fccgrb_cli.named", "InputError": "fccgrb_cli.errors"}
+           "SolveOptions": "fccgrb_cli.pipeline.options", "Run": "fccgrb_cli.pipeline.run",
+           "NamedArray": "fccgrb_cli.core.named", "InputError": "fccgrb_cli.core.errors"}
 
 
 def __getattr__(name: str):
     if name == "RESULTS_FORMAT":
-        from fccgrb_cli.io.results_format import FORMAT_VERSION
+        from fccgrb_cli.results.format import FORMAT_VERSION
 
         return FORMAT_VERSION
     if name in _PUBLIC:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from click.testing import CliRunner, Result
 
-from fccgrb_cli.cli import main
+from fccgrb_cli.cli.main import main
 
 
 def runner() -> CliRunner:

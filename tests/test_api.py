@@ -14,8 +14,8 @@ import pytest
 from cli_helpers import run_cli
 
 import fccgrb_cli as fc
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.options import SWEEP_KEYS, SolveOptions, describe
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.pipeline.options import SWEEP_KEYS, SolveOptions, describe
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "data" / "c3d"
@@ -94,7 +94,7 @@ def test_cli_sweep_and_api_give_identical_arrays(tmp_path: Path):
     fccgrb_ok("sweep", config, "-o", by_sweep)
 
     by_api = tmp_path / "api.h5"
-    fc.solve(fc.load_model(MODEL), fc.read_trial(TRIAL), **options).to_hdf5(by_api)
+    fc.write_results(fc.solve(fc.load_model(MODEL), fc.read_trial(TRIAL), **options), by_api)
 
     with h5py.File(by_cli) as a, h5py.File(by_sweep) as b, h5py.File(by_api) as c:
         (cell,) = b["cells"].values()
@@ -130,7 +130,7 @@ def test_help_of_solve_explains_every_option_with_its_unit():
 def test_every_option_is_a_cli_flag_and_a_sweep_key():
     from click.testing import CliRunner
 
-    from fccgrb_cli.cli import main
+    from fccgrb_cli.cli.main import main
 
     help_text = CliRunner().invoke(main, ["solve", "--help"], terminal_width=200).output
     for field in SolveOptions.__dataclass_fields__.values():
@@ -186,7 +186,7 @@ def test_run_coordinates_are_named_as_the_system_lays_them_out():
 def test_named_arrays_are_arrays_to_numpy():
     """np.asarray of a NamedArray is its frames × columns values (not a 0-d object array),
     column k being a["name k"]; numpy 2's copy contract holds."""
-    from fccgrb_cli.named import NamedArray
+    from fccgrb_cli.core.named import NamedArray
 
     rng = np.random.default_rng(7)
     values = rng.normal(size=(5, 3))
@@ -208,7 +208,7 @@ def test_named_arrays_are_arrays_to_numpy():
 def test_results_of_another_format_version_are_refused(tmp_path: Path):
     path = tmp_path / "old.h5"
     run = fc.solve(fc.load_model(MODEL), fc.read_trial(TRIAL), dynamics=False, name="old")
-    run.to_hdf5(path)
+    fc.write_results(run, path)
     with h5py.File(path, "r+") as h5:
         h5.attrs["format_version"] = 1
     with pytest.raises(InputError, match="results format 1"):
@@ -225,7 +225,7 @@ def test_public_names_are_exactly_those_listed():
 def test_the_installed_package_carries_the_paper_tables():
     """`fccgrb report` puts the paper's figures beside ours from a wheel install too: the table
     lives inside the package, not beside it in the repository."""
-    from fccgrb_cli.report import PAPER_TABLES, paper_figures
+    from fccgrb_cli.presentation.tables import PAPER_TABLES, paper_figures
 
     assert PAPER_TABLES.is_relative_to(Path(fc.__file__).parent) and PAPER_TABLES.is_file()
     assert len(paper_figures("table1")) > 10 and len(paper_figures("table2")) > 10

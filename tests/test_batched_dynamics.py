@@ -29,15 +29,15 @@ from test_floating_base import moving_text
 
 from fccgrb_cli.dynamics import ExternalLoad
 from fccgrb_cli.dynamics.convert import Dynamics, classical_dynamics
-from fccgrb_cli.io.trial import read_trial
 from fccgrb_cli.model import load_model, parse_model
-from fccgrb_cli.options import SolveOptions
-from fccgrb_cli.pipeline import solve_trial
+from fccgrb_cli.pipeline.options import SolveOptions
+from fccgrb_cli.pipeline.solve import solve_trial
+from fccgrb_cli.pipeline.synth import synthesize
 from fccgrb_cli.solvers.ad import solve as ad
 from fccgrb_cli.solvers.batched import Drives, Stacked, factor
 from fccgrb_cli.solvers.newton import linear_solve
-from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import compile_system
+from fccgrb_cli.trial.record import read_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ROOT / "configs" / "models"

@@ -28,10 +28,10 @@ from fccgrb_cli.anatomy.frames import (
     shank_frames,
     thigh_frames,
 )
-from fccgrb_cli.io.trial import Trial, write_trial
 from fccgrb_cli.model import load_model, parse_model
-from fccgrb_cli.options import SolveOptions
-from fccgrb_cli.pipeline import solve_trial
+from fccgrb_cli.pipeline.options import SolveOptions
+from fccgrb_cli.pipeline.solve import solve_trial
+from fccgrb_cli.trial.record import Trial, write_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 TEMPLATE = ROOT / "configs" / "models" / "lower_limb.yaml"

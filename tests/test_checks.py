@@ -30,7 +30,6 @@ import pytest
 from cli_helpers import one_error_line, run_cli
 
 import fccgrb_cli as fc
-from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.solvers import quality
 from fccgrb_cli.solvers.quality import (
     ANGLE_RANGE,
@@ -40,6 +39,7 @@ from fccgrb_cli.solvers.quality import (
     SINGULAR,
     UNCONVERGED,
 )
+from fccgrb_cli.trial.record import Trial
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ROOT / "configs" / "models"
@@ -484,7 +484,7 @@ def test_stance_off_the_plates_and_a_trial_without_plates(tmp_path):
     assert run.moments_trusted[np.ix_(stance_r, right)].all()
     assert "force plate measures" in said(run) and "foot_l" in said(run)
     trc = tmp_path / "walk.trc"
-    fc_io = __import__("fccgrb_cli.io.trial", fromlist=["write_trial"])
+    fc_io = __import__("fccgrb_cli.trial.record", fromlist=["write_trial"])
     fc_io.write_trial(trc, list(trial.labels), trial.markers, trial.rate, "mm")
     without = fc.solve(qualisys_model(), fc.read_trial(trc), method="nrm-wls",
                        filter_cutoff=6.0)
@@ -517,7 +517,7 @@ def test_flags_are_self_describing_in_the_results_file(tmp_path):
     run = fc.solve(fc.load_model(MODELS / "five_bar.yaml"), _five_bar_with_a_blank_start(),
                    method="nrm-wls", skip_unsolvable=True)
     out = tmp_path / "r.h5"
-    run.to_hdf5(out)
+    fc.write_results(run, out)
     with h5py.File(out) as h5:
         g = h5[f"runs/{run.name}"]
         assert g["flags"].dtype == np.uint16
@@ -541,7 +541,7 @@ def test_a_results_file_with_8_bit_flags_still_reads(tmp_path):
     run = fc.solve(fc.load_model(MODELS / "five_bar.yaml"), fc.read_trial(FIVE_BAR),
                    method="nrm-wls")
     out = tmp_path / "old.h5"
-    run.to_hdf5(out)
+    fc.write_results(run, out)
     with h5py.File(out, "a") as h5:
         g = h5[f"runs/{run.name}"]
         flags = g["flags"][()].astype(np.uint8)
@@ -574,7 +574,7 @@ def test_the_clinical_table_ranges_over_trusted_frames_only():
     """The summary's clinical table: an angle's range over the trusted frames (a poorly fitting
     stretch put −5,288,815° into a vendor trial's ankle inversion, flagged but printed), '–'
     where no frame is trusted; the ranges computed here from the frames the mask keeps."""
-    from fccgrb_cli.clinical import ClinicalResults, clinical_table
+    from fccgrb_cli.anatomy.clinical import ClinicalResults, clinical_table
 
     rng = np.random.default_rng(3)
     angles = rng.uniform(-30, 30, size=(50, 2))

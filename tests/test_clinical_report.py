@@ -28,7 +28,8 @@ from browser import Browser, chromium_binary
 from cli_helpers import one_error_line, run_cli
 from flag_bits import declared
 
-from fccgrb_cli.clinical_report.svg import (
+from fccgrb_cli.gait.cycles import PARAMETERS
+from fccgrb_cli.presentation.clinical_report.svg import (
     BOTTOM,
     HEIGHT,
     LEFT,
@@ -38,7 +39,6 @@ from fccgrb_cli.clinical_report.svg import (
     cycle_plot,
     nice_ticks,
 )
-from fccgrb_cli.gait.cycles import PARAMETERS
 
 needs_chromium = pytest.mark.skipif(chromium_binary() is None,
                                     reason="no chromium binary (apt-get install chromium)")

@@ -1,6 +1,7 @@
 """Clinical sign conventions pinned by statics and anatomy, not by the code (issue 12, item 2).
 
-README ("A gait trial") and ``fccgrb_cli/clinical.py``: the clinical angle is φ = sign·(θ − 90°),
+README ("A gait trial") and ``fccgrb_cli/anatomy/clinical.py``: the clinical angle is
+φ = sign·(θ − 90°),
 flexion, adduction, internal rotation, dorsiflexion and inversion positive on both sides; the
 clinical moment is the internal (net muscle) moment conjugate to φ, positive towards positive φ
 (OpenSim's generalized forces): an extensor moment is a negative flexion moment, a plantarflexor
@@ -50,7 +51,7 @@ import numpy as np
 import pytest
 import yaml
 
-from fccgrb_cli.clinical import clinical_results
+from fccgrb_cli.anatomy.clinical import clinical_results
 from fccgrb_cli.dynamics import ExternalLoad
 from fccgrb_cli.dynamics.convert import classical_dynamics
 from fccgrb_cli.model import Model, parse_model

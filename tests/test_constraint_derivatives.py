@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 
 from fccgrb_cli.model import load_model, parse_model
-from fccgrb_cli.synth import synthesize
+from fccgrb_cli.pipeline.synth import synthesize
 from fccgrb_cli.system import Drive, compile_system
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "models"

@@ -19,11 +19,11 @@ import pytest
 from cli_helpers import runner
 
 import fccgrb_cli as fc
-from fccgrb_cli.cli import main
+from fccgrb_cli.cli.main import main
 from fccgrb_cli.dynamics import inverse_dynamics
-from fccgrb_cli.io.truth import read_truth, truth_path
 from fccgrb_cli.model import parse_model
-from fccgrb_cli.synth import synthesize
+from fccgrb_cli.pipeline.synth import synthesize
+from fccgrb_cli.trial.truth import read_truth, truth_path
 
 SLIDER = Path(__file__).resolve().parents[1] / "configs" / "models" / "slider.yaml"
 DURATION, RATE = 1.0, 100.0

@@ -10,7 +10,7 @@ steps; guesses moved by the extrapolated corrections of the frames before.
   load whose point moves over the body; the sample's steps per frame with the extrapolation;
 * a taller Φ_q whose equations cannot all be met (a floating base driven by low-passed
   features) keeps Gauss–Newton: numpy's least-squares motion, not a chord's fixed point;
-* the LAPACK the solvers use (fccgrb_cli.blas.lapack) is scipy's, without importing the
+* the LAPACK the solvers use (fccgrb_cli.core.blas.lapack) is scipy's, without importing the
   scipy.linalg package: a solve's start-up does not pay for it (checked in a fresh process).
 """
 
@@ -27,12 +27,12 @@ from test_batched_dynamics import assert_same
 
 from fccgrb_cli.dynamics import ExternalLoad
 from fccgrb_cli.dynamics.convert import classical_dynamics
-from fccgrb_cli.io.trial import read_trial
 from fccgrb_cli.model import load_model
-from fccgrb_cli.options import SolveOptions
-from fccgrb_cli.pipeline import solve_trial
+from fccgrb_cli.pipeline.options import SolveOptions
+from fccgrb_cli.pipeline.solve import solve_trial
 from fccgrb_cli.solvers.ad import solve as ad
 from fccgrb_cli.solvers.engine import numba_available
+from fccgrb_cli.trial.record import read_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -101,7 +101,7 @@ def test_taller_system_with_unmet_equations_keeps_gauss_newton() -> None:
     from test_floating_base import moving_text
 
     from fccgrb_cli.model import parse_model
-    from fccgrb_cli.synth import synthesize
+    from fccgrb_cli.pipeline.synth import synthesize
 
     model = parse_model(moving_text(), "floating.yaml").with_form("full")
     truth = synthesize(model, duration=1.0).result
@@ -114,15 +114,16 @@ def test_taller_system_with_unmet_equations_keeps_gauss_newton() -> None:
 def test_solvers_lapack_is_scipys_without_scipy_linalg() -> None:
     from scipy.linalg import lapack as scipy_lapack
 
-    from fccgrb_cli.blas import lapack
+    from fccgrb_cli.core.blas import lapack
 
     assert lapack.dposv is scipy_lapack.dposv
     A = np.array([[4.0, 1.0], [1.0, 3.0]])
     _, x, info = lapack.dposv(A, np.array([1.0, 2.0]))
     assert info == 0 and np.allclose(A @ x, [1.0, 2.0], rtol=0, atol=1e-15)
     assert lapack.dposv(np.array([[1.0, 2.0], [2.0, 1.0]]), np.ones(2))[2] > 0  # indefinite
-    code = ("import sys, fccgrb_cli.cli, fccgrb_cli.pipeline, fccgrb_cli.solvers.nrm.solve; "
-            "from fccgrb_cli.blas import lapack; print('scipy.linalg' in sys.modules)")
+    code = ("import sys, fccgrb_cli.cli.main, fccgrb_cli.pipeline.solve, "
+            "fccgrb_cli.solvers.nrm.solve; "
+            "from fccgrb_cli.core.blas import lapack; print('scipy.linalg' in sys.modules)")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           check=True)
     assert done.stdout.strip() == "False"

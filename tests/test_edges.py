@@ -16,12 +16,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.inputs import MAX_DEPTH, MAX_VALUES, check_name, load_yaml, refuse_inputs
-from fccgrb_cli.io import hdf5_writer
-from fccgrb_cli.io.atomic import atomic_path, transaction
-from fccgrb_cli.io.lock import exclusive, lock_path
-from fccgrb_cli.options import SolveOptions
+from fccgrb_cli.core import hdf5_writer
+from fccgrb_cli.core.atomic import atomic_path, transaction
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.core.inputs import MAX_DEPTH, MAX_VALUES, check_name, load_yaml, refuse_inputs
+from fccgrb_cli.core.lock import exclusive, lock_path
+from fccgrb_cli.pipeline.options import SolveOptions
 
 # --- bounded YAML ---------------------------------------------------------------------------
 
@@ -258,9 +258,9 @@ def test_a_switch_is_true_or_false(value) -> None:
 def test_a_long_trial_written_by_fccgrb_is_read_back_whole(tmp_path: Path) -> None:
     """Past 65,535 frames the count goes to TRIAL:ACTUAL_START/END_FIELD and
     POINT:LONG_FRAMES (io.c3d), both read here from the file's own bytes."""
-    from fccgrb_cli.io.c3d import write_markers
-    from fccgrb_cli.io.c3d_header import read_layout, read_parameters
-    from fccgrb_cli.io.trial import read_trial
+    from fccgrb_cli.trial.c3d import write_markers
+    from fccgrb_cli.trial.c3d_header import read_layout, read_parameters
+    from fccgrb_cli.trial.record import read_trial
 
     n = 70_001
     markers = np.zeros((n, 1, 3))

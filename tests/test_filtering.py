@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import scipy.signal as oracle
 
-from fccgrb_cli import filtering
+from fccgrb_cli.signals import butterworth as filtering
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -22,11 +22,11 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from fccgrb_cli.cli import main
+from fccgrb_cli.cli.main import main
 from fccgrb_cli.dynamics.convert import classical_dynamics
 from fccgrb_cli.model import BaseMotion, Motion, parse_model
+from fccgrb_cli.pipeline.synth import synthesize
 from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
-from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import compile_system
 from fccgrb_cli.system.constraints import floating_bases
 from fccgrb_cli.system.structure import analyse

@@ -25,9 +25,9 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
-from fccgrb_cli.cli import main
+from fccgrb_cli.cli.main import main
 from fccgrb_cli.model import load_model
-from fccgrb_cli.synth import synthesize
+from fccgrb_cli.pipeline.synth import synthesize
 
 ROOT = Path(__file__).parents[1]
 MODEL_PATH = ROOT / "configs" / "models" / "pendulum.yaml"

@@ -21,9 +21,9 @@ import yaml
 from synthetic_body import ISB_TRUNK, full_body_text
 
 from fccgrb_cli.anatomy.full_body import personalize
-from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.model import load_model, parse_model
-from fccgrb_cli.synth import synthesize
+from fccgrb_cli.pipeline.synth import synthesize
+from fccgrb_cli.trial.record import Trial
 
 ROOT = Path(__file__).resolve().parents[1]
 QUALISYS = ROOT / ".." / "shared" / "data" / "c3d" / "Qualisys.c3d"
@@ -138,7 +138,7 @@ def test_plugin_gait_full_body_calibrates_from_its_static_and_solves_walking() -
     10 mm."""
     import fccgrb_cli as fc
     from fccgrb_cli.anatomy.calibrate import Measurements
-    from fccgrb_cli.io.processing import processing_measurements
+    from fccgrb_cli.trial.processing import processing_measurements
 
     static = PIG / "HC030A01.c3d"
     m = processing_measurements(static)

@@ -14,10 +14,10 @@ import pytest
 import fccgrb_cli as fc
 from fccgrb_cli.dynamics.convert import classical_dynamics
 from fccgrb_cli.dynamics.loads import ExternalLoad
-from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.model import load_model
-from fccgrb_cli.synth import synthesize
+from fccgrb_cli.pipeline.synth import synthesize
 from fccgrb_cli.system import Drive, compile_system
+from fccgrb_cli.trial.record import Trial
 
 ROOT = Path(__file__).resolve().parents[1]
 MECHANISMS = ("crank_rocker", "slider_crank", "rssr")

@@ -133,7 +133,7 @@ def walk(tmp_path_factory) -> tuple[Path, fc.Run]:
                          trial, mass=67)
     results = tmp_path_factory.mktemp("gait") / "gait.h5"
     run = fc.solve(model, trial, filter_cutoff=6)
-    run.to_hdf5(results)
+    fc.write_results(run, results)
     return results, run
 
 

@@ -39,7 +39,7 @@ from cli_helpers import one_error_line, run_cli
 from click.testing import Result
 
 from fccgrb_cli.dynamics.contact import Contact, assign, contacts
-from fccgrb_cli.io.trial import write_trial
+from fccgrb_cli.trial.record import write_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 TEMPLATE = ROOT / "configs" / "models" / "lower_limb.yaml"

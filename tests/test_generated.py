@@ -41,17 +41,17 @@ from yaml import safe_dump
 
 from fccgrb_cli.dynamics import ExternalLoad, inverse_dynamics
 from fccgrb_cli.dynamics.convert import classical_dynamics
-from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.model import parse_model
-from fccgrb_cli.options import SolveOptions
-from fccgrb_cli.pipeline import solve_trial
+from fccgrb_cli.pipeline.options import SolveOptions
+from fccgrb_cli.pipeline.solve import solve_trial
+from fccgrb_cli.pipeline.synth import base_trajectory
 from fccgrb_cli.solvers import solve_ad
 from fccgrb_cli.solvers.ad.baseline import solve_baseline
 from fccgrb_cli.solvers.ad.solve import stacked_drives
 from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
 from fccgrb_cli.solvers.optimize.solve import Settings, solve_optimization
-from fccgrb_cli.synth import base_trajectory
 from fccgrb_cli.system import compile_system
+from fccgrb_cli.trial.record import Trial
 
 EXAMPLES = settings().max_examples   # the active profile's (ci: 10, long: 100)
 

@@ -20,12 +20,12 @@ from hypothesis import given
 from hypothesis import strategies as st
 from test_generated import RATE, T0, reference
 
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model import load_model, parse_model
-from fccgrb_cli.perturb import perturb
+from fccgrb_cli.pipeline.synth import synthesize
+from fccgrb_cli.signals.artefact import perturb
 from fccgrb_cli.solvers import kernels
 from fccgrb_cli.solvers.nrm.solve import NrmSettings, row_weights, solve_nrm
-from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import Drive, compile_system
 from fccgrb_cli.system.sparse import sparse_of, supported
 
@@ -230,9 +230,9 @@ def test_weights_follow_the_settings() -> None:
 @pytest.mark.skipif(not GAIT.exists(), reason="the shared data folder is not here")
 def test_engines_agree_on_the_gait_trial() -> None:
     from fccgrb_cli.anatomy.calibrate import calibrate
-    from fccgrb_cli.io.trial import read_trial
-    from fccgrb_cli.options import SolveOptions
-    from fccgrb_cli.pipeline import solve_trial
+    from fccgrb_cli.pipeline.options import SolveOptions
+    from fccgrb_cli.pipeline.solve import solve_trial
+    from fccgrb_cli.trial.record import read_trial
 
     trial = read_trial(GAIT)
     cal = calibrate(load_model(MODELS / "lower_limb.yaml"), trial, mass=67.0)
@@ -320,9 +320,9 @@ def test_compiled_dynamics_on_moving_bases(structure) -> None:
 @pytest.mark.skipif(not GAIT.exists(), reason="the shared data folder is not here")
 def test_compiled_dynamics_on_the_gait_trial() -> None:
     from fccgrb_cli.anatomy.calibrate import calibrate
-    from fccgrb_cli.io.trial import read_trial
-    from fccgrb_cli.options import SolveOptions
-    from fccgrb_cli.pipeline import solve_trial
+    from fccgrb_cli.pipeline.options import SolveOptions
+    from fccgrb_cli.pipeline.solve import solve_trial
+    from fccgrb_cli.trial.record import read_trial
 
     trial = read_trial(GAIT)
     cal = calibrate(load_model(MODELS / "lower_limb.yaml"), trial, mass=67.0)
@@ -359,7 +359,7 @@ def test_frames_the_compiled_batch_leaves_take_the_frame_by_frame_path(monkeypat
 def test_points_along_a_solution_equal_point_positions(form: str) -> None:
     """pipeline.points_along (every frame at once) against System.point_positions frame by
     frame, with a frame left unsolved (NaN)."""
-    from fccgrb_cli.pipeline import points_along
+    from fccgrb_cli.pipeline.solve import points_along
 
     model = load_model(MODELS / "five_bar.yaml").with_form(form)
     truth = synthesize(model)

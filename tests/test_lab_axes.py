@@ -20,9 +20,9 @@ from cli_helpers import one_error_line, run_cli
 from lab_frames import X_UP, Y_UP, Z_DOWN_WALK_MINUS_Y, rotated_c3d
 
 import fccgrb_cli as fc
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.io.lab_axes import lab_axes
-from fccgrb_cli.io.trial import Trial
+from fccgrb_cli.anatomy.lab_axes import lab_axes
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.trial.record import Trial
 
 ROOT = Path(__file__).resolve().parents[1]
 GAIT = ROOT.parent / "shared" / "data" / "c3d" / "Qualisys.c3d"
@@ -197,7 +197,7 @@ def _upper_static(path: Path, lean_deg: float) -> Path:
     forward by ``lean_deg`` about the lab's y axis: every landmark and tracked marker where the
     template puts it (the acromion 40 mm above the shoulder centre), 30 frames with 0.5 mm
     noise, written as a z-up C3D (POINT:Y_SCREEN +Z, as Nexus writes)."""
-    from fccgrb_cli.io.c3d import write_markers
+    from fccgrb_cli.trial.c3d import write_markers
 
     model = fc.load_model(UPPER)
     where: dict[str, np.ndarray] = {}

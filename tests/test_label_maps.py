@@ -11,7 +11,7 @@ import pytest
 from cli_helpers import one_error_line, run_cli
 
 import fccgrb_cli as fc
-from fccgrb_cli.io.c3d import write_markers
+from fccgrb_cli.trial.c3d import write_markers
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "configs" / "models" / "five_bar.yaml"
@@ -79,8 +79,8 @@ def test_a_file_without_points_says_so():
     """A C3D with no 3D points at all (Theia's rotations-only files, an analog-only capture):
     one line saying the file holds none and naming the markers the model wants, instead of a
     'closest: none' for each of them."""
-    from fccgrb_cli.io.labels import match_labels
-    from fccgrb_cli.io.trial import Trial
+    from fccgrb_cli.trial.labels import match_labels
+    from fccgrb_cli.trial.record import Trial
 
     model = fc.load_model(ROOT / "configs" / "models" / "pendulum.yaml")
     empty = Trial("rotations.c3d", (), np.zeros((50, 0, 3)), 100.0)

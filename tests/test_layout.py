@@ -1,5 +1,7 @@
-"""The package's shape, read from its source: no import cycle among its modules (imports inside
-functions included: a lazy import still ties the two modules together), and no function with
+"""The package's shape, read from its source: layers as folders, each importing only its own and
+those below it (``LAYERS``, lowest first; imports inside functions included), nothing loose at the
+top but the public entry points, no import cycle among its modules (a lazy import still ties the
+two modules together), and no function with
 more than 8 parameters outside the click command functions (related arguments go in a dataclass
 or, for a compiled kernel, a named tuple numba can type)."""
 
@@ -10,6 +12,13 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "fccgrb_cli"
 MAX_PARAMETERS = 8
+
+# Lowest first: a package may import its own modules and those of the packages before it.
+LAYERS = ("core", "model", "system", "signals", "trial", "opensim", "solvers", "dynamics",
+          "anatomy", "plugin_gait", "gait", "pipeline", "results", "batch", "presentation", "view",
+          "cli")
+# The public entry points, the only modules at the top: above every layer.
+TOP = ("fccgrb_cli", "fccgrb_cli.api", "fccgrb_cli.entry")
 
 
 def _modules(root: Path) -> dict[str, Path]:
@@ -147,6 +156,35 @@ def parameter_counts(root: Path = PACKAGE) -> dict[str, int]:
     return out
 
 
+def layer_of(module: str, layers: tuple[str, ...] = LAYERS) -> int:
+    """The layer a module belongs to: its package's index in ``layers`` (the package's
+    ``__init__`` included); the top (len(layers)) for the modules directly in the package."""
+    parts = module.split(".")
+    return layers.index(parts[1]) if len(parts) > 1 and parts[1] in layers else len(layers)
+
+
+def upward_imports(graph: dict[str, set[str]], layers: tuple[str, ...] = LAYERS
+                   ) -> list[tuple[str, str]]:
+    """(importer, imported) for each import of a module in a higher layer than the importer's.
+    The package's own ``__init__`` (its version, the lazy public names) is not one: Python runs
+    it before any of its modules."""
+    return sorted((a, b) for a, edges in graph.items() for b in edges
+                  if "." in b and layer_of(b, layers) > layer_of(a, layers))
+
+
+def test_layers_import_only_downwards():
+    assert upward_imports(import_graph()) == []
+
+
+def test_every_package_is_a_layer_and_nothing_else_is_loose_at_the_top():
+    modules = _modules(PACKAGE)
+    packages = {name.split(".")[1] for name in modules if name.count(".") >= 2}
+    assert packages - set(LAYERS) == set()
+    loose = {name for name in modules if name.count(".") == 1 and name not in TOP}
+    loose -= {f"fccgrb_cli.{package}" for package in LAYERS}  # the packages' own __init__
+    assert loose == set()
+
+
 def test_no_import_cycle():
     assert cycles(import_graph()) == []
 
@@ -183,6 +221,16 @@ def test_type_checking_imports_and_parent_packages_close_no_cycle(tmp_path):
                 "def f():\n    pass\n",
         "b.py": "from pkg.a import f\n"})
     assert cycles(import_graph(root)) == []
+
+
+def test_an_import_of_a_higher_layer_is_found_lazy_or_not(tmp_path):
+    root = _package(tmp_path, {
+        "__init__.py": "", "low/__init__.py": "", "high/__init__.py": "",
+        "low/a.py": "def f():\n    from pkg.high.b import g\n",
+        "low/c.py": "import pkg.low.a\n",
+        "high/b.py": "from pkg.low import a\ndef g():\n    pass\n"})
+    assert upward_imports(import_graph(root), ("low", "high")) == [("pkg.low.a", "pkg.high.b")]
+    assert upward_imports(import_graph(root), ("high", "low")) == [("pkg.high.b", "pkg.low.a")]
 
 
 def test_parameters_are_counted_as_python_binds_them(tmp_path):

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from fccgrb_cli.io.c3d import save
-from fccgrb_cli.io.c3d_header import read_layout
-from fccgrb_cli.io.trial import read_trial
+from fccgrb_cli.trial.c3d import save
+from fccgrb_cli.trial.c3d_header import read_layout
+from fccgrb_cli.trial.record import read_trial
 
 FRAMES = 70_000
 

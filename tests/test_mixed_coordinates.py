@@ -33,13 +33,13 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
-from fccgrb_cli.cli import main
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.cli.main import main
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model import load_model
-from fccgrb_cli.perturb import perturb
+from fccgrb_cli.pipeline.synth import synthesize
+from fccgrb_cli.signals.artefact import perturb
 from fccgrb_cli.solvers.initial import initial_guess, rigid_fit
 from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
-from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import Drive, compile_system
 
 ROOT = Path(__file__).resolve().parents[1]

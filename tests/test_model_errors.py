@@ -24,7 +24,7 @@ import pytest
 import yaml
 from cli_helpers import one_error_line, runner
 
-from fccgrb_cli.cli import main
+from fccgrb_cli.cli.main import main
 
 PENDULUM = Path(__file__).resolve().parents[1] / "configs" / "models" / "pendulum.yaml"
 PENDULUM_TEXT = PENDULUM.read_text(encoding="utf-8")

@@ -61,18 +61,18 @@ from cli_helpers import runner
 from scipy.linalg import null_space
 
 import fccgrb_cli.solvers.optimize.solve as optimize
-from fccgrb_cli.cli import main
-from fccgrb_cli.io.trial import Trial
+from fccgrb_cli.cli.main import main
 from fccgrb_cli.model import load_model
 from fccgrb_cli.model.elements import FrozenMap
-from fccgrb_cli.options import SolveOptions
-from fccgrb_cli.perturb import perturb
-from fccgrb_cli.pipeline import solve_trial
-from fccgrb_cli.run import mean_jump, summary
+from fccgrb_cli.pipeline.options import SolveOptions
+from fccgrb_cli.pipeline.run import mean_jump, summary
+from fccgrb_cli.pipeline.solve import solve_trial
+from fccgrb_cli.pipeline.synth import synthesize
+from fccgrb_cli.signals.artefact import perturb
 from fccgrb_cli.solvers.optimize.problem import ED_SMOOTHING, FrameProblem
 from fccgrb_cli.solvers.optimize.solve import Settings, solve_optimization
-from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import Drive, compile_system
+from fccgrb_cli.trial.record import Trial
 
 MODEL_PATH = Path(__file__).resolve().parents[1] / "configs" / "models" / "five_bar.yaml"
 
@@ -507,7 +507,7 @@ def test_workers_receive_the_compiled_system(monkeypatch):
     kwargs = calls[0]
     assert kwargs["initializer"] is optimize._install
     installed_system, installed_targets, settings, parent = kwargs["initargs"]
-    assert parent == os.getpid()  # the workers end with this process (fccgrb_cli.scratch)
+    assert parent == os.getpid()  # the workers end with this process (fccgrb_cli.core.scratch)
     assert installed_system is system()
     assert installed_targets is targets
     assert settings == Settings("cno-sqp", parallel=True, workers=2, init="chunks")

@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 
 from fccgrb_cli.model import load_model
-from fccgrb_cli.perturb import perturb
-from fccgrb_cli.synth import synthesize
+from fccgrb_cli.pipeline.synth import synthesize
+from fccgrb_cli.signals.artefact import perturb
 from fccgrb_cli.system import compile_system
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fccgrb_cli.io.forceplates import (
+from fccgrb_cli.trial.forceplates import (
     MIN_LOAD,
     STAND_HEIGHT,
     STAND_MARGIN,

@@ -16,9 +16,9 @@ import ezc3d
 import numpy as np
 import pytest
 
-from fccgrb_cli.anatomy import plugin_gait as pg
 from fccgrb_cli.anatomy.frames import Frames
-from fccgrb_cli.gait.plugin_gait import cardan_yxz, pig_angles, progression_frame
+from fccgrb_cli.plugin_gait import segments as pg
+from fccgrb_cli.plugin_gait.angles import cardan_yxz, pig_angles, progression_frame
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / ".." / "shared" / "data" / "c3d" / "plugin_gait"

@@ -18,7 +18,7 @@ import pytest
 import yaml
 from cli_helpers import run_cli
 
-from fccgrb_cli.io.runs import read_runs
+from fccgrb_cli.results.runs import read_runs
 
 ROOT = Path(__file__).resolve().parents[1]
 TEMPLATE = ROOT / "configs" / "models" / "plugin_gait.yaml"
@@ -251,7 +251,7 @@ def test_calibration_sources_in_order_and_missing_measurements(tmp_path):
     (a TRC has no PROCESSING group) one error lists the Vicon keys missing."""
     from cli_helpers import one_error_line
 
-    from fccgrb_cli.io.trial import read_trial, write_trial
+    from fccgrb_cli.trial.record import read_trial, write_trial
 
     vsk = tmp_path / "child.vsk"
     vsk.write_text('<KinematicModel><Parameters>'

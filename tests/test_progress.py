@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import io
 
-from fccgrb_cli import progress as module
-from fccgrb_cli.progress import Progress
+from fccgrb_cli.core import progress as module
+from fccgrb_cli.core.progress import Progress
 
 
 class Clock:

@@ -7,8 +7,8 @@ which one applies, as ``oracle``):
 * the inputs: the truth is rebuilt from the YAML alone — closed-form angles θ(t), the joint
   variables φ(t) that give them, and the markers from a forward kinematics written in the tests
   (tests/five_bar_minimal.py) — and must equal the sweep's reference markers (measured 6e-16 m);
-  the perturbed markers are rebuilt with the sweep's seed and level (``fccgrb_cli.perturb``, the
-  input generator, not under test here) and must equal what the solver saw.
+  the perturbed markers are rebuilt with the sweep's seed and level (``signals.artefact``,
+  the input generator, not under test here) and must equal what the solver saw.
 * ``truth`` (P0 rows): angles within 1e-6 rad of the closed form, every model point within
   1e-3 mm of its true marker.
 * ``minimal-lsq`` (CNO at P30): min Σ‖r_P(q) − r*‖² subject to the exact topology is, in the
@@ -52,10 +52,10 @@ from five_bar_minimal import angles as minimal_angles
 from five_bar_minimal import tracked as minimal_tracked
 from scipy.optimize import least_squares, minimize
 
+from fccgrb_cli.batch.sweep import load_sweep, run_sweep
 from fccgrb_cli.model import load_model
-from fccgrb_cli.perturb import perturb
-from fccgrb_cli.report import collect, describe, level_name
-from fccgrb_cli.sweep import load_sweep, run_sweep
+from fccgrb_cli.presentation.tables import collect, describe, level_name
+from fccgrb_cli.signals.artefact import perturb
 from fccgrb_cli.system import Drive, System, compile_system
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -28,7 +28,7 @@ from fccgrb_cli.dynamics.inertia_fit import fit_inertia
 from fccgrb_cli.dynamics.kinematic_correction import CorrectionData, correction_step
 from fccgrb_cli.dynamics.mass import mass_blocks
 from fccgrb_cli.model import load_model, parse_model
-from fccgrb_cli.synth import synthesize
+from fccgrb_cli.pipeline.synth import synthesize
 from fccgrb_cli.system import compile_system
 
 ROOT = Path(__file__).resolve().parents[1]

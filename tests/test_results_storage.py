@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 
 import fccgrb_cli as fc
-from fccgrb_cli.io.datasets import LARGE
-from fccgrb_cli.io.export import write_csv
-from fccgrb_cli.io.results import write_run
-from fccgrb_cli.io.runs import read_runs
-from fccgrb_cli.report import collect
-from fccgrb_cli.run import summary
+from fccgrb_cli.core.datasets import LARGE
+from fccgrb_cli.pipeline.run import summary
+from fccgrb_cli.presentation.tables import collect
+from fccgrb_cli.results.export import write_csv
+from fccgrb_cli.results.runs import read_runs
+from fccgrb_cli.results.storage import write_run
 
 ROOT = Path(__file__).resolve().parents[1]
 FIVE_BAR = ROOT / "configs" / "models" / "five_bar.yaml"

@@ -23,6 +23,7 @@ from test_floating_base import moving_text
 
 from fccgrb_cli.dynamics.uncertainty import moment_jacobian, moments_at
 from fccgrb_cli.model import parse_model
+from fccgrb_cli.pipeline.synth import synthesize
 from fccgrb_cli.solvers.smooth import filter as reference
 from fccgrb_cli.solvers.smooth import kernels, rotation
 from fccgrb_cli.solvers.smooth.coordinates import Coordinates
@@ -30,7 +31,6 @@ from fccgrb_cli.solvers.smooth.noise import marker_noise, strength
 from fccgrb_cli.solvers.smooth.prior import density, noise_shape, transition
 from fccgrb_cli.solvers.smooth.start import initial_state
 from fccgrb_cli.solvers.smooth.trial import SmoothSettings, smooth_motion
-from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import compile_system
 
 

@@ -1,4 +1,5 @@
-"""``--smooth auto`` through a whole solve (fccgrb_cli/smoothing.py), against independent checks:
+"""``--smooth auto`` through a whole solve (fccgrb_cli/pipeline/smoothing.py), against independent
+checks:
 the topological equations and the rates' consistency (Φ_q q̇ = ν, Φ_q q̈ = γ) evaluated on every
 frame of the result; the moments against the truth-driven ones and the predicted standard
 deviations against a small Monte-Carlo over noise seeds (the 100-seed check is
@@ -12,15 +13,15 @@ import numpy as np
 import pytest
 
 import fccgrb_cli as fc
-from fccgrb_cli.io.export import write_csv
-from fccgrb_cli.io.trial import Trial
-from fccgrb_cli.smoothing import chain_coordinates
+from fccgrb_cli.pipeline.smoothing import chain_coordinates
+from fccgrb_cli.pipeline.synth import synthesize
+from fccgrb_cli.results.export import write_csv
 from fccgrb_cli.solvers.batched import Stacked
 from fccgrb_cli.solvers.smooth import trial as smooth_trial
 from fccgrb_cli.solvers.smooth.prior import response
 from fccgrb_cli.solvers.smooth.signal import smoothed_signal
-from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import Drive, compile_system
+from fccgrb_cli.trial.record import Trial
 
 FIVE_BAR = "configs/models/five_bar.yaml"
 
@@ -65,7 +66,7 @@ def test_smoothed_motion_keeps_the_topology_and_consistent_rates(five_bar, tmp_p
     for sd in (u.theta_sd, u.theta_d_sd, u.theta_dd_sd, u.moments_sd):
         assert sd.shape == r.theta.shape and np.all(sd > 0) and np.isfinite(sd).all()
     path = tmp_path / "run.h5"
-    run.to_hdf5(path)
+    fc.write_results(run, path)
     back = fc.read_results(path)[run.name].uncertainty
     for key in ("theta_sd", "theta_d_sd", "theta_dd_sd", "moments_sd", "cutoffs_hz"):
         np.testing.assert_array_equal(getattr(back, key), getattr(u, key))
@@ -196,8 +197,8 @@ def test_the_smoother_weighs_the_markers_as_the_frames_solve_did() -> None:
     weight or --tracking-weight for NRM-WLS, none for NRM-LS; the optimizers count a point
     without one as 1."""
     from fccgrb_cli.model import parse_model
-    from fccgrb_cli.options import SolveOptions
-    from fccgrb_cli.smoothing import marker_weights
+    from fccgrb_cli.pipeline.options import SolveOptions
+    from fccgrb_cli.pipeline.smoothing import marker_weights
     from fccgrb_cli.solvers.nrm.problem import row_weights
 
     with open(FIVE_BAR, encoding="utf-8") as handle:

@@ -19,12 +19,12 @@ from cli_helpers import one_error_line, run_cli
 from test_results_storage import FIVE_BAR, FIVE_BAR_TRIAL, GAIT_TRIAL, ROOT
 
 import fccgrb_cli as fc
-from fccgrb_cli.io.c3d_header import read_parameters
-from fccgrb_cli.io.results import write_run
-from fccgrb_cli.io.spill import Spill, StoredArray
-from fccgrb_cli.pipeline import distances, points_along, solve_trial
-from fccgrb_cli.run import summary
+from fccgrb_cli.core.spill import Spill, StoredArray
+from fccgrb_cli.pipeline.run import summary
+from fccgrb_cli.pipeline.solve import distances, points_along, solve_trial
+from fccgrb_cli.results.storage import write_run
 from fccgrb_cli.system import compile_system
+from fccgrb_cli.trial.c3d_header import read_parameters
 
 SPILLED = ("reference", "markers_input", "model_points", "ed", "ed_input")
 SPILLED_RESULT = ("q", "qd", "qdd", "theta_d", "theta_dd")

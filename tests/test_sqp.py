@@ -20,12 +20,12 @@ import numpy as np
 import pytest
 
 from fccgrb_cli.model import load_model
-from fccgrb_cli.perturb import perturb
+from fccgrb_cli.pipeline.synth import synthesize
+from fccgrb_cli.signals.artefact import perturb
 from fccgrb_cli.solvers.newton import Iterate
 from fccgrb_cli.solvers.optimize import frame
 from fccgrb_cli.solvers.optimize.problem import FrameProblem
 from fccgrb_cli.solvers.optimize.solve import Settings, solve_optimization
-from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import compile_system
 
 MODELS = Path(__file__).resolve().parents[1] / "configs" / "models"

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from fccgrb_cli.cli import main
+from fccgrb_cli.cli.main import main
 from fccgrb_cli.model import load_model, parse_model
-from fccgrb_cli.synth import synthesize
+from fccgrb_cli.pipeline.synth import synthesize
 from fccgrb_cli.system.structure import analyse
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -92,7 +92,7 @@ def test_bundled_sample_trials_match_their_models(name: str) -> None:
     model text it was made from, and the C3D's markers are the model's (to 32-bit precision)."""
     import h5py
 
-    from fccgrb_cli.io.trial import read_trial
+    from fccgrb_cli.trial.record import read_trial
 
     model_path = ROOT / "configs" / "models" / f"{name}.yaml"
     trial = ROOT / "sample_data" / f"{name}.c3d"

@@ -38,9 +38,9 @@ import yaml
 from cli_helpers import one_error_line, run_cli
 from click.testing import Result
 
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.report import METRICS, collect
-from fccgrb_cli.sweep import Cell, cells_folder, load_sweep
+from fccgrb_cli.batch.sweep import Cell, cells_folder, load_sweep
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.presentation.tables import METRICS, collect
 
 ROOT = Path(__file__).resolve().parents[1]
 PENDULUM = ROOT / "configs" / "models" / "pendulum.yaml"
@@ -147,7 +147,7 @@ def numbers_but_time(path: Path) -> list[tuple[str, ...]]:
 
 
 def paper_rows() -> list[dict[str, str]]:
-    """fccgrb_cli/data/paper_tables.csv read independently of fccgrb_cli.report."""
+    """fccgrb_cli/data/paper_tables.csv read independently of fccgrb_cli.presentation.tables."""
     lines = [line for line in PAPER_CSV.read_text(encoding="utf-8").splitlines()
              if line.strip() and not line.startswith("#")]
     return list(csv.DictReader(lines))

@@ -35,9 +35,9 @@ import yaml
 from cli_helpers import one_error_line, run_cli
 from click.testing import Result
 
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.io.c3d_header import decode_floats, read_layout
-from fccgrb_cli.io.trial import read_trial, write_trial
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.trial.c3d_header import decode_floats, read_layout
+from fccgrb_cli.trial.record import read_trial, write_trial
 
 MODELS = Path(__file__).resolve().parents[1] / "configs" / "models"
 PENDULUM = MODELS / "pendulum.yaml"
@@ -628,7 +628,7 @@ def test_fp_type1_c3d() -> None:
 # ---- truncated trials ---------------------------------------------------------------------
 #
 # A copy interrupted in the data section must not read as a shorter trial. The expected frame
-# counts come from outside fccgrb_cli.io.c3d_header: ezc3d's own reading of POINT:DATA_START and
+# counts come from outside fccgrb_cli.trial.c3d_header: ezc3d's own reading of POINT:DATA_START and
 # of the cut files (it reads the whole frames present), and the frame size the C3D format gives
 # (4 words per point, then the analog values; 4 bytes a word in float files, 2 in integer ones).
 

@@ -22,16 +22,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fccgrb_cli.io.trial import read_trial
 from fccgrb_cli.model import load_model
-from fccgrb_cli.options import SolveOptions
-from fccgrb_cli.perturb import perturb
-from fccgrb_cli.pipeline import solve_trial
-from fccgrb_cli.run import Run, summary
+from fccgrb_cli.pipeline.options import SolveOptions
+from fccgrb_cli.pipeline.run import Run, summary
+from fccgrb_cli.pipeline.solve import solve_trial
+from fccgrb_cli.signals.artefact import perturb
 from fccgrb_cli.solvers.optimize import solve as optimize
 from fccgrb_cli.solvers.optimize.solve import Settings, solve_optimization
 from fccgrb_cli.solvers.quality import JUMP, TOPOLOGY, UNCONVERGED, flags_of, jump_ratio
 from fccgrb_cli.system import compile_system
+from fccgrb_cli.trial.record import read_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "configs" / "models" / "five_bar.yaml"

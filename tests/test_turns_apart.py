@@ -24,9 +24,9 @@ import yaml
 from cli_helpers import run_cli
 
 import fccgrb_cli as fc
-from fccgrb_cli.io.trial import Trial
-from fccgrb_cli.io.truth import read_truth, truth_path
 from fccgrb_cli.solvers.turns import counted
+from fccgrb_cli.trial.record import Trial
+from fccgrb_cli.trial.truth import read_truth, truth_path
 
 ROOT = Path(__file__).resolve().parents[1]
 CRANK = ROOT / "configs" / "models" / "crank_rocker.yaml"

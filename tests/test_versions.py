@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from fccgrb_cli.io.results import PACKAGES, _installed_version, versions
+from fccgrb_cli.results.storage import PACKAGES, _installed_version, versions
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -34,7 +34,7 @@ def test_an_unloaded_package_is_read_from_its_dist_info(name: str) -> None:
 
 
 def test_a_solve_process_does_not_import_importlib_metadata() -> None:
-    code = ("import sys; from fccgrb_cli.io.results import versions; versions(); "
+    code = ("import sys; from fccgrb_cli.results.storage import versions; versions(); "
             "print('importlib.metadata' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)

@@ -15,11 +15,11 @@ import pytest
 from cli_helpers import one_error_line, run_cli
 
 import fccgrb_cli as fc
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.io.trial import Trial, write_trial
-from fccgrb_cli.io.virtual import with_virtual
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model.virtual import canonical
-from fccgrb_cli.options import SolveOptions
+from fccgrb_cli.pipeline.options import SolveOptions
+from fccgrb_cli.trial.record import Trial, write_trial
+from fccgrb_cli.trial.virtual import with_virtual
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "configs" / "models" / "five_bar.yaml"

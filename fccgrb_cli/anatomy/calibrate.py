@@ -39,11 +39,11 @@ from fccgrb_cli.anatomy.frames import (
     shank_frames,
     thigh_frames,
 )
+from fccgrb_cli.anatomy.lab_axes import LabAxes, lab_axes
 from fccgrb_cli.anatomy.plausibility import implausibilities, pose
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.io.lab_axes import LabAxes, lab_axes
-from fccgrb_cli.io.trial import Trial
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model import Model
+from fccgrb_cli.trial.record import Trial
 
 SIDES = {"r": "right", "l": "left"}
 LANDMARKS = ("right_asis", "left_asis", "right_psis", "left_psis", *(
@@ -285,7 +285,7 @@ def calibrate(model: Model, trial: Trial, frames: tuple[int, int] | None = None,
     method its landmarks choose (:func:`calibration_method`); ``measurements`` (Davis' method
     only; default :class:`Measurements`), ``mapping``: the template's label → the trial's,
     where a lab spells them otherwise. The personal model's gravity points down the trial's
-    vertical (``io.lab_axes``; ``vertical``: 'auto' or the axis up), as its poses lie in the
+    vertical (``anatomy.lab_axes``; ``vertical``: 'auto' or the axis up), as its poses lie in the
     trial's frame."""
     method = calibration_method(model)
     if method != "davis" and measurements is not None:

@@ -39,6 +39,7 @@ from fccgrb_cli.anatomy.calibrate import (
     tracked_markers,
 )
 from fccgrb_cli.anatomy.frames import Frames, harrington_hip_centre, pelvis_frames
+from fccgrb_cli.anatomy.lab_axes import lab_axes
 from fccgrb_cli.anatomy.upper_body import (
     forearm_frames,
     hand_frames,
@@ -47,10 +48,9 @@ from fccgrb_cli.anatomy.upper_body import (
     thorax_frames,
     upper_arm_frames,
 )
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.io.lab_axes import lab_axes
-from fccgrb_cli.io.trial import Trial
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model import Model
+from fccgrb_cli.trial.record import Trial
 
 TRUNK_LANDMARKS = ("c7", "t8", "suprasternal_notch", "xiphoid")
 HEAD_LANDMARKS = ("left_front_head", "right_front_head", "left_back_head", "right_back_head")
@@ -159,7 +159,7 @@ def _pelvis_alone(model: Model, trial: Trial, frames: tuple[int, int] | None,
                   mass: float | None, mapping: dict[str, str], vertical: str) -> Calibration:
     """A template without legs: the pelvis alone from its landmarks (ASIS and PSIS, or the
     sacrum), its markers, and the hip centres (Harrington et al. 2007) as points of it; the
-    gravity down the lab's vertical (``io.lab_axes``; ``vertical``: 'auto' or the axis up), as
+    gravity down the lab's vertical (``anatomy.lab_axes``; ``vertical``: 'auto' or the axis up), as
     a lower-limb template's (a y-up lab's upper-limb trial kept the template's −z)."""
     start, stop = frames if frames is not None else (0, trial.n_frames)
     if not 0 <= start < stop <= trial.n_frames:

@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from fccgrb_cli.filtering import lowpass
+from fccgrb_cli.signals.butterworth import lowpass
 
 
 @dataclass(frozen=True)

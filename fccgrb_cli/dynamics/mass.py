@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model import Inertia, Model
 
 

@@ -24,6 +24,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import yaml
 
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.dynamics.convert import Dynamics, classical_dynamics
 from fccgrb_cli.dynamics.inertia_fit import InertiaFit, fit_inertia
 from fccgrb_cli.dynamics.kinematic_correction import (
@@ -39,9 +40,8 @@ from fccgrb_cli.dynamics.residuals import (
     contact_states,
     residual_report,
 )
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.filtering import lowpass, settling_frames
 from fccgrb_cli.model import Inertia, Model
+from fccgrb_cli.signals.butterworth import lowpass, settling_frames
 from fccgrb_cli.solvers.result import KinematicResult
 from fccgrb_cli.system import compile_system
 

@@ -8,8 +8,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fccgrb_cli.clinical import ClinicalResults
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.anatomy.clinical import ClinicalResults
+from fccgrb_cli.anatomy.lab_axes import LabAxes
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.gait.cycles import SUFFIX, SideCycles, Walk, side_cycles
 from fccgrb_cli.gait.events import (
     SIDES,
@@ -20,9 +21,8 @@ from fccgrb_cli.gait.events import (
     kinematic_events,
     plate_events,
 )
-from fccgrb_cli.io.lab_axes import LabAxes
-from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.model import Model
+from fccgrb_cli.trial.record import Trial
 
 CHOICES = ("auto", *SOURCES)
 PELVIS = ("right_asis", "left_asis", "right_psis", "left_psis", "sacrum")
@@ -136,7 +136,7 @@ def find_events(model: Model, trial: Trial, clinical: ClinicalResults | None,
     when the model has no clinical curves of both sides (not a lower-limb model) — unless
     ``choice`` names a source, then that is an error saying why. ``solved``: the frames with a
     solution; events elsewhere, of any source, are left out (no data, no event). ``lab``: the
-    run's lab axes (``io.lab_axes``; default: up against the model's gravity), whose vertical
+    run's lab axes (``anatomy.lab_axes``; default: up against the model's gravity), whose vertical
     the events, step lengths and widths are measured with."""
     if not _has_both_sides(clinical):
         if choice != "auto":

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.inputs import read_text
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.core.inputs import read_text
 
 
 @dataclass(frozen=True)

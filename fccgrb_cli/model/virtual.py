@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import re
 
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.errors import InputError
 
 FUNCTIONS = {"mid": (2, 2), "mean": (2, None)}
 _CALL = re.compile(r"^\s*([A-Za-z_]\w*)\s*\((.*)\)\s*$", re.DOTALL)

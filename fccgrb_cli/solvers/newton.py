@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fccgrb_cli.blas import lapack
+from fccgrb_cli.core.blas import lapack
 from fccgrb_cli.system import Drive, System
 
 

@@ -1,5 +1,5 @@
 """Where a C3D file (Intel, as ezc3d writes it) keeps its header words and parameter values,
-found by walking its bytes independently of fccgrb_cli.io.c3d_header, so that a case can
+found by walking its bytes independently of fccgrb_cli.trial.c3d_header, so that a case can
 overwrite one value and nothing else."""
 
 from __future__ import annotations

@@ -79,8 +79,8 @@ def _walk(path: Path, template: Path) -> None:
     try:
         from test_calibrate import walking_subject
 
-        from fccgrb_cli.io.trial import write_trial
         from fccgrb_cli.model import load_model
+        from fccgrb_cli.trial.record import write_trial
     finally:
         sys.path.remove(str(TESTS))
     trial = walking_subject().trial(load_model(template).marker_labels)

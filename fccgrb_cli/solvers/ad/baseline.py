@@ -12,8 +12,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.filtering import lowpass
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.signals.butterworth import lowpass
 from fccgrb_cli.solvers.ad.solve import solve_ad, stacked_drives
 from fccgrb_cli.solvers.batched import Drives
 from fccgrb_cli.solvers.initial import initial_guess

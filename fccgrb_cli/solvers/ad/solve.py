@@ -17,8 +17,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from fccgrb_cli.blas import single_threaded
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.blas import single_threaded
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.solvers.batched import Drives, Stacked, blocks, factor, newton_stacked
 from fccgrb_cli.solvers.kernel_arrays import DrivenMotion, Drivers, Limits
 from fccgrb_cli.solvers.newton import linear_solve, newton_raphson

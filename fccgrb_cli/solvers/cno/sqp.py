@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fccgrb_cli.blas import lapack
+from fccgrb_cli.core.blas import lapack
 from fccgrb_cli.solvers.newton import Iterate
 from fccgrb_cli.system import Drive, System
 

@@ -47,7 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fccgrb_cli.blas import lapack
+from fccgrb_cli.core.blas import lapack
 from fccgrb_cli.solvers.cno.sqp import DELTA, FEASIBLE_TOP
 from fccgrb_cli.solvers.newton import Iterate
 from fccgrb_cli.solvers.optimize.problem import ED_SMOOTHING, FrameProblem

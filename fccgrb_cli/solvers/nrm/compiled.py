@@ -10,7 +10,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.solvers import kernels
 from fccgrb_cli.solvers.engine import ready
 from fccgrb_cli.solvers.initial import initial_guess

@@ -13,7 +13,7 @@ from fccgrb_cli.solvers.engine import use_kernels
 from fccgrb_cli.system import System
 
 if TYPE_CHECKING:
-    from fccgrb_cli.options import SolveOptions
+    from fccgrb_cli.pipeline.options import SolveOptions
 
 # Extrapolation through the last k solutions (binomial coefficients of the k-th difference).
 _EXTRAPOLATION = {1: (1.0,), 2: (2.0, -1.0), 3: (3.0, -3.0, 1.0), 4: (4.0, -6.0, 4.0, -1.0),

@@ -13,8 +13,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from fccgrb_cli.blas import single_threaded
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.blas import single_threaded
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.solvers.initial import initial_guess
 from fccgrb_cli.solvers.mixed import mixed_result
 from fccgrb_cli.solvers.newton import Iterate, gauss_newton

@@ -24,7 +24,7 @@ from fccgrb_cli.solvers.optimize.problem import FrameProblem
 from fccgrb_cli.system import System
 
 if TYPE_CHECKING:
-    from fccgrb_cli.options import SolveOptions
+    from fccgrb_cli.pipeline.options import SolveOptions
 
 STRUCTURED = {method: (name, f"{name}: converged successfully") for method, name in
               (("cno-sqp", "stabilized SQP"), ("cno-ip", "interior point"),

@@ -21,8 +21,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fccgrb_cli.blas import limit_this_process, single_threaded
-from fccgrb_cli.scratch import die_with_parent
+from fccgrb_cli.core.blas import limit_this_process, single_threaded
+from fccgrb_cli.core.scratch import die_with_parent
 from fccgrb_cli.solvers.engine import use_kernels
 from fccgrb_cli.solvers.initial import initial_guess
 from fccgrb_cli.solvers.mixed import mixed_result

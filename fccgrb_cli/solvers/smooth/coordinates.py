@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.solvers.batched import Drives, Stacked, factor, newton_stacked
 from fccgrb_cli.solvers.smooth.arrays import Drivers, Linearization, Points
 from fccgrb_cli.solvers.smooth.rotation import (

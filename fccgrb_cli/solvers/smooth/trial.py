@@ -27,7 +27,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.solvers.smooth import filter as reference
 from fccgrb_cli.solvers.smooth.coordinates import AssemblyError, Coordinates
 from fccgrb_cli.solvers.smooth.noise import (

@@ -1,0 +1,1 @@
+"""Many solves: resumable cells, the paper's sweeps and gait studies."""

@@ -1,0 +1,98 @@
+"""Resumable work in cells: each job writes one file (a sweep's cell, a study's calibration or
+trial) atomically, so a job whose file exists is done and a killed run loses only the jobs it was
+running. One executor path for every batch command (``fccgrb sweep``, ``fccgrb batch``): the
+jobs run in this process, over a local process pool, or over any ``concurrent.futures``
+executor — a Dask cluster's (``Client.get_executor()``) included — and the numbers do not depend
+on which (the same function runs on the same inputs).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from fccgrb_cli.core import scratch
+
+Done = Callable[["Job", "BaseException | None"], None]
+
+
+@dataclass(frozen=True)
+class Job:
+    """One cell: ``function(*args)`` writes ``target`` (atomically: a file that exists is whole).
+    ``alone``: run in this process after the pooled jobs, one at a time (a job that spreads over
+    its own processes, whose timing must not be shared)."""
+
+    name: str
+    target: Path
+    function: Callable[..., Any]
+    args: tuple = ()
+    alone: bool = False
+
+
+def cells_folder(output: Path) -> Path:
+    """Where the finished cells of a command writing ``output`` are kept."""
+    return output.with_name(output.name + ".cells")
+
+
+def remove_cells(output: Path) -> None:
+    """Forget the finished cells of ``output`` (for a clean rerun)."""
+    shutil.rmtree(cells_folder(output), ignore_errors=True)
+
+
+def pending(jobs: Iterable[Job], readable: Callable[[Path], bool],
+            forget: Callable[[Path], None] | None = None) -> list[Job]:
+    """The jobs still to run: those whose file is absent, or present but not ``readable`` (then
+    removed, after ``forget(path)`` is told; files are renamed into place whole, so only
+    something outside the run can break one)."""
+    todo = []
+    for job in jobs:
+        if job.target.exists() and not readable(job.target):
+            if forget is not None:
+                forget(job.target)
+            job.target.unlink()
+        if not job.target.exists():
+            todo.append(job)
+    return todo
+
+
+def run_jobs(jobs: Sequence[Job], done: Done, *, workers: int = 1,
+             executor: Executor | None = None) -> None:
+    """Run ``jobs``: the pooled ones over ``executor``, else over a local pool of ``workers``
+    processes (in this process when ``workers`` is 1; they end with it: ``scratch``), then the
+    ``alone`` ones here. After each,
+    ``done(job, error)`` (error None when it succeeded; ``done`` re-raises what should stop the
+    run: the remaining local jobs are cancelled)."""
+    pooled = [job for job in jobs if not job.alone]
+    if pooled:
+        own = executor is None and workers > 1
+        pool = ProcessPoolExecutor(max_workers=workers, initializer=scratch.die_with_parent,
+                                   initargs=(os.getpid(),)) if own else executor
+        if pool is None:
+            for job in pooled:
+                _run_here(job, done)
+        else:
+            try:
+                futures = {pool.submit(job.function, *job.args): job for job in pooled}
+                for future in as_completed(futures):
+                    error = future.exception()
+                    done(futures[future], error)
+            finally:
+                if own:
+                    pool.shutdown(cancel_futures=True)
+    for job in jobs:
+        if job.alone:
+            _run_here(job, done)
+
+
+def _run_here(job: Job, done: Done) -> None:
+    try:
+        job.function(*job.args)
+    except Exception as error:  # a job's failure is the caller's to judge (done)
+        done(job, error)
+        return
+    done(job, None)

@@ -1,0 +1,1 @@
+"""The command line (``fccgrb``): thin commands over the pipeline, batch and presentation."""

@@ -1,0 +1,75 @@
+"""Compile the numba kernels ahead of time (``fccgrb compile``): every compiled path once, on a
+few synthesized frames of a built-in model, so that the first real solve only loads them from
+numba's cache (numba compiles a kernel for the types of its arguments, which do not depend on
+the model)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+from fccgrb_cli.model import parse_model
+from fccgrb_cli.pipeline.options import SolveOptions
+from fccgrb_cli.pipeline.solve import solve_trial
+from fccgrb_cli.pipeline.synth import synthesize
+from fccgrb_cli.trial.record import Trial
+
+# A spatial double pendulum with inertia (configs/models/pendulum.yaml, shortened): every
+# compiled path runs on it, the inverse dynamics included.
+BUILT_IN = """
+name: pendulum
+units: {angle: deg}
+gravity: [0, 0, -9.81]
+form: full
+ground:
+  points: {O: [0, 0, 0]}
+  vectors: {down: [0, 0, -1], minus_x: [-1, 0, 0]}
+bodies:
+  link1:
+    mass: 1.5
+    inertia: [0.02, 0.02, 0.0003]
+    points: {A: [0, 0, 0.2], P1: [0, 0, -0.2]}
+    vectors: {minus_u: [-1, 0, 0], minus_w: [0, 0, -1]}
+    pose: {r: [0, 0, -0.2], u: [1, 0, 0], v: [0, 1, 0], w: [0, 0, 1]}
+  link2:
+    mass: 1.0
+    inertia: [0.0075, 0.0075, 0.0002]
+    points: {C: [0, 0, 0.15], P2: [0, 0.04, 0], P3: [0, 0, -0.15]}
+    pose: {r: [0, 0, -0.55], u: [1, 0, 0], v: [0, 1, 0], w: [0, 0, 1]}
+joints:
+  - {name: shoulder, type: universal, bodies: [ground, link1], points: [O, A], axes: [x, v]}
+  - {name: elbow, type: universal, bodies: [link1, link2], points: [P1, C], axes: [u, v]}
+angles:
+  - {name: shoulder_x, vectors: [ground.down, link1.v],
+     motion: {mean: 90, terms: [{amplitude: 30, frequency: 0.5}]}}
+  - {name: shoulder_y, vectors: [ground.minus_x, link1.w],
+     motion: {mean: 90, terms: [{amplitude: 20, frequency: 0.4, phase: 30}]}}
+  - {name: elbow_x, vectors: [link1.minus_w, link2.v],
+     motion: {mean: 100, terms: [{amplitude: 35, frequency: 0.6, phase: 60}]}}
+  - {name: elbow_y, vectors: [link1.minus_u, link2.w],
+     motion: {mean: 85, terms: [{amplitude: 25, frequency: 0.7, phase: 90}]}}
+tracking:
+  points:
+    - {marker: P1, point: link1.P1}
+    - {marker: P2, point: link2.P2}
+    - {marker: P3, point: link2.P3}
+"""
+# every compiled loop: NRM (with the rates and the classical model's drive and multipliers),
+# the structured optimizers (CNO-SQP's loop holds the interior point's and goal attainment's
+# kernels too)
+METHODS = ("nrm-wls", "cno-sqp")
+
+
+def precompile(report: Callable[[str, float], None] | None = None) -> float:
+    """Run every compiled path on 12 synthesized frames of the built-in pendulum; ``report``
+    gets (method, seconds) after each; returns the total seconds."""
+    started = time.perf_counter()
+    model = parse_model(BUILT_IN, "built-in pendulum")
+    truth = synthesize(model, duration=0.12, rate=100.0)
+    trial = Trial("built-in pendulum (synthesized)", truth.labels, truth.markers, truth.rate)
+    for method in METHODS:
+        begun = time.perf_counter()
+        solve_trial(model, trial, SolveOptions(method=method, engine="compiled", events="none"))
+        if report is not None:
+            report(method, time.perf_counter() - begun)
+    return time.perf_counter() - started

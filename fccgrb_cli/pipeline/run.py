@@ -1,0 +1,305 @@
+"""A solved trial (:class:`Run`): what ``pipeline.solve_trial`` returns, the results file
+stores (``results.storage`` writes it, ``results.runs`` reads it back) and the Python API hands
+out, with
+the one-row summary the command line prints."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from fccgrb_cli.anatomy.clinical import ClinicalResults
+from fccgrb_cli.anatomy.lab_axes import LabAxes
+from fccgrb_cli.core.named import NamedArray
+from fccgrb_cli.dynamics.convert import Dynamics
+from fccgrb_cli.dynamics.reduction import Reduction
+from fccgrb_cli.dynamics.residuals import ResidualReport
+from fccgrb_cli.gait.analysis import GaitResults
+from fccgrb_cli.model import Model
+from fccgrb_cli.pipeline.options import SolveOptions
+from fccgrb_cli.pipeline.smoothing import Uncertainty
+from fccgrb_cli.plugin_gait.outputs import PluginGaitResults
+from fccgrb_cli.solvers.result import KinematicResult
+
+__all__ = ["Run", "mean_jump", "summary"]
+
+
+@dataclass(frozen=True, repr=False)
+class Run:
+    """A solved trial: the options it was solved with, the kinematic result (with each frame's
+    quality flags), the markers it saw, the model points it reached, and the inverse dynamics."""
+
+    name: str
+    options: SolveOptions
+    result: KinematicResult
+    labels: tuple[str, ...]
+    rate: float
+    reference: np.ndarray
+    markers_input: np.ndarray
+    model_points: np.ndarray
+    ed: np.ndarray
+    ed_input: np.ndarray
+    truth_theta: np.ndarray | None
+    form: str
+    model_text: str
+    trial_path: str
+    dynamics: Dynamics | None = None
+    warnings: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
+    clinical: ClinicalResults | None = None
+    gait: GaitResults | None = None
+    moment_flags: np.ndarray | None = None
+    axes: LabAxes | None = None
+    uncertainty: Uncertainty | None = None
+    plugin_gait: PluginGaitResults | None = None
+    start_time: float = 0.0  # s: the first frame's time on the trial file's clock
+    residuals: ResidualReport | None = None
+    reduction: Reduction | None = None
+
+    def __repr__(self) -> str:
+        r = self.result
+        return (f"Run({self.name!r}: {self.options.method}, {len(r.time)} frames, "
+                f"{int((~r.converged).sum())} failed, {int((~r.trusted).sum())} not trusted, "
+                f"dynamics {'on' if self.dynamics is not None else 'off'})")
+
+    # --- what the results file records of the options, as they applied to this run -------
+    @property
+    def perturb_level_m(self) -> float:
+        return self.options.perturb_level_m
+
+    @property
+    def perturb_markers(self) -> tuple[str, ...]:
+        """The perturbed markers: those named, else every tracked one when perturbed."""
+        return self.options.perturb_markers or (self.labels if self.perturb_level_m > 0 else ())
+
+    @property
+    def perturb_seed(self) -> int:
+        return self.options.seed
+
+    @property
+    def tracking_weight(self) -> float | None:
+        return None if self.options.method == "nrm-ls" else self.options.tracking_weight
+
+    @property
+    def warm_start(self) -> str:
+        return self.options.warm_start
+
+    @property
+    def hessian(self) -> str:
+        return "" if self.options.method == "ad" else self.options.hessian
+
+    @property
+    def ad_drivers(self) -> str:
+        return self.options.ad_drivers if self.options.method == "ad" else ""
+
+    @property
+    def filter_cutoff(self) -> float | None:
+        return self.options.filter_cutoff
+
+    # --- the Python API's view: named arrays with units ------------------------------------
+    @cached_property
+    def model(self) -> Model:
+        """The model as solved (the run's YAML with the options' form and tracked markers, and
+        the gravity of the lab's axes)."""
+        from fccgrb_cli.model import parse_model
+        from fccgrb_cli.pipeline.options import prepared
+
+        model = prepared(parse_model(self.model_text, self.trial_path), self.options)
+        return model if self.axes is None else model.with_gravity(self.axes.gravity)
+
+    def _named(self, values: np.ndarray, names: tuple[str, ...], units: tuple[str, ...]
+               ) -> NamedArray:
+        return NamedArray(values, names, units, self.result.time)
+
+    @property
+    def _angle_units(self) -> tuple[str, ...]:
+        return tuple("m" if getattr(a, "kind", "angle") == "distance" else "rad"
+                     for a in self.model.angles)
+
+    @property
+    def angles(self) -> NamedArray:
+        """Every joint angle (rad; a distance coordinate in m) per frame."""
+        return self._named(self.result.theta, self.result.angle_names, self._angle_units)
+
+    @property
+    def angular_velocities(self) -> NamedArray:
+        """θ̇ (rad/s; m/s for distances), by central differences of the solved θ."""
+        return self._named(self.result.theta_d, self.result.angle_names,
+                           tuple(f"{u}/s" for u in self._angle_units))
+
+    @property
+    def angular_accelerations(self) -> NamedArray:
+        """θ̈ (rad/s²; m/s² for distances)."""
+        return self._named(self.result.theta_dd, self.result.angle_names,
+                           tuple(f"{u}/s²" for u in self._angle_units))
+
+    def _coordinates(self, values: np.ndarray, per: str) -> NamedArray:
+        names, units = [], []
+        for body in self.model.bodies:
+            for vector in ("r", "u", "v", "w")[: 4 if body.form == "full" else 3]:
+                names += [f"{body.name}.{vector}.{axis}" for axis in "xyz"]
+                units += [("m" if vector == "r" else "1") + per] * 3
+        if values.shape[1] > len(names):  # mixed coordinates: the angles follow
+            names += list(self.result.angle_names)
+            units += [u + per for u in self._angle_units]
+        return self._named(values, tuple(names), tuple(units))
+
+    @property
+    def q(self) -> NamedArray:
+        """The system coordinates per frame (Eq. 9): each body's r (m) and unit vectors, then
+        the mixed coordinates (rad, m)."""
+        return self._coordinates(self.result.q, "")
+
+    @property
+    def qd(self) -> NamedArray:
+        """q̇, consistent with the topological equations (per s)."""
+        return self._coordinates(self.result.qd, "/s")
+
+    @property
+    def qdd(self) -> NamedArray:
+        """q̈, consistent with the topological equations (per s²)."""
+        return self._coordinates(self.result.qdd, "/s²")
+
+    @property
+    def moments(self) -> NamedArray | None:
+        """Joint moments conjugate to the angles (N·m; N for distances), None without the
+        dynamics."""
+        if self.dynamics is None:
+            return None
+        return self._named(self.dynamics.inverse.joint_moments, self.result.angle_names,
+                           tuple("N" if u == "m" else "N·m" for u in self._angle_units))
+
+    @property
+    def clinical_angles(self) -> NamedArray | None:
+        """Clinical angles (deg) of the angles that declare a clinical sign."""
+        c = self.clinical
+        return None if c is None else self._named(c.angles, c.names, ("deg",) * len(c.names))
+
+    @property
+    def clinical_moments(self) -> NamedArray | None:
+        """Their conjugate moments, N·m/kg when the subject's mass is known, else N·m."""
+        c = self.clinical
+        if c is None or c.moments is None:
+            return None
+        per_kg = c.moments_per_kg
+        values, unit = (per_kg, "N·m/kg") if per_kg is not None else (c.moments, "N·m")
+        return self._named(values, c.names, (unit,) * len(c.names))
+
+    @property
+    def angle_sd(self) -> NamedArray | None:
+        """The smoother's standard deviation of every angle (rad; m for distances), None
+        without ``--smooth auto``."""
+        u = self.uncertainty
+        return None if u is None else self._named(u.theta_sd, self.result.angle_names,
+                                                  self._angle_units)
+
+    @property
+    def moment_sd(self) -> NamedArray | None:
+        """The joint moments' standard deviations (N·m; N for distances), None without the
+        smoother or the dynamics."""
+        u = self.uncertainty
+        if u is None or u.moments_sd is None:
+            return None
+        return self._named(u.moments_sd, self.result.angle_names,
+                           tuple("N" if unit == "m" else "N·m" for unit in self._angle_units))
+
+    @property
+    def clinical_sd(self) -> tuple[NamedArray, NamedArray | None] | None:
+        """The clinical angles' standard deviations (deg) and their moments' (N·m/kg when the
+        subject's mass is known, else N·m; None without the dynamics): the angles' own, as
+        a clinical curve is ±(θ − 90°) and its moment ±τ."""
+        c, u = self.clinical, self.uncertainty
+        if c is None or u is None:
+            return None
+        index = [self.result.angle_names.index(name) for name in c.names]
+        angles = self._named(np.degrees(u.theta_sd[:, index]), c.names, ("deg",) * len(index))
+        if u.moments_sd is None:
+            return angles, None
+        per_kg = c.mass is not None
+        values = u.moments_sd[:, index] / (c.mass if per_kg else 1.0)
+        unit = "N·m/kg" if per_kg else "N·m"
+        return angles, self._named(values, c.names, (unit,) * len(index))
+
+    @property
+    def trusted(self) -> np.ndarray:
+        """Per frame: converged and not flagged by the quality checks."""
+        return self.result.trusted
+
+    @property
+    def moments_trusted(self) -> np.ndarray | None:
+        """Per frame and joint (frames × angles): the moment is trusted — the frame's
+        kinematics and the moment's own checks (``solvers.quality.MOMENT_BITS``: the dynamics
+        ran there, every contact load measured, accelerations not noise); None without the
+        dynamics."""
+        if self.dynamics is None:
+            return None
+        if self.moment_flags is None:  # a run read from a file written without them
+            return np.broadcast_to(self.trusted[:, None],
+                                   self.dynamics.inverse.joint_moments.shape).copy()
+        return self.moment_flags == 0
+
+    def summary(self) -> dict[str, float | str | int]:
+        """The one-row summary the command line prints."""
+        return summary(self)
+
+    def to_dataframe(self):
+        """One row per frame: time, trusted, the angles, their moments and the clinical curves
+        (columns 'name [unit]'); needs pandas."""
+        import pandas as pd
+
+        parts = [self.angles.to_dataframe()]
+        parts += [a.to_dataframe().add_prefix(prefix) for prefix, a in (
+            ("moment ", self.moments), ("clinical ", self.clinical_angles),
+            ("clinical moment ", self.clinical_moments)) if a is not None]
+        frame = pd.concat(parts, axis=1)
+        frame.insert(0, "trusted", self.trusted)
+        return frame
+
+
+def mean_jump(points: np.ndarray) -> float:
+    """Mean frame-to-frame displacement of the model points (m): noise in a trajectory shows
+    as a larger jump than the motion itself needs (compare runs of the same trial)."""
+    if len(points) < 2:
+        return 0.0
+    return float(np.nanmean(np.linalg.norm(np.diff(points, axis=0), axis=2)))
+
+
+def summary(run: Run) -> dict[str, float | str | int]:
+    """The one-row summary: method, ms/frame, iterations/frame, ‖Φ‖, topology, ED (mm)."""
+    r = run.result
+    ok = np.isfinite(run.ed).all(axis=1) & r.converged
+    per_frame = r.wall_s / r.n_frames if np.isfinite(r.wall_s) else float(np.nanmean(r.time_s))
+    row: dict[str, float | str | int] = {
+        "run": run.name, "method": r.method, "ms/frame": 1e3 * per_frame,
+        "iter/frame": float(np.mean(r.iterations)),
+        "mean |Phi|": float(np.nanmean(r.phi_norm)),
+        "max |Phi_top|": float(np.nanmax(r.phi_top_max)),
+        "mean ED mm": 1e3 * float(np.nanmean(run.ed[ok])) if ok.any() else float("nan"),
+        "max ED mm": 1e3 * float(np.nanmax(run.ed[ok])) if ok.any() else float("nan"),
+        "jump mm": 1e3 * mean_jump(run.model_points),
+        "failed": int((~r.converged).sum()),
+        "flagged": int((r.converged & ~r.trusted).sum()),
+    }
+    if run.truth_theta is not None:
+        err = np.abs(r.theta - run.truth_theta)[ok]
+        distance = np.array(run._angle_units) == "m"
+        angle_err = err[:, ~distance]
+        row["max |dθ| deg"] = float(np.degrees(angle_err.max())) if angle_err.size else float("nan")
+        if distance.any():
+            row["max |dd| mm"] = 1e3 * float(err[:, distance].max()) if err.size else float("nan")
+    if run.residuals is not None:
+        over = run.residuals.over_measured
+        row["residual F %BW"] = over.force_rms_bw
+        row["residual M N·m"] = over.moment_rms
+    if run.dynamics is not None:  # over the trusted moments only
+        trusted = run.moments_trusted
+        loads = np.where(trusted, np.abs(run.dynamics.inverse.joint_moments), np.nan)
+        distance = np.array(run._angle_units) == "m"
+        for key, columns in (("max |τ| N·m", ~distance), ("max |F| N", distance)):
+            if columns.any() and (key == "max |τ| N·m" or distance.any()):
+                some = loads[:, columns]
+                # a slide's joint force (N) is not a moment
+                row[key] = float(np.nanmax(some)) if np.isfinite(some).any() else float("nan")
+    return row

@@ -1,0 +1,268 @@
+"""Personalize the Plug-in Gait template (``calibration.method: plugin-gait``) from a static trial.
+
+Over the chosen frames, Plug-in Gait's segments are built every frame from the markers and the
+subject's measurements (anatomy/plugin_gait.py): pelvis, Davis hip centres, chord knee and ankle
+centres with the thigh and shank rotation offsets, the proximal tibia (tibial torsion), the
+uncorrected foot. The static's foot offsets (plantarflexion and rotation of the toe-to-heel line
+in the uncorrected foot) are averaged over the frames as Plug-in Gait does, and the corrected
+foot follows. Every marker and joint centre is then the mean of its local coordinates in its
+segment; the universal ankle's foot arm is the uncorrected foot's up axis. The measurements used
+(given, computed or defaulted) and the static offsets are written into the model's ``subject:``
+section with where each came from.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+import yaml
+
+from fccgrb_cli.anatomy.anthropometry import SEGMENTS, segment_inertia
+from fccgrb_cli.anatomy.frames import Frames
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.model import Model
+from fccgrb_cli.model.subject import PIG_KEYS, Sided, SubjectMeasurements
+from fccgrb_cli.plugin_gait import segments as pg
+from fccgrb_cli.trial.record import Trial
+
+SIDES = {"r": "right", "l": "left"}
+LANDMARKS = ("right_asis", "left_asis", "sacrum", *(
+    f"{side}_{name}" for side in SIDES.values() for name in (
+        "thigh_wand", "lateral_epicondyle", "shank_wand", "lateral_malleolus", "heel", "toe")))
+BODIES = ("pelvis", *(f"{seg}_{s}" for s in SIDES for seg in ("thigh", "shank", "foot")))
+REQUIRED = ("leg_length", "knee_width", "ankle_width", "marker_diameter")
+PELVIS_LENGTH_PER_WIDTH = 0.6  # as anatomy/calibrate.py: de Leva's lower trunk over ASIS width
+
+
+@dataclass(frozen=True)
+class Options:
+    """Calibration options: frame indices [A, B) (None: every frame); Plug-in Gait's static
+    'foot flat' (the heel-to-toe line taken level, the heel raised by the sole delta)."""
+
+    frames: tuple[int, int] | None = None
+    foot_flat: bool = True
+
+
+@dataclass(frozen=True)
+class PigCalibration:
+    """The personalized model text, the frames used, the measurements used (given, computed and
+    defaulted, SI; the static foot offsets included), what was computed or defaulted (notes),
+    and segment lengths (m)."""
+
+    text: str
+    frames: tuple[int, int]
+    measurements: SubjectMeasurements
+    notes: tuple[str, ...]
+    lengths: dict[str, float]
+
+
+def _marker(trial: Trial, label: str, window: slice, used_by: str,
+            mapping: dict[str, str]) -> np.ndarray:
+    wanted = mapping.get(label, label)
+    found = trial.find(wanted)
+    if found is None:
+        mapped = f" (mapped from {label})" if wanted != label else ""
+        raise InputError(f"{trial.path}: expected the marker {wanted}{mapped} (used by "
+                         f"{used_by})")
+    xyz = trial.select([found])[window, 0]
+    if np.isnan(xyz).all(axis=1).any():
+        first = int(np.flatnonzero(np.isnan(xyz).any(axis=1))[0]) + (window.start or 0)
+        raise InputError(f"{trial.path}: frame index {first}: expected the marker {wanted} "
+                         f"(used by {used_by}); choose calibration frames without gaps "
+                         "(--frames A:B)")
+    return xyz
+
+
+def resolve(measured: SubjectMeasurements, lm: dict[str, np.ndarray]
+            ) -> tuple[SubjectMeasurements, tuple[str, ...]]:
+    """The measurements Plug-in Gait uses: the required ones must be given (an error lists the
+    missing Vicon keys); the inter-ASIS distance defaults to the markers' mean distance, the
+    ASIS–trochanter distance to 0.1288 leg length − 48.56 mm, rotations, torsion and sole delta
+    to 0. Returns them with a note per value computed or defaulted."""
+    missing = measured.missing(REQUIRED)
+    if missing:
+        raise InputError(f"Plug-in Gait calibration: expected the subject measurements "
+                         f"{', '.join(missing)} (from the static C3D's PROCESSING group, "
+                         "--subject FILE.vsk|FILE.yaml, or --knee-width/--ankle-width/"
+                         f"--marker-diameter); sources read: {measured.source or 'none'}")
+    notes = []
+    values: dict = {}
+    if measured.inter_asis_distance is None:
+        distance = float(np.mean(np.linalg.norm(lm["right_asis"] - lm["left_asis"], axis=1)))
+        values["inter_asis_distance"] = distance
+        notes.append(f"InterAsisDistance {1e3 * distance:.1f} mm measured between the ASIS "
+                     "markers")
+    at = measured.asis_trochanter_distance
+    sided = {}
+    for s, side in SIDES.items():
+        if at.side(s) is None:
+            sided[side] = pg.asis_trochanter_distance(measured.leg_length.side(s))
+            notes.append(f"{side} AsisTrocanterDistance {1e3 * sided[side]:.1f} mm from the "
+                         "leg length (0.1288 L − 48.56 mm)")
+    if sided:
+        values["asis_trochanter_distance"] = replace(at, **sided)
+    for name in ("thigh_rotation", "shank_rotation", "tibial_torsion", "sole_delta"):
+        value: Sided = getattr(measured, name)
+        if value.left is None or value.right is None:
+            values[name] = Sided(value.left or 0.0, value.right or 0.0)
+            notes.append(f"{PIG_KEYS[name].vicon} 0 where not given")
+    return replace(measured, **values), tuple(notes)
+
+
+def side_geometry(m: SubjectMeasurements, offsets: dict[str, tuple[float, float]] | None = None
+              ) -> dict[str, pg.SideGeometry]:
+    leg = 0.5 * (m.leg_length.left + m.leg_length.right)
+    out = {}
+    for s in SIDES:
+        hip = pg.davis_hip_centre(leg, m.asis_trochanter_distance.side(s),
+                                  m.inter_asis_distance, m.marker_diameter, s)
+        out[s] = pg.SideGeometry(
+            hip, 0.5 * (m.knee_width.side(s) + m.marker_diameter),
+            0.5 * (m.ankle_width.side(s) + m.marker_diameter), m.thigh_rotation.side(s),
+            m.shank_rotation.side(s), m.tibial_torsion.side(s),
+            None if offsets is None else offsets[s])
+    return out
+
+
+def _round(values, digits: int) -> list[float]:
+    return [round(float(x), digits) + 0.0 for x in values]
+
+
+def _pose(frames: Frames) -> dict:
+    axes = frames.axes[0]
+    return {"r": _round(frames.origin[0], 6), "u": _round(axes[:, 0], 9),
+            "v": _round(axes[:, 1], 9), "w": _round(axes[:, 2], 9)}
+
+
+def _subject_section(m: SubjectMeasurements, angle_scale: float) -> dict:
+    """The ``subject:`` section: lengths in m, angles in the file's unit, mass in kg."""
+    out: dict = {}
+    for name, q in PIG_KEYS.items():
+        value = getattr(m, name)
+        key = "mass" if name == "body_mass" else name
+        scale = 1.0 / angle_scale if q.kind == "angle" else 1.0
+        if isinstance(value, Sided):
+            if value.left is not None or value.right is not None:
+                out[key] = {side: round(getattr(value, side) * scale, 9) + 0.0
+                            for side in ("left", "right") if getattr(value, side) is not None}
+        elif value is not None:
+            out[key] = round(value * scale, 9) + 0.0
+    out["source"] = m.source
+    return out
+
+
+def calibrate_plugin_gait(model: Model, trial: Trial, measured: SubjectMeasurements,
+                          options: Options, mapping: dict[str, str] | None = None
+                          ) -> PigCalibration:
+    """The Plug-in Gait template ``model`` personalized from the static ``trial`` with the
+    subject's ``measured`` values (:func:`resolve`); ``mapping``: the template's label → the
+    trial's."""
+    mapping = mapping or {}
+    start, stop = options.frames if options.frames is not None else (0, trial.n_frames)
+    if not 0 <= start < stop <= trial.n_frames:
+        raise InputError(f"--frames: expected A:B with 0 ≤ A < B ≤ {trial.n_frames} (frame "
+                         f"indices of {trial.path}), got {start}:{stop}")
+    absent = [b for b in BODIES if b not in {b.name for b in model.bodies}]
+    missing = [name for name in LANDMARKS if name not in model.landmarks]
+    if absent or missing:
+        raise InputError(f"{model.source}: expected the Plug-in Gait bodies {', '.join(BODIES)} "
+                         f"and calibration.landmarks {', '.join(LANDMARKS)}; missing "
+                         f"{', '.join(absent + missing)}")
+    window = slice(start, stop)
+    lm = {name: _marker(trial, model.landmarks[name], window,
+                        f"{model.source} calibration.landmarks.{name}", mapping)
+          for name in LANDMARKS}
+    m, notes = resolve(measured, lm)
+    markers: dict = {"pelvis": (lm["right_asis"], lm["left_asis"], lm["sacrum"])}
+    for s, side in SIDES.items():
+        markers[f"thigh_{s}"] = (lm[f"{side}_thigh_wand"], lm[f"{side}_lateral_epicondyle"])
+        markers[f"shank_{s}"] = (lm[f"{side}_shank_wand"], lm[f"{side}_lateral_malleolus"])
+        markers[f"toe_{s}"] = lm[f"{side}_toe"]
+    uncorrected = pg.segments(markers, side_geometry(m))
+    up = -np.asarray(model.gravity) / np.linalg.norm(model.gravity)
+    offsets = {s: pg.foot_offsets(uncorrected[f"foot_{s}"], lm[f"{side}_heel"],
+                                  lm[f"{side}_toe"], up, options.foot_flat,
+                                  m.sole_delta.side(s))
+               for s, side in SIDES.items()}
+    m = replace(m, static_plantar_flexion=Sided(offsets["l"][0], offsets["r"][0]),
+                static_rotation_offset=Sided(offsets["l"][1], -offsets["r"][1]))
+    seg = pg.segments(markers, side_geometry(m, offsets))
+    geometry = side_geometry(m)
+    doc = yaml.safe_load(model.text)
+    points: dict[str, dict] = {b: {} for b in BODIES}
+    vectors: dict[str, dict] = {b: {} for b in BODIES}
+    lengths: dict[str, float] = {}
+    foot_ends: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for s, side in SIDES.items():
+        thigh, shank, foot = seg[f"thigh_{s}"], seg[f"shank_{s}"], seg[f"foot_{s}"]
+        points["pelvis"][f"HJC_{s}"] = geometry[s].hip
+        knee, ankle = thigh.mean_local(shank.origin), shank.mean_local(foot.origin)
+        points[f"thigh_{s}"].update(HJC=np.zeros(3), KJC=knee)
+        points[f"shank_{s}"].update(KJC=np.zeros(3), AJC=ankle)
+        points[f"foot_{s}"]["AJC"] = np.zeros(3)
+        turn = pg.offset_rotation(*offsets[s])  # corrected axes in the uncorrected foot's
+        vectors[f"foot_{s}"].update(uncorrected_u=turn[0], uncorrected_v=turn[1])
+        heel, toe = foot.mean_local(lm[f"{side}_heel"]), foot.mean_local(lm[f"{side}_toe"])
+        foot_ends[s] = (heel, toe)
+        lengths.update({f"thigh_{s}": float(np.linalg.norm(knee)),
+                        f"shank_{s}": float(np.linalg.norm(ankle)),
+                        f"foot_{s}": float(np.linalg.norm(toe - heel))})
+    for tp in model.tracked_points:
+        if tp.body in seg:
+            points[tp.body][tp.point] = seg[tp.body].mean_local(
+                _marker(trial, tp.marker, window, f"{model.source} tracking.points", mapping))
+    inertia = _inertia(m.body_mass, points, lengths, foot_ends, m.inter_asis_distance)
+    for body in BODIES:
+        spec = doc["bodies"][body]
+        spec["points"] = {**spec.get("points", {}),
+                          **{k: _round(v, 6) for k, v in points[body].items()}}
+        if vectors[body]:
+            spec["vectors"] = {**spec.get("vectors", {}),
+                               **{k: _round(v, 9) for k, v in vectors[body].items()}}
+        spec["pose"] = _pose(seg[body])
+        for key in ("mass", "com", "inertia"):
+            spec.pop(key, None)
+        spec.update(inertia.get(body, {}))
+    angle_scale = np.pi / 180.0 if (doc.get("units") or {}).get("angle", "deg") == "deg" \
+        else 1.0
+    doc["subject"] = _subject_section(m, angle_scale)
+    header = (f"# {doc.get('name', 'model')} personalized by `fccgrb calibrate` from "
+              f"{trial.path}, frame indices {start}:{stop}\n# from the template {model.source}: "
+              "Plug-in Gait's segments (Davis hip centres, chord knee and ankle centres, "
+              f"{'foot flat' if options.foot_flat else 'foot not flat'}); inertia: de Leva "
+              f"(1996){'' if m.body_mass is not None else ' (not computed: no body mass)'}.\n"
+              + "".join(f"# {note}\n" for note in notes))
+    text = header + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=100)
+    return PigCalibration(text, (start, stop), m, notes, lengths)
+
+
+def _inertia(mass: float | None, points: dict[str, dict], lengths: dict[str, float],
+             foot_ends: dict[str, tuple[np.ndarray, np.ndarray]], inter_asis: float
+             ) -> dict[str, dict]:
+    """de Leva (1996) segment inertia (as anatomy/calibrate.py) from the body mass and the
+    measured lengths: thigh hip → knee centre, shank knee → ankle centre, foot heel → toe
+    marker (``foot_ends``: their local positions); the pelvis's from 0.6 × the inter-ASIS
+    distance, its centre of mass mid-hip."""
+    if mass is None:
+        return {}
+    out = {}
+    for s in SIDES:
+        for name, end, start, long_axis in (
+                (f"thigh_{s}", points[f"thigh_{s}"]["KJC"], np.zeros(3), 1),
+                (f"shank_{s}", points[f"shank_{s}"]["AJC"], np.zeros(3), 1)):
+            segment = name.split("_")[0]
+            m, moments = segment_inertia(segment, mass, lengths[name], long_axis)
+            out[name] = {"mass": float(f"{m:.6g}"),
+                         "com": _round(start + SEGMENTS[segment].com * end, 5),
+                         "inertia": _round(moments, 7)}
+        m, moments = segment_inertia("foot", mass, lengths[f"foot_{s}"], 0)
+        heel, toe = foot_ends[s]
+        out[f"foot_{s}"] = {"mass": float(f"{m:.6g}"),
+                            "com": _round(heel + SEGMENTS["foot"].com * (toe - heel), 5),
+                            "inertia": _round(moments, 7)}
+    m, moments = segment_inertia("pelvis", mass, PELVIS_LENGTH_PER_WIDTH * inter_asis)
+    com = 0.5 * (points["pelvis"]["HJC_r"] + points["pelvis"]["HJC_l"])
+    out["pelvis"] = {"mass": float(f"{m:.6g}"), "com": _round(com, 5),
+                     "inertia": _round(moments, 7)}
+    return out

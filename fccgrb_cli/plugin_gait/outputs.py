@@ -1,0 +1,105 @@
+"""A run's outputs in Plug-in Gait's conventions, for a model calibrated as Plug-in Gait
+(``calibration.method: plugin-gait``): the angles (gait/plugin_gait.py) from the solved segment
+frames, and with the dynamics the joint moments and powers (gait/plugin_gait_kinetics.py) from
+the classical model's motion and the force plates. Each output is frames × 3 under Plug-in
+Gait's name; frames the quality checks do not trust keep their values (the run's ``trusted``
+says which; exports mark them), frames not solved are NaN.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fccgrb_cli.dynamics.convert import Dynamics
+from fccgrb_cli.model import Model
+from fccgrb_cli.plugin_gait.angles import pig_angles, progression_frame
+from fccgrb_cli.plugin_gait.kinetics import leg_kinetics, segment_motion
+from fccgrb_cli.system.layout import build_layout
+
+UNITS = {"angles": "deg", "moments": "N.mm/kg", "powers": "W/kg"}
+JOINT_POINTS = {"hip": ("thigh", "HJC"), "knee": ("shank", "KJC"), "ankle": ("foot", "AJC")}
+
+
+@dataclass(frozen=True)
+class PluginGaitResults:
+    """Plug-in Gait's outputs (name → frames × 3): angles (deg), moments (N·mm/kg) and powers
+    (W/kg, in Z); the progression frame's axes (3 × 3, columns x, y, z in the laboratory)."""
+
+    angles: dict[str, np.ndarray]
+    moments: dict[str, np.ndarray]
+    powers: dict[str, np.ndarray]
+    progression: np.ndarray
+
+    def kinds(self) -> dict[str, dict[str, np.ndarray]]:
+        """Each kind of output ('angles', 'moments', 'powers') with its curves."""
+        return {"angles": self.angles, "moments": self.moments, "powers": self.powers}
+
+
+def _body_coordinates(model: Model, q: np.ndarray) -> dict[str, np.ndarray]:
+    """Each body's fully-defined coordinates [r, u, v, w] per frame (frames × 12)."""
+    layout = build_layout(model, tuple(a.name for a in model.angles))
+    out = {}
+    for body in model.bodies:
+        x = np.asarray(q[:, layout.q_slice(body.name)], dtype=float)
+        if x.shape[1] == 9:  # reduced: w = u × v
+            x = np.concatenate([x, np.cross(x[:, 3:6], x[:, 6:9])], axis=1)
+        out[body.name] = x
+    return out
+
+
+def _axes(x: np.ndarray) -> np.ndarray:
+    return np.stack([x[:, 3:6], x[:, 6:9], x[:, 9:12]], axis=2)
+
+
+def _point(model: Model, x: np.ndarray, body: str, point: str) -> np.ndarray:
+    local = np.array(model.body(body).points[point].local)
+    return x[:, :3] + _axes(x) @ local
+
+
+def plugin_gait_results(model: Model, q: np.ndarray, trusted: np.ndarray,
+                        dynamics: Dynamics | None) -> PluginGaitResults:
+    """The outputs of a run of a Plug-in Gait model: its solved coordinates ``q`` (frames ×
+    nq), which frames are trusted, and its dynamics (None: angles only)."""
+    x = _body_coordinates(model, q)
+    up = -np.asarray(model.gravity) / np.linalg.norm(model.gravity)
+    frames = {name: _axes(value) for name, value in x.items()}
+    pelvis = np.where(trusted[:, None], x["pelvis"][:, :3], np.nan)
+    lab = progression_frame(pelvis, frames["pelvis"][trusted, :, 0], up)
+    torsion = {"l": model.measurements.tibial_torsion.left or 0.0,
+               "r": model.measurements.tibial_torsion.right or 0.0}
+    angles = pig_angles(frames, torsion, lab)
+    moments: dict[str, np.ndarray] = {}
+    powers: dict[str, np.ndarray] = {}
+    if dynamics is not None and model.subject_mass is not None:
+        moments, powers = _kinetics(model, dynamics)
+    return PluginGaitResults(angles, moments, powers, lab)
+
+
+def _kinetics(model: Model, dynamics: Dynamics
+              ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    kin = dynamics.kinematics
+    x, xd, xdd = (_body_coordinates(model, np.asarray(values))
+                  for values in (kin.q, kin.qd, kin.qdd))
+    segments = {}
+    for body in model.bodies:
+        inertia = body.inertia
+        segments[body.name] = segment_motion(x[body.name], xd[body.name], xdd[body.name],
+                                             np.array(inertia.com), np.array(inertia.tensor),
+                                             inertia.mass)
+    gravity = np.asarray(model.gravity)
+    moments: dict[str, np.ndarray] = {}
+    powers: dict[str, np.ndarray] = {}
+    for s, prefix in (("l", "L"), ("r", "R")):
+        chain = {"pelvis": segments["pelvis"], **{seg: segments[f"{seg}_{s}"]
+                                                  for seg in ("thigh", "shank", "foot")}}
+        centres = {joint: _point(model, x[f"{seg}_{s}"], f"{seg}_{s}", point)
+                   for joint, (seg, point) in JOINT_POINTS.items()}
+        loads = [(load.force, load.point, load.moment) for load in dynamics.loads
+                 if load.body == f"foot_{s}"]
+        leg = leg_kinetics(chain, centres, s, loads, (gravity, model.subject_mass))
+        for joint in ("Hip", "Knee", "Ankle"):
+            moments[f"{prefix}{joint}Moment"] = leg.moments[joint]
+            powers[f"{prefix}{joint}Power"] = leg.powers[joint]
+    return moments, powers
