@@ -6,8 +6,10 @@
 Every command runs through the installed ``fccgrb`` (or ``python benchmarks/...``) in a
 temporary folder laid out like the repository (``configs`` linked to the repository's, and
 ``../shared`` to the shared data folder when it exists), so each console block shows exactly
-what the command it names prints. The README's generated blocks sit between
-``<!-- generated: NAME -->`` and ``<!-- /generated -->``; only their content is rewritten.
+what the command it names prints (on stdout and stderr, less progress lines and the compiled
+kernels' notices, which depend on this machine's cache). The generated blocks of README.md and
+of the guides in docs/ sit between ``<!-- generated: NAME -->`` and ``<!-- /generated -->``; only
+their content is rewritten, in whichever page holds the block.
 
 Parts and their blocks:
 
@@ -16,7 +18,8 @@ Parts and their blocks:
   solve, plot and export the walking trial of ../shared/data/c3d/Qualisys.c3d, and
   docs/gait_qualisys.png and docs/gait_cycles.png; skipped when the trial is absent),
   ``table-subset`` (check only: the AD and NRM rows of docs/table1.md and docs/table2.md
-  against a sweep of just those cells).
+  against a sweep of just those cells), ``cli-reference`` (docs/cli.md from every command's
+  ``--help``).
 * ``tables`` (minutes): ``sweeps`` (configs/sweeps/table1.yaml and table2.yaml → docs/table1.md,
   docs/table2.md and the README's sweep paragraph), ``gait-methods`` (CNO-SQP against NRM-WLS on
   the walking trial), ``whole-body`` (the whole body on the walking trial with the residual
@@ -135,6 +138,11 @@ PROGRESS = re.compile(r"^([\w .-]+: (\[[#.]*\] )?(frame|trial) \d+/\d+ \(\d+ %, 
                       r"|sweep: \d+/\d+ cells \(.*)$")
 
 
+# the compiled kernels' notices ("compiling the compiled kernels…", "compiled kernels loaded in …
+# s"): what this machine's cache holds, not what the command answers; on stderr, never in a block
+KERNEL_NOTICE = re.compile(r"^fccgrb: (compiling|compiled kernels) ")
+
+
 class Workspace:
     """A temporary folder laid out like the repository; runs each command once (cached)."""
 
@@ -165,7 +173,7 @@ class Workspace:
         argv = shlex.split(command)
         argv[0] = {"fccgrb": _executable("fccgrb"), "python": sys.executable}.get(argv[0],
                                                                                   argv[0])
-        env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONHASHSEED="0")
+        env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONHASHSEED="0", COLUMNS="80")
         started = time.perf_counter()
         done = subprocess.run(argv, cwd=cwd or self.dir, env=env, stdout=subprocess.PIPE,
                               stderr=subprocess.STDOUT, check=False)
@@ -175,7 +183,8 @@ class Workspace:
                  for line in done.stdout.decode("utf-8", "replace").split("\n")]
         while lines and not lines[-1]:
             lines.pop()
-        text = "\n".join(line for line in lines if not PROGRESS.match(line))
+        text = "\n".join(line for line in lines
+                         if not PROGRESS.match(line) and not KERNEL_NOTICE.match(line))
         if done.returncode != 0:
             raise RuntimeError(f"`{command}` exited with status {done.returncode}:\n{text}")
         self.outputs[command] = text
@@ -631,6 +640,20 @@ def plugin_gait(ws: Workspace) -> list[Artifact]:
     return [ReadmeBlock("plugin-gait", "\n".join(lines).strip())]
 
 
+def cli_reference(ws: Workspace) -> list[Artifact]:
+    """docs/cli.md: every command's own ``--help``, as the installed ``fccgrb`` prints it."""
+    top = ws.run("fccgrb --help")
+    names = re.findall(r"^  (\w[\w-]*)\s", top.split("Commands:", 1)[1], re.M)
+    parts = ["# Command-line reference", "",
+             "Generated from the commands' own `--help` by `python docs/generate.py --block "
+             "cli-reference`", "(compared with a fresh run by the tests).", "",
+             "```console", "$ fccgrb --help", top, "```"]
+    for name in names:
+        parts += ["", f"## fccgrb {name}", "", "```console", f"$ fccgrb {name} --help",
+                  ws.run(f"fccgrb {name} --help"), "```"]
+    return [TextFile("docs/cli.md", "\n".join(parts) + "\n")]
+
+
 @dataclass(frozen=True)
 class Block:
     name: str
@@ -640,30 +663,31 @@ class Block:
 
 
 BLOCKS = {b.name: b for b in (
-    Block("example-session", "cheap", example_session, "README: the five-bar session"),
-    Block("full-turns", "cheap", full_turns, "README and docs/crank_angle.png"),
-    Block("gait-trial", "cheap", gait_trial, "README and docs/gait_qualisys.png"),
+    Block("example-session", "cheap", example_session, "docs: the five-bar session"),
+    Block("full-turns", "cheap", full_turns, "docs/crank_angle.png"),
+    Block("gait-trial", "cheap", gait_trial, "docs/gait_qualisys.png"),
     Block("table-subset", "cheap", table_subset, "check only: docs tables' AD and NRM rows"),
+    Block("cli-reference", "cheap", cli_reference, "docs/cli.md from every command's --help"),
     Block("sweeps", "tables", sweeps, "docs/table1.md, docs/table2.md, README sweep line"),
-    Block("gait-methods", "tables", gait_methods, "README: CNO-SQP against NRM-WLS on gait"),
-    Block("clean-margins", "tables", clean_margins, "README: each check on clean and broken "
+    Block("gait-methods", "tables", gait_methods, "docs: CNO-SQP against NRM-WLS on gait"),
+    Block("clean-margins", "tables", clean_margins, "docs: each check on clean and broken "
           "trials"),
     Block("whole-body", "tables", whole_body,
-          "README: whole body, residual reduction, docs/residual_force.png"),
+          "docs: whole body, residual reduction, docs/residual_force.png"),
     Block("bench-kinematics", "benchmarks", bench_kinematics, "README performance table"),
     Block("bench-optimization", "benchmarks", bench_optimization, "README performance table"),
     Block("bench-gait", "benchmarks", bench_gait, "README gait speed"),
     Block("bench-dynamics", "benchmarks", bench_dynamics, "README dynamics stage speed"),
-    Block("bench-peers", "benchmarks", bench_peers, "README: against OpenSim's IK"),
-    Block("bench-long", "benchmarks", bench_long, "README: a 10-minute trial"),
-    Block("bench-startup", "benchmarks", bench_startup, "README: whole commands' wall time"),
-    Block("bench-batch", "benchmarks", bench_batch, "README: a 50-trial study"),
-    Block("study", "study", study, "README and docs/report_subject.png: a study, its report"),
+    Block("bench-peers", "benchmarks", bench_peers, "docs: against OpenSim's IK"),
+    Block("bench-long", "benchmarks", bench_long, "docs: a 10-minute trial"),
+    Block("bench-startup", "benchmarks", bench_startup, "docs: whole commands' wall time"),
+    Block("bench-batch", "benchmarks", bench_batch, "docs: a 50-trial study"),
+    Block("study", "study", study, "docs/report_subject.png: a study, its report"),
     Block("bench-smoothing", "benchmarks", bench_smoothing,
-          "README: the smoother's table"),
-    Block("plugin-gait", "tables", plugin_gait, "README: Plug-in Gait against Vicon's angles"),
+          "docs: the smoother's table"),
+    Block("plugin-gait", "tables", plugin_gait, "docs: Plug-in Gait against Vicon's angles"),
     Block("figures", "figures", figures, "docs/*.png of the Figure 8 case and their commands"),
-    Block("figure8-seeds", "figures", figure8_seeds, "README: P6's distance over seeds"),
+    Block("figure8-seeds", "figures", figure8_seeds, "docs: P6's distance over seeds"),
 )}
 PARTS = ("cheap", "tables", "benchmarks", "figures", "study")
 
@@ -767,6 +791,18 @@ def readme_blocks(text: str) -> dict[str, str]:
     return {m.group(1): m.group(2) for m in BLOCK_RE.finditer(text)}
 
 
+def pages(root: Path = ROOT) -> list[Path]:
+    """The pages generated blocks may sit in: the README, then docs/*.md."""
+    return [root / "README.md", *sorted((root / "docs").glob("*.md"))]
+
+
+def page_of(name: str, root: Path = ROOT) -> Path | None:
+    """The page holding the block ``name``, or None."""
+    start = f"<!-- generated: {name} -->"
+    return next((page for page in pages(root) if start in page.read_text(encoding="utf-8")),
+                None)
+
+
 BLOCK_RE = re.compile(r"<!-- generated: ([\w-]+) -->\n(.*?)\n?<!-- /generated -->", re.S)
 
 
@@ -823,10 +859,15 @@ def _same_image(old: Path, new: bytes) -> str | None:
 def differences(artifact: Artifact, readme: str, root: Path = ROOT) -> list[str]:
     """Why ``artifact`` disagrees with the repository (an empty list when it agrees)."""
     if isinstance(artifact, ReadmeBlock):
-        blocks = readme_blocks(readme)
-        if artifact.name not in blocks:
-            return [f"README.md has no block <!-- generated: {artifact.name} -->"]
-        return _diff(blocks[artifact.name], artifact.text, f"README.md:{artifact.name}")
+        label, blocks = "README.md", readme_blocks(readme)
+        if artifact.name not in blocks:  # a guide's block: the docs/ page that holds it
+            page = page_of(artifact.name, root)
+            if page is None:
+                return [f"no page of README.md and docs/ has a block "
+                        f"<!-- generated: {artifact.name} -->"]
+            label = str(page.relative_to(root))
+            blocks = readme_blocks(page.read_text(encoding="utf-8"))
+        return _diff(blocks[artifact.name], artifact.text, f"{label}:{artifact.name}")
     path = root / artifact.path
     if isinstance(artifact, Image):
         why = _same_image(path, artifact.data)
@@ -846,15 +887,15 @@ def differences(artifact: Artifact, readme: str, root: Path = ROOT) -> list[str]
 
 
 def write(artifact: Artifact, root: Path = ROOT) -> None:
-    """Write one artifact; a README block is replaced in the README as it is now."""
+    """Write one artifact; a block is replaced in the page (README or docs/) that holds it."""
     if isinstance(artifact, RowCheck):
         return
     if isinstance(artifact, ReadmeBlock):
-        path = root / "README.md"
-        text = path.read_text(encoding="utf-8")
         start = f"<!-- generated: {artifact.name} -->"
-        if start not in text:
-            raise RuntimeError(f"README.md: no {start} to fill")
+        path = page_of(artifact.name, root)
+        if path is None:
+            raise RuntimeError(f"README.md and docs/: no {start} to fill")
+        text = path.read_text(encoding="utf-8")
         pattern = re.compile(re.escape(start) + r"\n.*?\n?<!-- /generated -->", re.S)
         new = pattern.sub(lambda _: f"{start}\n{artifact.text}\n<!-- /generated -->", text,
                           count=1)

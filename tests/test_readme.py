@@ -141,3 +141,38 @@ def test_docs_tables_agree_with_a_sweep_of_their_fast_cells():
     assert len(rows) >= 8 * (6 + 8)  # each metric's table: 6 such rows in Table 1, 8 in Table 2
     found = _agree(made)
     assert not found, "\n".join(found) + REGENERATE.format(part="tables")
+
+
+def test_cli_reference_matches_every_commands_help():
+    found = _agree(_made("cli-reference"))
+    assert not found, "\n".join(found) + REGENERATE.format(part="cheap")
+
+
+def test_the_readme_is_a_front_page_and_its_links_lead_somewhere():
+    """At most 300 lines; every relative link of the README and of docs/*.md names a file or
+    folder of the repository (a guide moved or renamed leaves no dead link)."""
+    assert len(README.splitlines()) <= 300
+    dead = []
+    for page in gen.pages(ROOT):
+        text = re.sub(r"```.*?```|`[^`\n]*`", "", page.read_text(encoding="utf-8"), flags=re.S)
+        for target in re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", text):
+            if re.match(r"[a-z]+:", target):
+                continue
+            if not (page.parent / target).exists():
+                dead.append(f"{page.relative_to(ROOT)}: {target}")
+    assert dead == []
+
+
+def test_a_block_in_a_guide_is_found_there_and_a_missing_one_is_named(tmp_path):
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "README.md").write_text("front page\n")
+    (tmp_path / "docs" / "guide.md").write_text(
+        "<!-- generated: walk -->\nold 1.5 ms/frame\n<!-- /generated -->\n")
+    assert gen.page_of("walk", tmp_path) == tmp_path / "docs" / "guide.md"
+    same = gen.ReadmeBlock("walk", "old 9.9 ms/frame")
+    assert gen.differences(same, "front page\n", tmp_path) == []
+    assert gen.differences(gen.ReadmeBlock("walk", "new 1.5 ms/frame"), "", tmp_path)
+    assert "no page" in gen.differences(gen.ReadmeBlock("run", "x"), "", tmp_path)[0]
+    gen.write(gen.ReadmeBlock("walk", "new"), tmp_path)
+    assert "<!-- generated: walk -->\nnew\n<!-- /generated -->" in (
+        tmp_path / "docs" / "guide.md").read_text()

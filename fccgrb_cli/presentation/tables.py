@@ -18,7 +18,7 @@ import numpy as np
 
 from fccgrb_cli.core.errors import InputError
 
-PAPER_TABLES = Path(__file__).resolve().parent / "data" / "paper_tables.csv"
+PAPER_TABLES = Path(__file__).resolve().parents[1] / "data" / "paper_tables.csv"
 LEVELS = ("P0", "P7.5", "P30")
 METRICS = (
     ("ms/frame", "time_ms_per_frame", "{:.3g}"),
