@@ -242,3 +242,17 @@ def test_parameters_are_counted_as_python_binds_them(tmp_path):
                 "class K:\n    def method(self, a, b, c, d, e, f, g):\n        pass\n"
                 "@main.command()\ndef cmd(a, b, c, d, e, f, g, h, i, j):\n    pass\n"})
     assert parameter_counts(root) == {"pkg.m:f": 5, "pkg.m:f.inner": 9, "pkg.m:K.method": 8}
+
+
+def test_the_methods_named_at_the_edges_are_the_solvers_own():
+    """The command line's and a sweep's method names (``pipeline.options.METHODS``, kept free
+    of the solvers' imports for a fast ``--help``) are exactly the solvers' ``Method``s."""
+    from fccgrb_cli.pipeline.options import METHODS
+    from fccgrb_cli.solvers.methods import METHODS as SOLVED
+    from fccgrb_cli.solvers.methods import Method
+
+    assert METHODS == SOLVED
+    assert [m.family for m in Method] == ["ad", "nrm", "nrm", *["optimize"] * 4]
+    assert [m.value for m in Method if m.drives_angles] == ["ad"]
+    assert [m.value for m in Method if m.weighted] == ["nrm-wls"]
+    assert Method("cno-ip") == "cno-ip" and str(Method.MO_ED) == "mo-ed"

@@ -21,6 +21,7 @@ from fccgrb_cli.model import Model
 from fccgrb_cli.pipeline.options import SolveOptions
 from fccgrb_cli.pipeline.smoothing import Uncertainty
 from fccgrb_cli.plugin_gait.outputs import PluginGaitResults
+from fccgrb_cli.solvers.methods import Method
 from fccgrb_cli.solvers.result import KinematicResult
 
 __all__ = ["Run", "mean_jump", "summary"]
@@ -80,7 +81,8 @@ class Run:
 
     @property
     def tracking_weight(self) -> float | None:
-        return None if self.options.method == "nrm-ls" else self.options.tracking_weight
+        unweighted = Method(self.options.method) is Method.NRM_LS
+        return None if unweighted else self.options.tracking_weight
 
     @property
     def warm_start(self) -> str:
@@ -88,11 +90,11 @@ class Run:
 
     @property
     def hessian(self) -> str:
-        return "" if self.options.method == "ad" else self.options.hessian
+        return "" if Method(self.options.method).drives_angles else self.options.hessian
 
     @property
     def ad_drivers(self) -> str:
-        return self.options.ad_drivers if self.options.method == "ad" else ""
+        return self.options.ad_drivers if Method(self.options.method).drives_angles else ""
 
     @property
     def filter_cutoff(self) -> float | None:

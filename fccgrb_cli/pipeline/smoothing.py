@@ -37,6 +37,7 @@ from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.dynamics.uncertainty import moment_uncertainty
 from fccgrb_cli.model import Model
 from fccgrb_cli.solvers.batched import Drives, Stacked, blocks
+from fccgrb_cli.solvers.methods import Method
 from fccgrb_cli.solvers.rates import consistent_rates
 from fccgrb_cli.solvers.result import KinematicResult
 from fccgrb_cli.solvers.smooth import Motion, SmoothSettings, smooth_motion
@@ -223,7 +224,7 @@ def _residuals(mixed: System, q: np.ndarray, markers: np.ndarray
 
 def applies(options, model: Model) -> str | None:
     """Why ``--smooth auto`` does not apply to this solve (None: it does)."""
-    if options.method == "ad":
+    if Method(options.method).drives_angles:
         return "the classical AD baseline keeps its own drivers (the paper's)"
     if options.filter_cutoff is not None:
         return "--filter-cutoff asks for the Butterworth filter instead"
@@ -244,9 +245,10 @@ def marker_weights(model: Model, options) -> tuple[float, ...] | None:
     """Each tracked point's weight as the frames' own solve gave it, so that the smoother
     fits the markers as that solve did (None: all equal): NRM-LS none (W = I), NRM-WLS the
     point's own weight or --tracking-weight, the optimizers the point's own or 1."""
-    if options.method == "nrm-ls":
+    method = Method(options.method)
+    if method is Method.NRM_LS:
         return None
-    default = options.tracking_weight if options.method == "nrm-wls" else 1.0
+    default = options.tracking_weight if method.weighted else 1.0
     weights = tuple(default if tp.weight is None else tp.weight for tp in model.tracked_points)
     return None if len(set(weights)) <= 1 else weights
 

@@ -38,12 +38,11 @@ from fccgrb_cli.plugin_gait.outputs import plugin_gait_results
 from fccgrb_cli.signals.artefact import perturb
 from fccgrb_cli.signals.butterworth import frames_needed
 from fccgrb_cli.solvers import KinematicResult, solve_ad
-from fccgrb_cli.solvers.ad.baseline import solve_baseline
 from fccgrb_cli.solvers.ad.solve import stacked_drives
 from fccgrb_cli.solvers.determined import determined
+from fccgrb_cli.solvers.methods import Method, solve_stretch
 from fccgrb_cli.solvers.mixed import recounted
 from fccgrb_cli.solvers.nrm.problem import unsolvable_text
-from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
 from fccgrb_cli.solvers.quality import JUMP, NO_DATA, Finding, assessed, with_findings
 from fccgrb_cli.system import System, compile_system
 from fccgrb_cli.trial.labels import match_labels, vector_targets
@@ -251,7 +250,8 @@ def _kinematics(model: Model, trial: Trial, inputs: np.ndarray, options: SolveOp
     answer), or are an error naming the first without ``--skip-unsolvable``. Also the frames
     the markers do not determine, named (the ``no_data`` finding)."""
     o, time = options, trial.time
-    if o.method == "ad" and o.ad_drivers == "truth":
+    driven = Method(o.method).drives_angles
+    if driven and o.ad_drivers == "truth":
         system = compile_system(model, angles="driver")
         return (system, _solve_with_true_angles(system, trial, truth, o.tol, progress),
                 Finding(np.zeros(len(time), dtype=bool)))
@@ -259,19 +259,19 @@ def _kinematics(model: Model, trial: Trial, inputs: np.ndarray, options: SolveOp
     by_label = dict(zip(model.marker_labels, np.moveaxis(inputs, 1, 0), strict=True))
     vectors = vector_targets(model, trial, by_label)
     targets = np.concatenate([inputs, vectors], axis=1) if vectors.shape[1] else inputs
-    known = determined(mixed, targets, every_marker=o.method == "ad")
+    known = determined(mixed, targets, every_marker=driven)
     labels = model.marker_labels + tuple(tv.marker for tv in model.tracked_vectors)
     if not known.all() and not o.skip_unsolvable:
         f = int(np.flatnonzero(~known)[0])
         text = unsolvable_text(f, time, ~np.isfinite(targets[f]).all(axis=1), labels,
                                trial.path)
-        why = "; the angular-driver pre-analysis needs every marker" if o.method == "ad" else ""
+        why = "; the angular-driver pre-analysis needs every marker" if driven else ""
         raise InputError(f"{text}{why} (--skip-unsolvable leaves such frames unsolved)")
-    system = compile_system(model, angles="driver") if o.method == "ad" else mixed
+    system = compile_system(model, angles="driver") if driven else mixed
     parts = runs(known)
     if len(parts) == 1 and parts[0] == (0, len(time)):
-        return system, _solve(model, system, time, targets, options, trial.path,
-                              progress), Finding(~known)
+        return system, solve_stretch(o.method, system, time, targets, o,
+                                    source=trial.path, progress=progress), Finding(~known)
     done = 0
 
     def step(k: int, _: int) -> None:
@@ -280,7 +280,8 @@ def _kinematics(model: Model, trial: Trial, inputs: np.ndarray, options: SolveOp
 
     solved = []
     for a, b in parts:
-        part = _solve(model, system, time[a:b], targets[a:b], options, trial.path, step)
+        part = solve_stretch(o.method, system, time[a:b], targets[a:b], o, source=trial.path,
+                             progress=step)
         solved.append((slice(a, b), part))
         done += b - a
     unknown = np.flatnonzero(~known)
@@ -293,26 +294,6 @@ def _kinematics(model: Model, trial: Trial, inputs: np.ndarray, options: SolveOp
     return system, result, Finding(
         ~known, f"{trial.path}: frame indices {spans(unknown)} (missing: "
                 f"{', '.join(np.array(labels)[gone])})")
-
-
-def _solve(model: Model, system: System, time: np.ndarray, targets: np.ndarray,
-           options: SolveOptions, source: str, progress: Progress) -> KinematicResult:
-    """One stretch by the chosen method (every frame's markers determine the model)."""
-    o = options
-    if o.method == "ad":
-        markers = targets[:, :len(model.tracked_points)]
-        return solve_baseline(model, time, markers, cutoff=o.filter_cutoff,
-                              order=o.filter_order, tol=o.tol, progress=progress)
-    if o.method.startswith("nrm"):
-        labels = model.marker_labels + tuple(tv.marker for tv in model.tracked_vectors)
-        return solve_nrm(system, time, targets, NrmSettings.from_options(o), labels=labels,
-                         source=source, progress=progress)
-    from fccgrb_cli.solvers.optimize.solve import (  # scipy.optimize: 0.1 s
-        Settings,
-        solve_optimization,
-    )
-
-    return solve_optimization(system, time, targets, Settings.from_options(o), progress)
 
 
 def _unsolved(system: System, time: np.ndarray, options: SolveOptions) -> KinematicResult:
@@ -417,7 +398,7 @@ def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResul
                f"(frame indices {spans(short)})" if len(short) else ""))
     if not parts:
         return None
-    baseline = options.method == "ad" and options.ad_drivers == "markers"
+    baseline = Method(options.method).drives_angles and options.ad_drivers == "markers"
     contact_points = {body: _body_points(system, result.q, body)
                       for body in model.contact_bodies}
     loads = plate_loads(model, trial, warnings, contact_points, notes)
@@ -471,7 +452,7 @@ def run_name(method: str, ad_drivers: str, cutoff: float | None, level_m: float,
     """The default run name: the method as the solver labels it (e.g. cno-sqp-ed-parallel), AD
     drivers, filter, perturbation and the perturbed subset, e.g. ad-f6Hz-P30-P4+P9."""
     parts = [method]
-    if method == "ad" and ad_drivers == "truth":
+    if Method(method).drives_angles and ad_drivers == "truth":
         parts.append("truth")
     if cutoff is not None:
         parts.append(f"f{cutoff:g}Hz")

@@ -12,7 +12,11 @@ Shared numerics beside them: ``newton`` (Newton–Raphson, Gauss–Newton), ``ra
 first guess), ``quality`` (frames not to be trusted), ``result`` (KinematicResult), ``engine``
 (numpy or compiled) and ``kernels`` (the compiled kernels' shared parts)."""
 
-from fccgrb_cli.solvers.ad.solve import assemble, solve_ad
-from fccgrb_cli.solvers.result import KinematicResult
+from fccgrb_cli.core.kernel_cache import configure
+
+configure()  # before any kernel is defined: numba's cache named by the kernels' sources
+
+from fccgrb_cli.solvers.ad.solve import assemble, solve_ad  # noqa: E402
+from fccgrb_cli.solvers.result import KinematicResult  # noqa: E402
 
 __all__ = ["KinematicResult", "assemble", "solve_ad"]
