@@ -167,7 +167,7 @@ def test_kernel_equals_numpy_frame_by_frame(method: str) -> None:
         problem = FrameProblem(system, markers[f])
         ours, _ = active_set_sqp(problem, chain.q[f - 1], method[3:], 1e-10)
         present = np.isfinite(markers[f]).all(axis=1)
-        goals = goal_kernels.Goals(present, np.ones(n_points), method == "mo-ed")
+        goals = goal_kernels.GoalArrays(present, np.ones(n_points), method == "mo-ed")
         k, ok = goal_kernels.goal_frame(s, chain.q[f - 1].copy(),
                                         np.where(present[:, None], markers[f], 0.0), goals,
                                         kernels.Limits(1e-10, 50), q, ws, gw)

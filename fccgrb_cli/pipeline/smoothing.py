@@ -40,7 +40,7 @@ from fccgrb_cli.solvers.batched import Drives, Stacked, blocks
 from fccgrb_cli.solvers.methods import Method
 from fccgrb_cli.solvers.rates import consistent_rates
 from fccgrb_cli.solvers.result import KinematicResult
-from fccgrb_cli.solvers.smooth import Motion, SmoothSettings, smooth_motion
+from fccgrb_cli.solvers.smooth import SmoothedMotion, SmoothSettings, smooth_motion
 from fccgrb_cli.solvers.smooth.coordinates import Coordinates
 from fccgrb_cli.solvers.smooth.signal import smoothed_signal
 from fccgrb_cli.system import System, compile_system
@@ -84,7 +84,7 @@ class Smoothing:
     """The stage's answer: the smoothed motion, the kinematic result made of it, the classical
     model's drives and the classical system."""
 
-    motion: Motion
+    motion: SmoothedMotion
     result: KinematicResult
     drives: Drives
     system: System

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from fccgrb_cli.batch.cells import Job, cells_folder, pending, run_jobs
 from fccgrb_cli.batch.study.jobs import (
-    Calibration,
+    CalibrationJob,
     TrialSolve,
     calibrate_subject,
     calibration_file,
@@ -113,7 +113,7 @@ def _run_study(study: Study, output: Path, where: Executors, accept_truncated: b
                                                   f"({error.strerror})"
             continue
         calibrations[s.name] = Job(s.name, target, calibrate_subject,
-                                   (Calibration(s, target, accept_truncated),))
+                                   (CalibrationJob(s, target, accept_truncated),))
     run_jobs(pending(calibrations.values(), _readable_text), calibrated, workers=where.workers,
              executor=where.executor)
     command = f"fccgrb batch {study.source.name}"

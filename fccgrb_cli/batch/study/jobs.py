@@ -41,7 +41,7 @@ def file_digest(path: Path) -> str:
 
 
 @dataclass(frozen=True)
-class Calibration:
+class CalibrationJob:
     """A subject's calibration job: the subject as the study gives it, the file to write and
     whether truncated trials are accepted."""
 
@@ -82,7 +82,7 @@ def trial_file(subject: SubjectSpec, model: Path, trial: Path, options: SolveOpt
 
 
 @single_threaded
-def calibrate_subject(job: Calibration) -> None:
+def calibrate_subject(job: CalibrationJob) -> None:
     """Personalize the subject's template from its static trial (``fccgrb calibrate``'s steps)
     with its mass and measurements, and write the model."""
     from fccgrb_cli.anatomy.calibrate import calibrate, calibration_method

@@ -47,7 +47,7 @@ def ed_fits(s: SparseSystem, n_points: int) -> bool:
     return True
 
 
-class Goals(NamedTuple):
+class GoalArrays(NamedTuple):
     """A frame's goals: which tracked points have a marker (and a weight), their weights, and
     whether each point's distance is one goal ('ed') or each residual component two ('tc')."""
 
@@ -97,7 +97,7 @@ def goal_workspace(s: SparseSystem, n_points: int) -> GoalWorkspace:
 
 
 @njit(cache=True)
-def _goals(s: SparseSystem, phi: np.ndarray, values: np.ndarray, goals: Goals,
+def _goals(s: SparseSystem, phi: np.ndarray, values: np.ndarray, goals: GoalArrays,
            gw: GoalWorkspace) -> int:
     """goal_sqp.goals: c, w and G (factor order) of the points with markers, into ``gw``; the
     number m. 'ed' keeps each point's unit direction n = d/s and s in ``gw.normals``."""
@@ -311,7 +311,7 @@ def _working_step(s: SparseSystem, N: np.ndarray, L: np.ndarray, m: int, n_w: in
 
 
 @njit(cache=True)
-def goal_frame(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, goals: Goals,
+def goal_frame(s: SparseSystem, q0: np.ndarray, ref: np.ndarray, goals: GoalArrays,
                limits: Limits, q: np.ndarray, ws, gw: GoalWorkspace) -> tuple[int, bool]:
     """One frame of goal_sqp.active_set_sqp from q0; the iterate in ``q``."""
     n_rows, nq = len(s.c_const) + len(s.dot_c), s.nq

@@ -43,7 +43,7 @@ def solve_compiled(system: System, time: np.ndarray, targets: np.ndarray,
     missing = ~np.all(np.isfinite(targets), axis=2)
     patterns, pattern_of = np.unique(missing, axis=0, return_inverse=True)
     pattern_of = pattern_of.ravel().astype(np.int64)
-    state = Frames(n, nq, len(patterns))
+    state = FrameState(n, nq, len(patterns))
     base_w = row_weights(system, settings.tracking_weight)
     guess, use_guess = np.zeros(nq), False
     trial = kernels.NrmTrial(targets, missing, pattern_of, state.solvable, base_w)
@@ -83,7 +83,7 @@ def solve_compiled(system: System, time: np.ndarray, targets: np.ndarray,
         method=settings.method, tol=settings.tol, compiled=True)
 
 
-class Frames:
+class FrameState:
     """The per-frame outputs and the loop's carried state, as the kernels fill them."""
 
     def __init__(self, n: int, nq: int, n_patterns: int) -> None:

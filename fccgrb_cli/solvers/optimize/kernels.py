@@ -14,7 +14,7 @@ from numba import njit
 from fccgrb_cli.solvers.cno.sqp import DELTA, FAR
 from fccgrb_cli.solvers.cno.sqp import MAX_ITER as MAX_SQP
 from fccgrb_cli.solvers.goal import sqp as goal_sqp
-from fccgrb_cli.solvers.goal.kernels import Goals, goal_frame, goal_workspace
+from fccgrb_cli.solvers.goal.kernels import GoalArrays, goal_frame, goal_workspace
 from fccgrb_cli.solvers.kernels import (
     DONE,
     NEED_FALLBACK,
@@ -69,7 +69,7 @@ def solve_frames(s: SparseSystem, kind: int, trial: OptimizerTrial, limits: Limi
     far = goal_sqp.FAR if goal else FAR
     ws = workspace(s, n_rows)
     gw = goal_workspace(s, n_points)
-    goals = Goals(np.zeros(n_points, dtype=np.bool_), point_weights, kind == GOAL_ED)
+    goals = GoalArrays(np.zeros(n_points, dtype=np.bool_), point_weights, kind == GOAL_ED)
     present = goals.present
     bounds = Bounds(lower, upper, kind == INTERIOR, np.zeros((4, nq)))
     w = np.zeros(n_rows)

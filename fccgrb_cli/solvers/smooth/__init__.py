@@ -9,6 +9,6 @@ base's rotation-vector chart), coordinates.py (the markers as functions of the c
 through the topology; model_kernels.py compiled), trial.py (Gauss–Newton over the trial).
 """
 
-from fccgrb_cli.solvers.smooth.trial import Motion, SmoothSettings, smooth_motion
+from fccgrb_cli.solvers.smooth.trial import SmoothedMotion, SmoothSettings, smooth_motion
 
-__all__ = ["Motion", "SmoothSettings", "smooth_motion"]
+__all__ = ["SmoothSettings", "SmoothedMotion", "smooth_motion"]

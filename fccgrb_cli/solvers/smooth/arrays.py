@@ -19,7 +19,7 @@ class ChainArrays(NamedTuple):
     cov0: np.ndarray
 
 
-class Drivers(NamedTuple):
+class SmoothedDrivers(NamedTuple):
     """Every frame's guess (frames × nq), driven angles (frames × angles), floating bases'
     features (frames × slots × 3) and those features' rates for a unit rate of each base
     coordinate (frames × base coordinates × slots × 3)."""

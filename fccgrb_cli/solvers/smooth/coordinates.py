@@ -23,7 +23,7 @@ import numpy as np
 
 from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.solvers.batched import Drives, Stacked, factor, newton_stacked
-from fccgrb_cli.solvers.smooth.arrays import Drivers, Linearization, Points
+from fccgrb_cli.solvers.smooth.arrays import Linearization, Points, SmoothedDrivers
 from fccgrb_cli.solvers.smooth.rotation import (
     exp_map,
     jacobian_rate,
@@ -268,7 +268,7 @@ class Coordinates:
         points, H = np.empty((n_frames, k, 3)), np.empty((n_frames, 3 * k, n))
         converged = np.zeros(n_frames, dtype=bool)
         linearize_frames(sparse_of(self.system),
-                         Drivers(np.ascontiguousarray(guesses),
+                         SmoothedDrivers(np.ascontiguousarray(guesses),
                                  np.ascontiguousarray(drives.theta),
                                  np.ascontiguousarray(drives.ref), self.base_units(d)),
                          Points(self.point_offset.astype(np.int64), self.point_local),

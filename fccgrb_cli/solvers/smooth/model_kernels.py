@@ -14,7 +14,7 @@ import numpy as np
 from numba import njit
 
 from fccgrb_cli.solvers.kernels import cholesky, jacobian, normal_equations, residual, substitute
-from fccgrb_cli.solvers.smooth.arrays import Drivers, Linearization, Points
+from fccgrb_cli.solvers.smooth.arrays import Linearization, Points, SmoothedDrivers
 from fccgrb_cli.system.sparse import SparseSystem
 
 RESIDUAL = 1e-13  # max |Φ| (m, or unit-vector components) that ends a frame's iteration
@@ -51,7 +51,7 @@ def _unit_nu(s: SparseSystem, theta: np.ndarray, k: int, n_angles: int,
 
 
 @njit(cache=True)
-def linearize_frames(s: SparseSystem, drivers: Drivers, tracked: Points, max_iter: int,
+def linearize_frames(s: SparseSystem, drivers: SmoothedDrivers, tracked: Points, max_iter: int,
                      out_arrays: Linearization) -> None:
     """Every frame: q from its guess (max |Φ(q; θ, ref)| < RESIDUAL), S (nq × n),
     the tracked points and H (3 markers × n)."""

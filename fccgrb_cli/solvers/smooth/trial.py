@@ -62,7 +62,7 @@ class SmoothSettings:
 
 
 @dataclass(frozen=True)
-class Motion:
+class SmoothedMotion:
     """The smoothed motion: the coordinates' names and units, d, ḋ, d̈ (frames × n), the
     covariance of (d, ḋ, d̈) that the noise gives (frames × 3n × 3n, derivative-major), q of
     the classical system (frames × nq), the frames whose markers were used, the markers' noise
@@ -122,7 +122,8 @@ class _Strength:
 
 
 def smooth_motion(system: System, time: np.ndarray, markers: np.ndarray, use: np.ndarray,
-                  mixed_q: np.ndarray, settings: SmoothSettings = SmoothSettings()) -> Motion:
+                  mixed_q: np.ndarray, settings: SmoothSettings = SmoothSettings()
+                  ) -> SmoothedMotion:
     """Smooth a trial: ``system`` the classical model (angles='driver'), ``markers`` the
     tracked points' targets (frames × markers × 3, NaN where missing), ``use`` the frames
     whose markers may be used, ``mixed_q`` each frame's mixed-coordinate solution (NaN where
@@ -178,10 +179,10 @@ def smooth_motion(system: System, time: np.ndarray, markers: np.ndarray, use: np
         part = slice(max(0, start - overlap), min(n, stop + overlap))
         keep = slice(start - part.start, stop - part.start)
         parts.append((_span(data, part, d[part], q[part], strength), keep))
-    return Motion(coordinates, *(np.concatenate([getattr(m, key)[keep] for m, keep in parts])
-                                 for key in ("d", "d_d", "d_dd", "covariance", "q")),
-                  usable, strength.noise, strength.strengths, settings.cutoff is None,
-                  max(m.iterations for m, _ in parts))
+    joined = (np.concatenate([getattr(m, key)[keep] for m, keep in parts])
+              for key in ("d", "d_d", "d_dd", "covariance", "q"))
+    return SmoothedMotion(coordinates, *joined, usable, strength.noise, strength.strengths,
+                          settings.cutoff is None, max(m.iterations for m, _ in parts))
 
 
 def span_frames(n: int) -> int:
@@ -194,7 +195,7 @@ def span_frames(n: int) -> int:
     return max(1000, int(SPAN_BYTES / (8 * (4 * ORDER + 24) * n * n)))
 
 
-def _held(motion: Motion, inner: slice, n: int) -> Motion:
+def _held(motion: SmoothedMotion, inner: slice, n: int) -> SmoothedMotion:
     """A motion smoothed on the frames ``inner`` of a trial of ``n`` frames, its values held
     at the first and last of them on the frames outside (which it did not use: the caller
     leaves them unsolved)."""
@@ -257,7 +258,7 @@ def _estimate(data: _Data, part: slice, d: np.ndarray, q: np.ndarray,
 
 
 def _span(data: _Data, part: slice, d: np.ndarray, q: np.ndarray, strength: _Strength
-          ) -> Motion:
+          ) -> SmoothedMotion:
     """Gauss–Newton over the frames ``part`` (see the module's docstring)."""
     try:
         return _gauss_newton(data, part, d, q, strength)
@@ -266,7 +267,7 @@ def _span(data: _Data, part: slice, d: np.ndarray, q: np.ndarray, strength: _Str
 
 
 def _gauss_newton(data: _Data, part: slice, d: np.ndarray, q: np.ndarray,
-                  strength: _Strength) -> Motion:
+                  strength: _Strength) -> SmoothedMotion:
     """_span's iteration (frame indices in its errors counted from ``part.start``). The
     covariance (3.5 times a pass without it) is asked of the pass expected to be the last: the
     one whose step the contraction so far puts below ``STEP`` (the five-bar's steps shrink
@@ -294,7 +295,7 @@ def _gauss_newton(data: _Data, part: slice, d: np.ndarray, q: np.ndarray,
         if steps[-1] < STEP or iteration == ITERATIONS:
             break
     q = data.coordinates.linearize(d, q, data.compiled).q
-    return Motion(data.coordinates, d, values[:, 1], values[:, 2], cov, q,
+    return SmoothedMotion(data.coordinates, d, values[:, 1], values[:, 2], cov, q,
                   np.ones(len(d), bool), strength.noise, strength.strengths, True,
                   iteration + 1)
 
