@@ -1,4 +1,4 @@
-"""The optimization methods (FORMULATION §3): CNO by SQP and by interior point, MO goal
+"""The optimization methods (docs/formulation.md §3): CNO by SQP and by interior point, MO goal
 attainment over tracking components (MO-TC) and Euclidean distances (MO-ED), sequential and
 parallel, measured independently of the solver's own statistics.
 

@@ -1,7 +1,7 @@
 """benchmarks/peers.py: fccgrb's CNO-SQP against OpenSim's inverse kinematics on the same markers.
 
 OpenSim's IK with unit marker weights minimizes the same sum of squared marker distances over
-the same configuration space as CNO-SQP with the TC objective (FORMULATION §3), by different
+the same configuration space as CNO-SQP with the TC objective (docs/formulation.md §3), by different
 code (Simbody's assembler over joint coordinates): reaching the same optimum is the independent
 check that fccgrb's CNO solves the right problem. The OpenSim model itself is checked against
 the YAML (neutral pose, marker placement) and against the prescribed motion at P0. The angles
