@@ -1,5 +1,5 @@
 """fccgrb against OpenSim's inverse kinematics on the same five-bar and the same markers, and on
-the gait example's lower limb and walking trial, in one run (issue 13, item 7; issue 27).
+the gait example's lower limb and walking trial, in one run.
 
     python benchmarks/peers.py [--frames 300] [--repeat 3] [--no-gait] [--no-cli]
 
