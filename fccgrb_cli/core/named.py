@@ -81,7 +81,18 @@ class NamedArray:
         return dict(zip(self.names, self.units, strict=True))
 
     def to_dataframe(self):
-        """A pandas DataFrame (index: time in s; columns 'name [unit]')."""
+        """A pandas DataFrame (index: time in s; columns 'name [unit]').
+
+        Returns
+        -------
+        pandas.DataFrame
+            n_frames × n_columns, the values in each column's unit.
+
+        Raises
+        ------
+        ImportError
+            pandas is not installed (the ``pandas`` extra).
+        """
         try:
             import pandas as pd
         except ImportError:

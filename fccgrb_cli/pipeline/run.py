@@ -283,12 +283,32 @@ class Run:
         return self.moment_flags == 0
 
     def summary(self) -> dict[str, float | str | int]:
-        """The one-row summary the command line prints."""
+        """The one-row summary the command line prints.
+
+        Returns
+        -------
+        dict of str to float, str or int
+            ``run``, ``method``; ``ms/frame`` and ``iter/frame`` (the solve's cost);
+            ``mean |Phi|`` and ``max |Phi_top|`` (m and unitless); ``mean ED mm`` and
+            ``max ED mm`` (model points to reference markers over the solved frames);
+            ``jump mm``; ``failed`` and ``flagged`` frame counts; with a truth file
+            ``max |dθ| deg`` (and ``max |dd| mm`` for distances); with a floating base's
+            residual ``residual F %BW`` and ``residual M N·m``; with dynamics ``max |τ| N·m``
+            (and ``max |F| N`` for distances).
+        """
         return summary(self)
 
     def to_dataframe(self):
         """One row per frame: time, trusted, the angles, their moments and the clinical curves
-        (columns 'name [unit]'); needs pandas."""
+        (columns 'name [unit]'); needs pandas.
+
+        Returns
+        -------
+        pandas.DataFrame
+            n_frames rows indexed by time (s); columns ``trusted``, then each angle, each
+            moment (prefix ``moment``), each clinical angle and moment (prefixes ``clinical``,
+            ``clinical moment``), in the units their names carry.
+        """
         import pandas as pd
 
         parts = [self.angles.to_dataframe()]
