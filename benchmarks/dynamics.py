@@ -1,6 +1,6 @@
-"""Speed of the dynamics stage alone (FORMULATION §4): the classical model driven by the solved
-angles (positions, consistent velocities and accelerations), then the inverse dynamics, on the
-five-bar sample (P30, NRM-WLS) and on the lower-limb gait trial (calibrated as in
+"""Speed of the dynamics stage alone (docs/formulation.md §4): the classical model driven by the
+solved angles (positions, consistent velocities and accelerations), then the inverse dynamics, on
+the five-bar sample (P30, NRM-WLS) and on the lower-limb gait trial (calibrated as in
 ``benchmarks/gait.py``, NRM-WLS, 6 Hz filter, force plates).
 
     python benchmarks/dynamics.py [--repeat 3] [--trial ../shared/data/c3d/Qualisys.c3d]

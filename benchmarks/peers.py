@@ -1,5 +1,5 @@
 """fccgrb against OpenSim's inverse kinematics on the same five-bar and the same markers, and on
-the gait example's lower limb and walking trial, in one run (issue 13, item 7; issue 27).
+the gait example's lower limb and walking trial, in one run.
 
     python benchmarks/peers.py [--frames 300] [--repeat 3] [--no-gait] [--no-cli]
 
@@ -28,11 +28,11 @@ span the same configuration space from the same neutral pose (tests/test_peers.p
 frames against the YAML's axes, and that at P0 OpenSim reproduces the prescribed angles).
 
 Markers: fccgrb's synthesized trial (300 frames at 100 Hz, the prescribed motion of the YAML's
-``angles``, FORMULATION §7) perturbed at P0, P7.5 and P30 (FORMULATION §5, seed 0); every solver
-gets exactly these arrays. Solvers:
+``angles``, docs/formulation.md §7) perturbed at P0, P7.5 and P30 (docs/formulation.md §5, seed 0);
+every solver gets exactly these arrays. Solvers:
 
-- fccgrb NRM-WLS (FORMULATION §3, tracking weight 1e-3, tolerance 1e-10 on ‖Δq‖∞);
-- fccgrb CNO-SQP with the TC objective (FORMULATION §3, Eq. 29–36 as the objective, the
+- fccgrb NRM-WLS (docs/formulation.md §3, tracking weight 1e-3, tolerance 1e-10 on ‖Δq‖∞);
+- fccgrb CNO-SQP with the TC objective (docs/formulation.md §3, Eq. 29–36 as the objective, the
   topological equations exact): min Σ ‖r_P(q) − r*_P‖² subject to Φ_top(q) = 0;
 - OpenSim's ``InverseKinematicsSolver``, every marker weight 1 and the constraint weight
   infinite (the five-bar is an open chain: OpenSim's coordinates satisfy its joints by
@@ -123,7 +123,7 @@ class Solved:
 # --- configurations compared through body poses ------------------------------------------------
 def poses_from_q(system: System, q: np.ndarray) -> np.ndarray:
     """fccgrb's body poses (… × bodies × 4 × 3) from system coordinates q (… × nq): each body's
-    r, u, v, w (FORMULATION §1; a reduced body's w = u × v, Eq. 5)."""
+    r, u, v, w (docs/formulation.md §1; a reduced body's w = u × v, Eq. 5)."""
     q = np.asarray(q)
     x = np.array([system.layout.expand(row) for row in q.reshape(-1, q.shape[-1])])
     return x.reshape(*q.shape[:-1], len(system.layout.body_names), 4, 3)
@@ -138,8 +138,8 @@ def _frame_rows(model: Model, body: str, poses: np.ndarray) -> np.ndarray:
 
 def angles_from_poses(model: Model, poses: np.ndarray) -> np.ndarray:
     """The model's angles (… × n_angles, rad) from body poses (… × bodies × 4 × 3) the way
-    fccgrb defines its mixed coordinates (Eq. 10, FORMULATION §2 MCR): θ_k = acos(s1·s2) with
-    s = α u + β v + γ w the YAML's body vectors. Only unsigned angles (the five-bar's)."""
+    fccgrb defines its mixed coordinates (Eq. 10, docs/formulation.md §2 MCR): θ_k = acos(s1·s2)
+    with s = α u + β v + γ w the YAML's body vectors. Only unsigned angles (the five-bar's)."""
     out = []
     for angle in model.angles:
         if angle.kind != "angle" or angle.full:

@@ -207,7 +207,7 @@ def worst(r: dict, kind: str = "solve") -> tuple[float, float]:
 
 def summary(results: list[dict]) -> list[str]:
     """Per trial its worst X and worst Y/Z (when several), then the worst over the trials and
-    how many meet issue 25's targets (X ≤ 1°, Y and Z ≤ 2°)."""
+    how many meet the compatibility targets (RMS X ≤ 1°, Y and Z ≤ 2°)."""
     lines = []
     if len(results) > 1:
         lines += ["| trial | worst X | worst Y, Z | both targets |", "|---|---|---|---|"]

@@ -1,5 +1,5 @@
-"""Joint moments with the whole-trial smoother (issue 23) against central differences and the
-Butterworth filter, on the five-bar synthesized at 200 Hz for 3 s.
+"""Joint moments with the whole-trial smoother (docs/formulation.md §12) against central differences
+and the Butterworth filter, on the five-bar synthesized at 200 Hz for 3 s.
 
     python benchmarks/smoothing.py [--orders] [--monte-carlo 100] [--cost 10000]
                                    [--figure docs/x.png] [--no-table]

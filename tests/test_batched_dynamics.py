@@ -1,4 +1,4 @@
-"""The batched dynamics stage (issue 13, item 4) against the frame-by-frame one, and the stacked
+"""The batched dynamics stage against the frame-by-frame one, and the stacked
 evaluation against derivatives taken by central differences.
 
 * ``classical_dynamics`` batched (every frame at once from the run's own body coordinates; the

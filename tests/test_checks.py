@@ -1,4 +1,4 @@
-"""What fccgrb checks for you (issue 21): each row of the issue's table, rebuilt from the shared
+"""What fccgrb checks for you (README's section of that name): each check, rebuilt from the shared
 files or synthesized, with the right answer computed here, never taken from the checks' code.
 
 * no data, no answer: frames without markers are unsolved by every method and engine, and no

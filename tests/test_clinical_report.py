@@ -74,7 +74,7 @@ def _flagged_copy(results: Path, target: Path) -> Path:
             flags[...] = values
             flags.attrs["marker_dropout"] = np.uint16(1 << 14)
             flags.attrs["marker_dropout_means"] = "a marker of the model missing for 50 ms"
-        # a per-joint flag dataset describing its bits in JSON, as issue 21's moment_flags do
+        # a per-joint flag dataset describing its bits in JSON, as the moment_flags dataset does
         # (one this version does not write, so its meanings can come from nowhere else)
         run = h5["runs"]["A-walk2"]
         joints = np.zeros(run["theta"].shape, dtype=np.uint16)

@@ -1,4 +1,4 @@
-"""Clinical sign conventions pinned by statics and anatomy, not by the code (issue 12, item 2).
+"""Clinical sign conventions pinned by statics and anatomy, not by the code.
 
 README ("A gait trial") and ``fccgrb_cli/anatomy/clinical.py``: the clinical angle is
 φ = sign·(θ − 90°),

@@ -1,7 +1,7 @@
 """Φ_q, ν and γ of every constraint type checked against finite differences.
 
-FORMULATION §2: Φ_q q̇ = ν and Φ_q q̈ = γ. For ANY smooth q(t) (consistent with the constraints or
-not) and smooth drive data θ*(t), y(t), the function Φ(t) = Φ(q(t), t) satisfies
+docs/formulation.md §2: Φ_q q̇ = ν and Φ_q q̈ = γ. For ANY smooth q(t) (consistent with the
+constraints or not) and smooth drive data θ*(t), y(t), the function Φ(t) = Φ(q(t), t) satisfies
 
     dΦ/dt   = Φ_q q̇ − ν
     d²Φ/dt² = Φ_q q̈ − γ(q, q̇)
@@ -34,8 +34,8 @@ CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "models"
 
 JOINT_TYPES = ("spherical", "revolute", "universal", "cylindrical", "prismatic", "parallel",
                "line")
-# Scalar equations per joint (FORMULATION §2; cylindrical = 2 axis + 2 offset, prismatic + lock,
-# parallel = the 2 axis equations, line = the 2 offset equations).
+# Scalar equations per joint (docs/formulation.md §2; cylindrical = 2 axis + 2 offset, prismatic +
+# lock, parallel = the 2 axis equations, line = the 2 offset equations).
 EXPECTED_ROWS = {"spherical": 3, "revolute": 5, "universal": 4, "cylindrical": 4,
                  "prismatic": 5, "parallel": 2, "line": 2}
 WITH_POINTS = {"spherical", "revolute", "universal", "cylindrical", "prismatic", "line"}

@@ -1,4 +1,4 @@
-"""Cycles over several different strides (issue 21, item 8): time normalization, the mean ± SD
+"""Cycles over several different strides: time normalization, the mean ± SD
 over the trusted strides, which strides an untrusted frame spoils, pooling trials.
 
 Each generated trial has strides of different lengths with strikes between frames, and a curve

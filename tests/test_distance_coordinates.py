@@ -1,5 +1,5 @@
 """Distance coordinates end to end: d = (r_Q − r_P)·s drives and solves the slides of prismatic,
-cylindrical and parallel joints, which no angle can drive (FORMULATION §2 with g(d) = d).
+cylindrical and parallel joints, which no angle can drive (docs/formulation.md §9: g(d) = d).
 
 Two models: ``configs/models/slider.yaml`` (a carriage on a vertical prismatic slide, a pendulum
 hinged to it: one distance, one angle) and, written here, a sleeve on a tilted cylindrical joint

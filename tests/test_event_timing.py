@@ -1,4 +1,4 @@
-"""Sub-frame timing of the gait events (issue 21, item 8; gait/events.py).
+"""Sub-frame timing of the gait events (gait/events.py).
 
 * Plates: a force that rises linearly from zero at a random instant (between frames and between
   analog samples) and falls likewise, on a type-2 plate written from scratch. The strike is the

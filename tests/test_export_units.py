@@ -1,4 +1,4 @@
-"""Units and scaling of the clinical curves in every export format (issue 21, item 8).
+"""Units and scaling of the clinical curves in every export format.
 
 The pendulum (``configs/models/pendulum.yaml``) with clinical signs written into it (+1, −1, −1,
 +1) and a subject of 62.5 kg: each format must hold, for every frame, the clinical angle

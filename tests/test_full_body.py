@@ -8,7 +8,7 @@ every upper-body point must come back where the subject has it: the markers in t
 the glenohumeral, elbow and wrist centres, the cervicothoracic joint (midway between C7 and the
 suprasternal notch), the joint arms; the masses are de Leva's fractions typed here. On the
 Qualisys walking trial (skipped without ../shared/data) the calibrated model tracks the markers
-within the issue's 10 mm.
+within 10 mm.
 """
 
 from __future__ import annotations

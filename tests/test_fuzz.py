@@ -1,7 +1,7 @@
 """The generated bad-input cases (tests/fuzz), a seeded subset: ``PER_CLASS`` cases of every
-class of issue 22's table, run as real ``fccgrb`` processes two at a time. The whole set (over
-600 cases, ~15 min on two cores): ``python -m tests.fuzz --all``; another draw of its random
-parts: ``--seed N``; more of them here: ``FCCGRB_FUZZ_PER_CLASS=20 python -m pytest
+class of bad input (``fuzz.cases.CLASSES``), run as real ``fccgrb`` processes two at a time. The
+whole set (over 600 cases, ~15 min on two cores): ``python -m tests.fuzz --all``; another draw of
+its random parts: ``--seed N``; more of them here: ``FCCGRB_FUZZ_PER_CLASS=20 python -m pytest
 tests/test_fuzz.py``."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Generated models against independent oracles (issue 12): random open trees of 2–6 bodies,
+"""Generated models against independent oracles: random open trees of 2–6 bodies,
 every joint type (spherical, revolute, universal, cylindrical, prismatic, parallel), fixed and
 floating bases (the floating root translating and turning with non-zero acceleration), random
 geometry, full inertia tensors with off-centre centres of mass, random smooth motions of every

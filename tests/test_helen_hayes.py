@@ -1,4 +1,4 @@
-"""The Helen Hayes / Davis marker set end to end (issue 15, item 5) on ``FP_Type1.c3d``.
+"""The Helen Hayes / Davis marker set end to end on ``FP_Type1.c3d``.
 
 ``../shared/data/c3d/FP_Type1.c3d`` is a quiet-standing trial with the Helen Hayes set (Kadaba
 et al. 1990; Davis et al. 1991); it is read in place and skipped where absent. Every figure is

@@ -1,4 +1,4 @@
-"""The lab's axes (issue 21, item 1): the vertical found from the file, gravity and the gait
+"""The lab's axes: the vertical found from the file, gravity and the gait
 following it, the choice and its reasons printed and stored.
 
 The walking trial ``../shared/data/c3d/Qualisys.c3d`` (z up, walking +x) is carried into other
@@ -6,7 +6,7 @@ labs by ``lab_frames.rotated_c3d`` — a BTS-like y-up lab (``POINT:Y_SCREEN +Y`
 points down with the subject walking along −y — and must give the same clinical angles, moments
 and spatiotemporal parameters with no option: a rotation of the whole capture changes nothing
 the body does. Before this, the y-up copy moved the hip moments by up to 0.58 N·m/kg and the
-step width from 0.121 to 0.081 m (the issue's first row).
+step width from 0.121 to 0.081 m.
 """
 
 from __future__ import annotations

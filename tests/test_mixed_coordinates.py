@@ -11,10 +11,10 @@ What is independent of the code under test:
   lever arms of the off-axis points; rate errors bounded by the Taylor remainders of the
   finite-difference stencils of the documented ``central_derivatives`` (derived below from the
   YAML amplitudes and frequencies).
-* Perturbation properties are checked against FORMULATION §5 (max |noise| per axis = level,
+* Perturbation properties are checked against docs/formulation.md §5 (max |noise| per axis = level,
   seeded, per-marker, band-limited), not against the output of ``perturb`` itself.
 * Topological consistency of q̇, q̈ is checked row by row with the Jacobian and γ of the
-  constraint library (FORMULATION §2), and determinacy in gaps from the model's joint types.
+  constraint library (docs/formulation.md §2), and determinacy in gaps from the model's joint types.
 
 Package defect found (see ``test_skip_unsolvable_reports_frame``): ``solve_nrm`` with
 ``NrmSettings(skip_unsolvable=True)`` crashed with ``LinAlgError: Singular matrix`` as soon as a
@@ -300,7 +300,7 @@ def test_wls_keeps_topology_far_better_than_ls_at_30mm():
     assert ratio >= 10.0, worst
 
 
-# --- 4. perturbation properties (FORMULATION §5) -----------------------------------------------
+# --- 4. perturbation properties (docs/formulation.md §5) ------------------------------------
 
 def hann_power(x: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
     P = np.abs(np.fft.rfft(x * np.hanning(len(x)))) ** 2

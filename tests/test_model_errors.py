@@ -508,5 +508,5 @@ def test_distance_motions_are_not_held_to_angle_ranges(tmp_path: Path) -> None:
     result = runner().invoke(main, arguments("synth", model, tmp_path))
     assert result.exit_code == 0, result.output
     # its markers lie on the links' axes: they cannot fix the floating chain's roll, which
-    # ``check`` reports (issue 22) while ``synth``, driving the base, needs no markers
+    # ``check`` reports as one error line while ``synth``, driving the base, needs no markers
     one_error_line(runner().invoke(main, ["check", str(model)]), "tracking", "rank")

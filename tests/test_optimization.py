@@ -1,4 +1,4 @@
-"""The optimization methods (FORMULATION §3): CNO by SQP and by interior point, MO goal
+"""The optimization methods (docs/formulation.md §3): CNO by SQP and by interior point, MO goal
 attainment over tracking components (MO-TC) and Euclidean distances (MO-ED), sequential and
 parallel, measured independently of the solver's own statistics.
 
@@ -82,7 +82,7 @@ SEQ_WINDOW = (0, 80)
 IP_WINDOW = (0, 10)
 PAR_WINDOW = (100, 200)
 FAIL_WINDOW = (0, 6)
-# (method, objective): the four methods of the issue, and CNO-SQP with the ED objective
+# (method, objective): the four optimization methods, and CNO-SQP with the ED objective
 METHODS = (("cno-sqp", "tc"), ("cno-ip", "tc"), ("mo-tc", "tc"), ("mo-ed", "tc"),
            ("cno-sqp", "ed"))
 

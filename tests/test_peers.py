@@ -1,7 +1,7 @@
 """benchmarks/peers.py: fccgrb's CNO-SQP against OpenSim's inverse kinematics on the same markers.
 
 OpenSim's IK with unit marker weights minimizes the same sum of squared marker distances over
-the same configuration space as CNO-SQP with the TC objective (FORMULATION §3), by different
+the same configuration space as CNO-SQP with the TC objective (docs/formulation.md §3), by different
 code (Simbody's assembler over joint coordinates): reaching the same optimum is the independent
 check that fccgrb's CNO solves the right problem. The OpenSim model itself is checked against
 the YAML (neutral pose, marker placement) and against the prescribed motion at P0. The angles
@@ -158,7 +158,7 @@ def test_opensim_reproduces_the_prescribed_motion(opensim_five_bar, five_bar):
 
 def test_cno_sqp_reaches_opensims_optimum(opensim_five_bar, five_bar):
     """At P7.5 CNO-SQP (TC objective) and OpenSim's IK (accuracy 1e-10) land on the same
-    optimum: angles within 1e-4°, the issue's bar (measured over 300 frames: 1.1e-6° with the
+    optimum: angles within 1e-4° (measured over 300 frames: 1.1e-6° with the
     structured SQP, 3.1e-6° with scipy's SLSQP; 1.6e-7–3e-7° on these 20 frames: the spread the
     stopping tests leave on a flat objective; OpenSim's default accuracy 1e-5 is 0.14° off) and
     the per-frame mean fit within 1e-6 mm (measured 1.5e-7 mm). NRM-WLS, which lets the joints

@@ -1,4 +1,4 @@
-"""The implausible-plate rule near its thresholds (issue 21, item 8; io/forceplates.py).
+"""The implausible-plate rule near its thresholds (trial/forceplates.py).
 
 Plates are generated with known geometry — sides, a twist out of plane, a corner pushed along
 a side (the diagonals' midpoints apart), a shear (corner angles off 90°), placed anywhere by a

@@ -1,4 +1,4 @@
-"""Plug-in Gait compatibility on the shared Nexus trials (issue 25's "done when"): calibrate
+"""Plug-in Gait compatibility on the shared Nexus trials, to the targets below: calibrate
 configs/models/plugin_gait.yaml from the static HC030A01 with no measurement typed (they come
 from the C3D's PROCESSING group), solve the walking trial HC030A05 by mixed coordinates (the
 default NRM-WLS), and compare every Plug-in Gait angle the run stores with the ones Vicon's

@@ -1,4 +1,4 @@
-"""Progress on stderr (issue 13, long trials): quiet for short runs, one line per ``log_every``
+"""Progress on stderr for long trials: quiet for short runs, one line per ``log_every``
 seconds into a log, a rewritten line on a terminal, and the time left at the pace so far."""
 
 from __future__ import annotations

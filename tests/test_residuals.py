@@ -1,4 +1,4 @@
-"""Residuals and their reduction (issue 24), against computations written here.
+"""Residuals and their reduction (docs/formulation.md §14), against computations written here.
 
 * The rigid-motion residual of a whole floating group (``dynamics.residuals``, from K matrices)
   against Newton–Euler for each body (tests/synthetic_body.py: Σ m (a_G − g), Σ r_G × m (a_G −
@@ -10,8 +10,8 @@
 * The kinematic correction on the whole body moved off its trajectory by a known rigid
   translation: the correction is that translation, back, and the residual falls to nothing.
 * On the Qualisys walking trial (skipped without ../shared/data): the frames where a foot
-  touches the ground off the plates are not measured, and the issue's figures after the
-  reduction hold.
+  touches the ground off the plates are not measured, and after the reduction the
+  residual, masses and marker misfit meet the targets of the last test.
 """
 
 from __future__ import annotations
@@ -227,8 +227,8 @@ def test_feet_off_the_plates_are_not_measured(qualisys) -> None:
     assert (states["foot_r"][: frame["right off"] - 2] == R.UNMEASURED).all()
 
 
-def test_qualisys_residuals_fall_as_the_issue_asks(qualisys) -> None:
-    """Issue 24's figures: markers within 10 mm; the first model's residual reported; after the
+def test_qualisys_residuals_fall_to_their_targets(qualisys) -> None:
+    """The targets: markers within 10 mm; the first model's residual reported; after the
     reduction, over the single-support frames on a plate, force RMS ≤ 2 % and peak ≤ 5 % of body
     weight, moment RMS ≤ 10 N·m; every mass within ±25 % of de Leva's (the calibrated ones), the
     total within 2 % of the plates' body weight; the markers' RMS up by ≤ 2 mm."""

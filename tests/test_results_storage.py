@@ -1,4 +1,4 @@
-"""The results file's storage (issue 13, long trials): large arrays are written chunked and
+"""The results file's storage for long trials: large arrays are written chunked and
 compressed, and reading a file back gives every array of the run that wrote it bit for bit —
 so ``fccgrb report``, ``fccgrb export`` and ``read_results`` see exactly what was solved.
 

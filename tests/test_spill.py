@@ -1,5 +1,5 @@
-"""Long trials (issue 13, item 6): ``fccgrb solve`` keeps a run's largest per-frame arrays on
-disk from the moment the later stages are done with them (``io/spill.py``), computes the model
+"""Long trials in bounded memory: ``fccgrb solve`` keeps a run's largest per-frame arrays on
+disk from the moment the later stages are done with them (``core/spill.py``), computes the model
 points and their distances a block of frames at a time, and reads a C3D's parameters without
 ezc3d's per-point objects. None of it may change a result: a run solved with a spill folder
 writes the same results file, dataset by dataset and bit for bit, as the run held in memory.

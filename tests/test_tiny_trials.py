@@ -1,4 +1,4 @@
-"""Trials of a few frames (issue 21, item 6): solved, or refused in one line naming the file and
+"""Trials of a few frames: solved, or refused in one line naming the file and
 the frames needed; never a traceback, never a rate that reads as a body at rest.
 
 A 2-frame C3D with force plates crashed the plate events (``IndexError`` in

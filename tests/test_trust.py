@@ -1,4 +1,5 @@
-"""No silent wrong answer: the runs of issue 12's table, judged against the synthesized truth.
+"""No silent wrong answer: every method and parallel mode (``TABLE``) judged against the synthesized
+truth.
 
 The bundled five-bar trial (sample_data/five_bar.c3d) comes with its exact angles; the truth's
 joint moments come from the classical model driven by those angles (``--ad-drivers truth``).

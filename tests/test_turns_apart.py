@@ -1,4 +1,4 @@
-"""Signed angles of frames solved apart keep one count of turns (issue 21, item 8).
+"""Signed angles of frames solved apart keep one count of turns.
 
 A frame solved from a fresh guess — a parallel worker's first frame (``--parallel
 --parallel-init chunks``), the first frame after a gap — comes back with its signed angle in

@@ -26,8 +26,8 @@ left against right                   within a few per cent          ``ASYMMETRY`
 ==================================  ============================  ==================
 
 The thresholds sit well outside what the clean calibrations of the project's trials reach
-(README, "What fccgrb checks for you"); the misplaced tibia wand of the issue builds the shank
-frame 125° from the thigh's.
+(README, "What fccgrb checks for you"); a tibia wand misplaced onto the wrong face builds the
+shank frame 125° from the thigh's.
 """
 
 from __future__ import annotations

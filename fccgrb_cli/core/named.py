@@ -14,6 +14,17 @@ class NamedArray:
     ``a["knee_flexion_r"]`` is one column (a 1-D array over frames); ``a.values`` or
     ``np.asarray(a)`` the whole array (``a.shape``: frames × columns); ``a.to_dataframe()`` a
     pandas DataFrame indexed by time (pandas is optional).
+
+    Attributes
+    ----------
+    values : ndarray
+        n_frames × n_columns, each column in its own unit.
+    names : tuple of str
+        The columns' names (n_columns).
+    units : tuple of str
+        Each column's unit (n_columns), e.g. 'rad', 'N·m', 'deg'.
+    time : ndarray
+        The frames' times (n_frames, s).
     """
 
     values: np.ndarray
@@ -70,7 +81,18 @@ class NamedArray:
         return dict(zip(self.names, self.units, strict=True))
 
     def to_dataframe(self):
-        """A pandas DataFrame (index: time in s; columns 'name [unit]')."""
+        """A pandas DataFrame (index: time in s; columns 'name [unit]').
+
+        Returns
+        -------
+        pandas.DataFrame
+            n_frames × n_columns, the values in each column's unit.
+
+        Raises
+        ------
+        ImportError
+            pandas is not installed (the ``pandas`` extra).
+        """
         try:
             import pandas as pd
         except ImportError:

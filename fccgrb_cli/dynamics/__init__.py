@@ -1,4 +1,5 @@
-"""Inverse dynamics: mass matrices, generalized forces, multipliers and joint moments (§4)."""
+"""Inverse dynamics: mass matrices, generalized forces, multipliers and joint moments
+(docs/formulation.md §4)."""
 
 from fccgrb_cli.dynamics.inverse import InverseDynamics, inverse_dynamics
 from fccgrb_cli.dynamics.loads import ExternalLoad

@@ -1,6 +1,6 @@
-"""MC solution → classical model (FORMULATION §4, paper §5): the solved θ(t) become AR drivers
-θ*(t) (optionally low-passed; θ̇*, θ̈* by central differences), the tracking constraints go, and
-the square system gives consistent q, q̇, q̈ for the inverse dynamics."""
+"""MC solution → classical model (docs/formulation.md §4, paper §5): the solved θ(t) become AR
+drivers θ*(t) (optionally low-passed; θ̇*, θ̈* by central differences), the tracking constraints go,
+and the square system gives consistent q, q̇, q̈ for the inverse dynamics."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Inverse dynamics of the classical (AD-driven) system: M q̈ + Φ_qᵀ λ = g (FORMULATION §4).
+"""Inverse dynamics of the classical (AD-driven) system: M q̈ + Φ_qᵀ λ = g (docs/formulation.md §4).
 
 Written on the fully-defined equivalent x: Φ_qᵀ λ = X_qᵀ (g_x − M_x ẍ), ẍ = X_q q̈ + V̇ q̇, which
 also covers reduced bodies (their mass matrix then depends on q). λ by least squares, minimum norm

@@ -1,4 +1,4 @@
-"""External forces and moments on bodies, as generalized forces on x (FORMULATION §4).
+"""External forces and moments on bodies, as generalized forces on x (docs/formulation.md §4).
 
 A force f applied at a point with local coordinates (a, b, c) of body i gives C_Pᵀ f =
 [f, a f, b f, c f]; a moment n gives ½ n × u, ½ n × v, ½ n × w on the u, v, w blocks. The point

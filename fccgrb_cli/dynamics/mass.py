@@ -2,9 +2,9 @@
 
 For a body with x_i = [r, u, v, w], a point with local (a, b, c) moves as C x_i with
 C = [1, a, b, c] ⊗ I3, so T_i = ½ ẋ_iᵀ (K_i ⊗ I3) ẋ_i with K_i = ∫ [1,a,b,c]ᵀ[1,a,b,c] dm
-(FORMULATION §4). With the centre of mass at local c̄ and the inertia tensor I_G about it (body
-frame): K = [[m, m c̄ᵀ], [m c̄, m c̄ c̄ᵀ + ½ tr(I_G) I − I_G]]. Reduced bodies use the same matrix on
-their fully-defined equivalent (Eq. 5); the map to q happens in the inverse dynamics.
+(docs/formulation.md §4). With the centre of mass at local c̄ and the inertia tensor I_G about it
+(body frame): K = [[m, m c̄ᵀ], [m c̄, m c̄ c̄ᵀ + ½ tr(I_G) I − I_G]]. Reduced bodies use the same
+matrix on their fully-defined equivalent (Eq. 5); the map to q happens in the inverse dynamics.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ A floating base's drivers apply the wrench the rest of the data cannot account f
 residual; ``inverse._base_wrenches``). Under a rigid motion of its whole group of bodies every
 joint equation holds (internal joint forces do no work), so that wrench follows from the
 bodies' motion and the external loads alone, joints and closed chains whatever they are
-(FORMULATION §4): with X_i = [r u v w] (3 × 4) of body i, the generalized forces on it are
+(docs/formulation.md §14): with X_i = [r u v w] (3 × 4) of body i, the generalized forces on it are
 Q_i = (G − Ẍ_i) K_i + (loads on i), G = [g 0 0 0], K_i its inertia coefficients, and the
 residual's power over a translation δ and a rotation δθ about the base's origin o cancels
 theirs:

@@ -1,5 +1,6 @@
 """How uncertain each joint moment is: the smoother's covariance of the driver coordinates and
-their rates, carried through the inverse dynamics linearized at each frame (FORMULATION §4).
+their rates, carried through the inverse dynamics linearized at each frame
+(docs/formulation.md §13).
 
 The moments τ(d, ḋ, d̈) of a frame are those of the classical model driven by d, ḋ, d̈:
 q̇ solves Φ_q q̇ = ν, q̈ solves Φ_q q̈ = γ, λ solves Φ_qᵀλ = Q − M q̈ and τ_k = −g′(θ_k) λ_k

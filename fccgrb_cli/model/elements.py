@@ -15,7 +15,7 @@ GROUND = "ground"
 Form = Literal["full", "reduced"]
 Vec3 = tuple[float, float, float]
 
-# Scalar equations each joint type contributes (FORMULATION §2).
+# Scalar equations each joint type contributes (docs/formulation.md §2).
 JOINT_EQUATIONS: dict[str, int] = {
     "spherical": 3,
     "revolute": 5,
@@ -176,7 +176,7 @@ class AngularCoordinate:
 
     @property
     def kind(self) -> str:
-        """"angle": the row is s1·s2 − g(θ) with g = cos (FORMULATION §2)."""
+        """"angle": the row is s1·s2 − g(θ) with g = cos (docs/formulation.md §2)."""
         return "angle"
 
     def clinical(self, theta: np.ndarray) -> np.ndarray | None:

@@ -1,6 +1,6 @@
 """A solved run's checks put together: which frames the kinematics cannot be trusted on, and
-where a joint moment cannot be trusted although the kinematics can (FORMULATION §4; the bits
-are those of ``solvers/quality.py``; README, "What fccgrb checks for you").
+where a joint moment cannot be trusted although the kinematics can (docs/formulation.md §11; the
+bits are those of ``solvers/quality.py``; README, "What fccgrb checks for you").
 
 Frames: the markers fit (``quality.poor_fit``), the clinical angles' ranges
 (``model/ranges.py``), paper-style angles near 0°/180° or beyond (``quality.flat_or_mirrored``),

@@ -47,7 +47,13 @@ def _option(default: Any, help: str, **meta: Any) -> Any:
 
 @dataclass(frozen=True)
 class SolveOptions:
-    """The options of one solve (SI inside; the perturbation level in mm as users state it)."""
+    """The options of one solve (SI inside; the perturbation level in mm as users state it).
+
+    Frozen and validated: every field is a keyword (``SolveOptions(method="cno-sqp")``), and
+    ``help(fccgrb_cli.solve)`` or :func:`describe` lists each with its unit, default and
+    meaning; the command line's flags and a sweep's keys are the same fields.
+    :meth:`from_mapping` builds one from a mapping of field names or sweep keys.
+    """
 
     # --- kinematics ------------------------------------------------------------------------
     method: str = _option(

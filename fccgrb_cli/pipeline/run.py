@@ -30,7 +30,49 @@ __all__ = ["Run", "mean_jump", "summary"]
 @dataclass(frozen=True, repr=False)
 class Run:
     """A solved trial: the options it was solved with, the kinematic result (with each frame's
-    quality flags), the markers it saw, the model points it reached, and the inverse dynamics."""
+    quality flags), the markers it saw, the model points it reached, and the inverse dynamics.
+
+    The properties give the arrays by name and unit (:class:`NamedArray`): ``angles``,
+    ``angular_velocities``, ``angular_accelerations`` (rad, rad/s, rad/s²; m for distances),
+    ``q``, ``qd``, ``qdd``, ``moments`` (N·m; N for distances), ``clinical_angles`` (deg),
+    ``clinical_moments`` (N·m/kg), ``angle_sd`` and ``moment_sd`` (with the smoother), and the
+    per-frame ``trusted`` (n_frames) and per-joint ``moments_trusted`` (n_frames × n_angles).
+
+    Attributes
+    ----------
+    name : str
+        The run's name in a results file.
+    options : SolveOptions
+        The options it was solved with.
+    result : KinematicResult
+        The kinematic solution: q, θ and their rates, each frame's iterations, time, ‖Φ‖,
+        max |Φ_top| and quality flags (docs/formulation.md §11).
+    labels : tuple of str
+        The tracked markers (n_markers), in the order of the marker arrays.
+    rate : float
+        Frame rate (Hz).
+    reference, markers_input, model_points : ndarray
+        n_frames × n_markers × 3 (m): the reference markers (the trial's, or a synthesized
+        trial's exact ones), the markers the solver saw (with any artefact added), and the
+        model's tracked points.
+    ed, ed_input : ndarray
+        n_frames × n_markers (m): each model point's distance to its reference marker and to
+        its input marker.
+    truth_theta : ndarray or None
+        n_frames × n_angles (rad; m for distances): a synthesized trial's exact coordinates.
+    dynamics : Dynamics or None
+        The classical model's kinematics and inverse dynamics (docs/formulation.md §4).
+    warnings, notes : tuple of str
+        What the solve warned of, and what it reported.
+    moment_flags : ndarray or None
+        n_frames × n_angles: why each joint moment is not trusted (bits; 0 = trusted).
+    start_time : float
+        The first frame's time on the trial file's clock (s).
+    clinical, gait, axes, uncertainty, plugin_gait, residuals, reduction
+        The gait model's clinical curves, gait events and cycles, the lab's axes, the
+        smoother's standard deviations, Plug-in Gait outputs, a floating base's residuals and
+        their reduction, where the run has them (else None).
+    """
 
     name: str
     options: SolveOptions
@@ -243,12 +285,32 @@ class Run:
         return self.moment_flags == 0
 
     def summary(self) -> dict[str, float | str | int]:
-        """The one-row summary the command line prints."""
+        """The one-row summary the command line prints.
+
+        Returns
+        -------
+        dict of str to float, str or int
+            ``run``, ``method``; ``ms/frame`` and ``iter/frame`` (the solve's cost);
+            ``mean |Phi|`` and ``max |Phi_top|`` (m and unitless); ``mean ED mm`` and
+            ``max ED mm`` (model points to reference markers over the solved frames);
+            ``jump mm``; ``failed`` and ``flagged`` frame counts; with a truth file
+            ``max |dθ| deg`` (and ``max |dd| mm`` for distances); with a floating base's
+            residual ``residual F %BW`` and ``residual M N·m``; with dynamics ``max |τ| N·m``
+            (and ``max |F| N`` for distances).
+        """
         return summary(self)
 
     def to_dataframe(self):
         """One row per frame: time, trusted, the angles, their moments and the clinical curves
-        (columns 'name [unit]'); needs pandas."""
+        (columns 'name [unit]'); needs pandas.
+
+        Returns
+        -------
+        pandas.DataFrame
+            n_frames rows indexed by time (s); columns ``trusted``, then each angle, each
+            moment (prefix ``moment``), each clinical angle and moment (prefixes ``clinical``,
+            ``clinical moment``), in the units their names carry.
+        """
         import pandas as pd
 
         parts = [self.angles.to_dataframe()]

@@ -1,6 +1,6 @@
-"""The smoothing stage of a solve (``--smooth auto``, issue 23): the whole trial's driver
-coordinates and their rates from every frame's markers at once (``solvers/smooth``), the run's
-kinematics replaced by them, the classical model driven by them, and the uncertainty of every
+"""The smoothing stage of a solve (``--smooth auto``, docs/formulation.md §12): the whole trial's
+driver coordinates and their rates from every frame's markers at once (``solvers/smooth``), the
+run's kinematics replaced by them, the classical model driven by them, and the uncertainty of every
 angle, rate and joint moment.
 
 What the stage hands on:

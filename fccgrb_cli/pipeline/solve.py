@@ -245,7 +245,7 @@ def _reference(measured: np.ndarray, labels: list[str], trial: Trial,
 def _kinematics(model: Model, trial: Trial, inputs: np.ndarray, options: SolveOptions,
                 truth: Truth | None, progress: Progress
                 ) -> tuple[System, KinematicResult, Finding]:
-    """The kinematic solve by the chosen method (FORMULATION §3), on every stretch of frames
+    """The kinematic solve by the chosen method (docs/formulation.md §3), on every stretch of frames
     the markers determine (``solvers.determined``); the others are left unsolved (no data, no
     answer), or are an error naming the first without ``--skip-unsolvable``. Also the frames
     the markers do not determine, named (the ``no_data`` finding)."""
@@ -358,13 +358,13 @@ class _Notes:
 def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResult,
               options: SolveOptions, report: _Notes,
               smoothing: Smoothing | None = None) -> Dynamics | None:
-    """The inverse dynamics of the classical model driven by the run's angles (FORMULATION §4),
-    with the trial's force plates, on every stretch of solved frames long enough for its rates
-    (``stretches.shortest``): θ̇, θ̈ and the filter within each stretch, never across a gap;
-    None, with a warning, when it cannot or need not run, or no stretch is long enough. With
-    ``smoothing`` the model is driven by the smoothed rates over the whole trial (the smoother
-    bridged its gaps with the model; their frames stay untrusted and so do their moments) and the
-    plates are smoothed alike (smoothing.py)."""
+    """The inverse dynamics of the classical model driven by the run's angles
+    (docs/formulation.md §4), with the trial's force plates, on every stretch of solved frames long
+    enough for its rates (``stretches.shortest``): θ̇, θ̈ and the filter within each stretch, never
+    across a gap; None, with a warning, when it cannot or need not run, or no stretch is long
+    enough. With ``smoothing`` the model is driven by the smoothed rates over the whole trial (the
+    smoother bridged its gaps with the model; their frames stay untrusted and so do their moments)
+    and the plates are smoothed alike (smoothing.py)."""
     warnings, notes, stance = report.warnings, report.notes, report.stance
     if options.dynamics is None and not model.has_inertia:
         warnings.append(f"{model.source}: no mass and inertia on every body; inverse dynamics "

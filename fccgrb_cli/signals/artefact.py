@@ -1,4 +1,4 @@
-"""Soft-tissue-artefact perturbation (FORMULATION §5).
+"""Soft-tissue-artefact perturbation (docs/formulation.md §5).
 
 For each perturbed marker and axis: a sum of a few sinusoids with frequencies inside the band of
 the movement, seeded random phases and relative amplitudes, scaled so that its largest absolute

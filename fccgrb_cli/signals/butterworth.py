@@ -1,4 +1,4 @@
-"""Zero-lag Butterworth low-pass filter (FORMULATION §6): run forward and backward.
+"""Zero-lag Butterworth low-pass filter (docs/formulation.md §6): run forward and backward.
 
 The design and the forward-backward run are scipy.signal's ``butter`` and ``filtfilt`` (odd
 extension of 3 × (order + 1) samples at each end, the initial state of the step response),

@@ -1,6 +1,7 @@
 """Many frames at once: the compiled System's Φ, Φ_q, ν and γ on stacks of frames, and the
 linear solves the kinematic analysis with angular drivers and the inverse dynamics need
-(FORMULATION §2–4), as arrays of n_frames × rows × columns instead of a Python loop per frame.
+(docs/formulation.md §2–4), as arrays of n_frames × rows × columns instead of a Python loop per
+frame.
 
 Where frames are independent (the classical model driven by θ*(t) known for every frame, the
 consistent rates Φ_q q̇ = ν and Φ_q q̈ = γ, the multipliers Φ_qᵀ λ = Q − M q̈) every frame is
@@ -199,7 +200,7 @@ class Stacked:
         return nu
 
     def gamma(self, q: np.ndarray, qd: np.ndarray, drives: Drives) -> np.ndarray:
-        """γ = −(Φ_q q̇)_q q̇ − 2Φ_qt q̇ − Φ_tt of every frame (FORMULATION §2): −Φ_x V̇q̇,
+        """γ = −(Φ_q q̇)_q q̇ − 2Φ_qt q̇ − Φ_tt of every frame (docs/formulation.md §2): −Φ_x V̇q̇,
         −2 Ḟ_a·Ḟ_b on the dot rows, r̈* on the base rows, g″(θ*) θ̇*² + g′(θ*) θ̈* on the
         driver rows (Eq. 26: −θ̇*² cos θ* − θ̈* sin θ* for an angle), −sin θ* θ̇*² + cos θ* θ̈*
         on the sine rows."""
@@ -312,7 +313,7 @@ class StackedIterate:
 
 def newton_stacked(stacked: Stacked, q0: np.ndarray, drives: Drives, tol: float,
                    max_iter: int) -> StackedIterate:
-    """``newton.newton_raphson`` on every frame at once (FORMULATION §3, KA with AD):
+    """``newton.newton_raphson`` on every frame at once (docs/formulation.md §3, KA with AD):
     Φ_q Δq = −Φ until ‖Δq‖∞ < tol, iterating only the frames not yet converged. A frame whose
     step is not finite goes back to its guess, unconverged, as in the one-frame iteration."""
     q = q0.copy()

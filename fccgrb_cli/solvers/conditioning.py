@@ -1,4 +1,5 @@
-"""How near a motion comes to a singular position of the classical model (FORMULATION §4).
+"""How near a motion comes to a singular position of the classical model (docs/formulation.md §4,
+§11).
 
 The inverse dynamics solves Φ_qᵀ λ = g − M q̈ on the classical model (the angles as drivers).
 Where Φ_q loses rank — a closed loop's change point (a parallelogram four-bar with all links in

@@ -1,4 +1,4 @@
-"""A first-frame guess that needs no hand-given pose (FORMULATION §3).
+"""A first-frame guess that needs no hand-given pose (docs/formulation.md §3).
 
 Bodies are visited outward from the ground along the joints, then outward from each floating
 base, which its own markers place. Each is fitted to what is known of

@@ -2,7 +2,7 @@
 exact Hessian's terms and an envelope Cholesky factorization, all on the constant arrays of
 :class:`~fccgrb_cli.system.sparse.SparseSystem`, and a loop over frames that does what
 ``solve_nrm``'s numpy path does frame by frame (same guesses, same Gauss–Newton / Newton
-iteration, line search and stopping test: FORMULATION §3.1), without leaving machine code.
+iteration, line search and stopping test: docs/formulation.md §3.1), without leaving machine code.
 
 The loop hands control back to Python where Python knows more: a frame without a history (the
 first, or after a failure) needs ``initial_guess``; a frame whose set of missing markers is new
@@ -69,7 +69,7 @@ def features(s: SparseSystem, q: np.ndarray, F: np.ndarray) -> None:
 def residual(s: SparseSystem, q: np.ndarray, theta: np.ndarray, ref: np.ndarray,
              F: np.ndarray, phi: np.ndarray) -> None:
     """Φ: linear and tracking rows from the constant rows, dot rows F_a·F_b − c − g(θ), a signed
-    angle's sine row − sin θ (FORMULATION §2); θ is q's tail in a mixed system, the drivers'
+    angle's sine row − sin θ (docs/formulation.md §2); θ is q's tail in a mixed system, the drivers'
     θ* in a classical one."""
     features(s, q, F)
     for r in range(s.n_lin):
@@ -605,10 +605,10 @@ def driven_frames(s: SparseSystem, guesses: np.ndarray, drivers: Drivers, limits
     its own guess moved by the correction (solution − guess) of the frames before it,
     extrapolated linearly (the drivers' filtering and the WLS topology misfit change slowly;
     7e-6 → 1e-6 m on the five-bar sample at P30): Newton–Raphson on Φ = 0 until a step
-    ‖Δq‖∞ < tol (newton.newton_raphson), then Φ_q q̇ = ν and Φ_q q̈ = γ (FORMULATION §3) and,
-    with ``inverse`` (see :data:`NO_INVERSE`), the multipliers of the inverse dynamics
-    (FORMULATION §4), all through the normal equations on the envelope (Φ_q square, or taller
-    with full column rank: the same solution as LU or least squares).
+    ‖Δq‖∞ < tol (newton.newton_raphson), then Φ_q q̇ = ν and Φ_q q̈ = γ (docs/formulation.md §3)
+    and, with ``inverse`` (see :data:`NO_INVERSE`), the multipliers of the inverse dynamics
+    (docs/formulation.md §4), all through the normal equations on the envelope (Φ_q square, or
+    taller with full column rank: the same solution as LU or least squares).
 
     The factorization at each frame's solution serves q̇, q̈ and λ and, where Φ_q is square,
     the next frame's Newton iteration as a chord (simplified Newton) matrix: frames 10 ms apart
@@ -794,7 +794,7 @@ def _load_forces(x: np.ndarray, force: np.ndarray, point: np.ndarray, moment: np
 def multipliers_frames(s: SparseSystem, q_all: np.ndarray, rhs: np.ndarray, lam: np.ndarray,
                        misfit: np.ndarray) -> None:
     """λ with Φ_qᵀλ = rhs for every frame of a classical motion (the inverse dynamics, Eq. of
-    FORMULATION §4): λ = Φ_q (Φ_qᵀΦ_q)⁻¹ rhs, the solution for a square Φ_q and the
+    docs/formulation.md §4): λ = Φ_q (Φ_qᵀΦ_q)⁻¹ rhs, the solution for a square Φ_q and the
     minimum-norm one for a taller Φ_q of full column rank; ``misfit`` = ‖Φ_qᵀλ − rhs‖."""
     n_rows, nq = lam.shape[1], s.nq
     F = np.empty(len(s.f0))

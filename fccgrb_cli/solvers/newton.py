@@ -1,5 +1,5 @@
 """Newton–Raphson on square (or redundant) systems and Gauss–Newton on weighted over-determined
-ones: the shared iteration of the AD and NRM methods (FORMULATION §3)."""
+ones: the shared iteration of the AD and NRM methods (docs/formulation.md §3)."""
 
 from __future__ import annotations
 

@@ -2,7 +2,7 @@
 
 θ̇ and θ̈ come from the solved θ(t) by central differences; the body coordinates then follow
 from the topological equations (rigid body, joints, MCR) as in the converted model of
-FORMULATION §4: Φ_q,body q̇_b = −Φ_θ θ̇ and Φ_q,body q̈_b = γ − Φ_θ θ̈.
+docs/formulation.md §4: Φ_q,body q̇_b = −Φ_θ θ̇ and Φ_q,body q̈_b = γ − Φ_θ θ̈.
 """
 
 from __future__ import annotations

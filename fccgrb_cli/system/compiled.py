@@ -38,7 +38,7 @@ _EMPTY3 = np.zeros((0, 3))
 def coordinate_terms(theta: np.ndarray, distance: np.ndarray
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """g, g′ and g″ of every coordinate (last axis of θ): cos θ, −sin θ, −cos θ for an angle,
-    d, 1, 0 where ``distance`` is True (a row's Φ = F_a·F_b − g(θ), FORMULATION §2)."""
+    d, 1, 0 where ``distance`` is True (a row's Φ = F_a·F_b − g(θ), docs/formulation.md §2)."""
     cos = np.cos(theta)
     return (np.where(distance, theta, cos), np.where(distance, 1.0, -np.sin(theta)),
             np.where(distance, 0.0, -cos))

@@ -1,4 +1,4 @@
-"""The constraint library of FORMULATION §2, compiled into index arrays.
+"""The constraint library of docs/formulation.md §2, compiled into index arrays.
 
 Each constraint becomes either linear vector equations ``F_a − F_b`` (spherical joints, ground
 points), tracking equations ``F_a − y(t)`` (TC Eq. 29–36, TOC Eq. 37–38) or scalar dot equations
@@ -71,7 +71,7 @@ def _on_axis(features: FeatureTable, out: ConstraintList, joint: Joint, label: s
 
 
 def joint(features: FeatureTable, out: ConstraintList, joint: Joint) -> None:
-    """The equations of one joint (FORMULATION §2 table)."""
+    """The equations of one joint (docs/formulation.md §2 table)."""
     label = f"joint {joint.name} ({joint.type})"
     (bi, bj) = joint.bodies
     if joint.type in ("spherical", "revolute", "universal"):
@@ -183,7 +183,7 @@ def floating_bases(model: Model) -> tuple[str, ...]:
 def base_drivers(features: FeatureTable, out: ConstraintList, model: Model) -> None:
     """Drivers of each floating base's coordinates, r − r*(t), u − u*(t), v − v*(t) (and w for
     a fully-defined body): the classical model's base, driven by its solved trajectory
-    (FORMULATION §4). Written as tracking rows with targets after the markers'."""
+    (docs/formulation.md §10). Written as tracking rows with targets after the markers'."""
     slot = len(out.tracking)
     for name in floating_bases(model):
         body = model.body(name)

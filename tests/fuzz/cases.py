@@ -1,4 +1,4 @@
-"""The generated cases, one generator per class of issue 22's table (and one for C3D bytes).
+"""The generated cases, one generator per class of bad input in ``CLASSES``.
 
 A case is a few setup actions on a copy of the fixtures (``fixtures.py``) and one or more
 ``fccgrb`` commands, each with what it must do: fail as bad input (``error``: exit 2, one line

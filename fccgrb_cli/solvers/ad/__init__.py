@@ -1,2 +1,2 @@
-"""The kinematic analysis with angular drivers (AD, FORMULATION §2): its solve (numpy, batched
-and compiled), and the classical baseline that computes the drivers from the markers."""
+"""The kinematic analysis with angular drivers (AD, docs/formulation.md §3): its solve (numpy,
+batched and compiled), and the classical baseline that computes the drivers from the markers."""

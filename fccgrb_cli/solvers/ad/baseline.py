@@ -1,4 +1,4 @@
-"""The classical baseline (FORMULATION §6): angular drivers computed from the markers in a
+"""The classical baseline (docs/formulation.md §6): angular drivers computed from the markers in a
 pre-analysis step, optionally low-passed, then the kinematic analysis with angular drivers.
 
 Each frame's segment frames are fitted to the markers (the rigid fits of ``initial_guess``), and

@@ -3,7 +3,7 @@
 Positions by Newton–Raphson frame by frame, each frame warm-started from the previous one
 (extrapolated with its velocity and acceleration), then Φ_q q̇ = ν and Φ_q q̈ = γ
 (``solve_ad``). When a good guess is known for every frame (the converted model of
-FORMULATION §4: the mixed-coordinate solution's bodies already satisfy the topology and the
+docs/formulation.md §4: the mixed-coordinate solution's bodies already satisfy the topology and the
 drivers it becomes), the frames are independent and ``solve_ad_batched`` solves them all at
 once on stacked arrays, the frames that do not converge in a few iterations going through the
 frame-by-frame path.
@@ -75,7 +75,7 @@ def stacked_drives(system: System, theta: np.ndarray, theta_d: np.ndarray,
 
 
 def frame_rates(system: System, q: np.ndarray, drive: Drive) -> tuple[np.ndarray, np.ndarray]:
-    """q̇ and q̈ of one frame: Φ_q q̇ = ν, Φ_q q̈ = γ (FORMULATION §3)."""
+    """q̇ and q̈ of one frame: Φ_q q̇ = ν, Φ_q q̈ = γ (docs/formulation.md §3)."""
     J = system.jacobian(q)
     qd = linear_solve(J, system.nu(q, drive))
     return qd, linear_solve(J, system.gamma(q, qd, drive))

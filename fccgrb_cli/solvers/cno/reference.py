@@ -1,4 +1,4 @@
-"""Constrained nonlinear optimization (CNO, FORMULATION §3): min F(q) subject to the
+"""Constrained nonlinear optimization (CNO, docs/formulation.md §3): min F(q) subject to the
 topological equations Φ_top(q) = 0 and bounds, so the model never stretches to follow noise.
 
 F is the weighted sum of squared tracking residuals ('tc') or of Euclidean distances ('ed').

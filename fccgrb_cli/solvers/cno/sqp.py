@@ -1,6 +1,6 @@
 """CNO-SQP with the engine's own linear algebra: a stabilized SQP on the equality-constrained
-least squares min F(q) = Σ w_n ‖C_P q − r*‖² subject to Φ_top(q) = 0 (FORMULATION §3, CNO with
-the TC objective).
+least squares min F(q) = Σ w_n ‖C_P q − r*‖² subject to Φ_top(q) = 0 (docs/formulation.md §3, CNO
+with the TC objective).
 
 Newton on the KKT conditions ∇F + Φ_topᵀλ = 0, Φ_top = 0 with the exact Lagrangian Hessian
 H = 2Φ_trkᵀWΦ_trk + Σ λ_i ∇²Φ_i (the tracking rows are linear: no second-order term of their
@@ -23,7 +23,7 @@ The SQP takes no bounds: its result is checked against FrameProblem's bounds, an
 optimum lies outside them, or that does not converge, is handed to SLSQP (cno/reference.py).
 
 CNO-IP is the same iteration with a primal-dual logarithmic barrier on the bounds l ≤ q ≤ u
-(the interior point of FORMULATION §3, as MATLAB's fmincon 'interior-point', on this linear
+(the interior point of docs/formulation.md §3, as MATLAB's fmincon 'interior-point', on this linear
 algebra): bound multipliers z_l, z_u with z·s = μ on the slacks s_l = q − l, s_u = u − q; the
 Newton step adds Σ = Z_l S_l⁻¹ + Z_u S_u⁻¹ to the Hessian's diagonal and μ S_l⁻¹ − μ S_u⁻¹ to
 the right-hand side (scaled by δ in the eliminated system), takes the largest step that goes

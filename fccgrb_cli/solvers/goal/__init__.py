@@ -1,2 +1,2 @@
-"""Multi-objective goal attainment (MO-TC / MO-ED, FORMULATION §3): the paper's reference per
-frame (scipy's SLSQP) and the structured active-set SQP, in numpy and compiled."""
+"""Multi-objective goal attainment (MO-TC / MO-ED, docs/formulation.md §3): the paper's reference
+per frame (scipy's SLSQP) and the structured active-set SQP, in numpy and compiled."""

@@ -1,4 +1,4 @@
-"""Multi-objective goal attainment (Gembicki; FORMULATION §3): over (q, γ), min γ subject to
+"""Multi-objective goal attainment (Gembicki; docs/formulation.md §3): over (q, γ), min γ subject to
 F_i(q) − w_i γ ≤ F_i* and Φ_top(q) = 0, solved by SQP (scipy's SLSQP, as MATLAB's fgoalattain).
 
 Objectives: 'tc', each tracking component |r_P − r*| (3 per point, written as ±(r_P − r*) − wγ ≤ 0

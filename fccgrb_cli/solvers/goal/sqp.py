@@ -1,4 +1,4 @@
-"""Goal attainment (FORMULATION §3, MO) by an active-set SQP on the engine's linear algebra:
+"""Goal attainment (docs/formulation.md §3, MO) by an active-set SQP on the engine's linear algebra:
 over (q, γ), min γ subject to c_j(q) − w_j γ ≤ 0 and Φ_top(q) = 0, with c_j = ±d_k, each
 tracking residual component with both signs ('tc'), or c_j = ‖d_p‖, each point's distance
 smoothed at zero as in FrameProblem.distances ('ed').

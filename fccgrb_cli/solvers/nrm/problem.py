@@ -1,6 +1,7 @@
 """What both NRM engines (the numpy reference in nrm/solve.py, the compiled one in
-nrm/compiled.py) share: the settings, each row's weight W (FORMULATION §3.1), the warm start's
-extrapolation, the test that a frame's remaining markers determine the model, and the messages."""
+nrm/compiled.py) share: the settings, each row's weight W (docs/formulation.md §3.1), the warm
+start's extrapolation, the test that a frame's remaining markers determine the model, and the
+messages."""
 
 from __future__ import annotations
 
@@ -80,7 +81,7 @@ def no_convergence_text(f: int, time: np.ndarray, iterations: int) -> str:
 
 @dataclass(frozen=True)
 class NrmSettings:
-    """NRM's options (FORMULATION §3.1): the tracking equations' weight (None: plain least
+    """NRM's options (docs/formulation.md §3.1): the tracking equations' weight (None: plain least
     squares, NRM-LS; else WLS with the topological equations weighing 1), the tolerance on
     ‖Δq‖∞ (m and rad), the iteration cap per frame, the warm start ('extrapolate' or
     'previous'), the iteration matrix ('auto', 'gauss-newton', 'exact'), and whether frames the

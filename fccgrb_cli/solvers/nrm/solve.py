@@ -2,8 +2,8 @@
 
 Topology + MCR + TC/TOC is over-determined; each frame solves the Gauss–Newton normal equations
 (Φ_qᵀ W Φ_q) Δq = −Φ_qᵀ W Φ with W = diag(1 for topological rows, w for tracking rows): LS is
-W = I, WLS takes w = 1e-3 unless a tracked point has its own weight (FORMULATION §3, paper §2.5).
-A marker missing in a frame (NaN) drops its tracking rows for that frame only.
+W = I, WLS takes w = 1e-3 unless a tracked point has its own weight (docs/formulation.md §3, paper
+§2.5). A marker missing in a frame (NaN) drops its tracking rows for that frame only.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""One frame through an optimization method (FORMULATION §3, CNO and MO): the settings, the
+"""One frame through an optimization method (docs/formulation.md §3, CNO and MO): the settings, the
 structured optimizer or scipy's (the paper's reference), the verdict, and the retry from the
 frame's NRM-WLS solution; what the sequential loop, the parallel pool and the compiled loop
 (optimize/compiled.py) all call for a frame."""

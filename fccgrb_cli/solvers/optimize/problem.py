@@ -1,5 +1,5 @@
-"""One frame as an optimization problem (FORMULATION §3, CNO and MO): the topological equations
-Φ_top(q) = 0 as equality constraints, the tracking residuals as objectives, and bounds.
+"""One frame as an optimization problem (docs/formulation.md §3, CNO and MO): the topological
+equations Φ_top(q) = 0 as equality constraints, the tracking residuals as objectives, and bounds.
 
 Every value, gradient and Jacobian comes from the compiled constraint engine (no finite
 differences); one evaluation of Φ and Φ_q is cached per q, since the optimizers ask for the

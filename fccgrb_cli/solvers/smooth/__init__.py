@@ -1,6 +1,6 @@
-"""The whole-trial smoother (issue 23): every frame's driver coordinates — the angles, the
-distances, a floating base's origin and orientation — and their first two derivatives from all
-frames' markers at once, with the topological equations kept at every frame.
+"""The whole-trial smoother (docs/formulation.md §12): every frame's driver coordinates — the
+angles, the distances, a floating base's origin and orientation — and their first two derivatives
+from all frames' markers at once, with the topological equations kept at every frame.
 
 prior.py (the integrated-Wiener-process prior), start.py (its first frame), filter.py (the
 linear smoother and its covariance, numpy; the reference), kernels.py (the same, compiled),

@@ -1,8 +1,8 @@
 """The smoother's coordinates and its measurement model: the markers as functions of the driver
 coordinates d, through the topological equations.
 
-d holds what the classical model of FORMULATION §4 is driven by: every angle and distance, then
-for each floating base its origin r (3) and the rotation vector φ (3) of its orientation
+d holds what the classical model of docs/formulation.md §4 is driven by: every angle and distance,
+then for each floating base its origin r (3) and the rotation vector φ (3) of its orientation
 R = exp([φ]×) R₀ (``rotation.py``; R₀ the base's mean orientation over the trial). Given d, the
 classical system Φ(q; d) = 0 fixes the bodies' coordinates q (Newton–Raphson, every frame at
 once), so that the topology holds by construction at every d the smoother tries; its

@@ -4,9 +4,9 @@ The unknowns are the driver coordinates d(t) of every frame (``coordinates.py``)
 derivatives; the prior says each coordinate is an integrated Wiener process of order p
 (``prior.py``), the markers say y_f = p(d_f) + noise of σ/√w_i per coordinate of marker i, w_i
 its weight relative to the largest (1 for every marker unless the model weighs its tracked
-points: the per-frame weighted least squares the smoother replaces, formulation §3). Each iteration
-linearizes p at the current d (positions by the topological equations, so every iterate is an
-assembled mechanism), and the linear smoother (``filter.py``, compiled in ``kernels.py``) solves
+points: the per-frame weighted least squares the smoother replaces, docs/formulation.md §3.1). Each
+iteration linearizes p at the current d (positions by the topological equations, so every iterate is
+an assembled mechanism), and the linear smoother (``filter.py``, compiled in ``kernels.py``) solves
 the linearized problem over all frames in O(frames); the iteration stops when d moves less than
 ``STEP`` (a few iterations: the markers' model is nearly linear over the noise's size). The
 first linearization, at each frame's own solution, also gives the smoothing strength
