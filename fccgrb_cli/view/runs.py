@@ -77,7 +77,7 @@ def motion_scene(path: str | Path, names: tuple[str, ...] = (), curve: str | Non
     The scene; its time on the trial's clock (the first frame at the run's start time).
     """
     runs = chosen_runs(path, names)
-    skeletons = [skeleton(run.model, labelled_points=False) for run in runs]
+    skeletons = [skeleton(run.model) for run in runs]
     n = len(runs[0].result.time)
     if frames is not None and not ((frames >= 0) & (frames < n)).all():
         raise InputError(f"--frame: expected a frame index from 0 to {n - 1} of {path}, got "

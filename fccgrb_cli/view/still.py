@@ -12,7 +12,16 @@ from fccgrb_cli.view.camera import Camera, project
 from fccgrb_cli.view.camera import framing as frame_points
 from fccgrb_cli.view.page import grid
 from fccgrb_cli.view.scene import Layer, Scene
-from fccgrb_cli.view.styles import FLAGGED, FLOOR, OVERLAY, OVERLAY_KINDS, STYLES, UNTRUSTED
+from fccgrb_cli.view.styles import (
+    FLAGGED,
+    FLOOR,
+    OVERLAY,
+    OVERLAY_ALPHA,
+    OVERLAY_KINDS,
+    OVERLAY_WIDEN,
+    STYLES,
+    UNTRUSTED,
+)
 
 WIDTH, HEIGHT = 900, 560
 
@@ -50,8 +59,11 @@ def svg(scene: Scene, k: int = 0, camera: str = "orbit", width: int = WIDTH,
         segment(corner + a * step * ax.lateral, corner + a * step * ax.lateral
                 + n * step * ax.forward, FLOOR, 1)
     segment(corner, corner + g["vertical"] * ax.up, "#000000", 2, "vertical")
-    for n_layer, layer in enumerate(scene.layers):
-        _layer(out, layer, k, n_layer > 0, scene, cam, width, height, segment)
+    for n_layer in reversed(range(len(scene.layers))):  # the second run under the first
+        overlay = n_layer > 0
+        out.append(f'<g opacity="{OVERLAY_ALPHA if overlay else 1:g}">')
+        _layer(out, scene.layers[n_layer], k, overlay, scene, cam, width, height, segment)
+        out.append("</g>")
     t = scene.time[scene.frames[k]]
     out.append(f'<text x="8" y="{height - 8}">{html.escape(scene.title)} · t = {t:.3f} s · '
                f"frame {int(scene.frames[k])}</text></svg>")
@@ -75,20 +87,22 @@ def _layer(out: list[str], layer: Layer, k: int, overlay: bool, scene: Scene, ca
         if overlay and kind not in OVERLAY_KINDS:
             continue
         if np.isfinite(points[[i, j]]).all():
-            segment(points[i], points[j], color(kind), float(STYLES[kind]["width"]), kind)
+            segment(points[i], points[j], color(kind),
+                    float(STYLES[kind]["width"]) + (OVERLAY_WIDEN if overlay else 0.0), kind)
     screen = project(points, cam, scene.axes, width, height)
     bad = _untrusted_markers(layer, k)
     for i, (kind, label) in enumerate(zip(layer.kinds, layer.labels, strict=True)):
         x, y, z = screen[i]
         if not np.isfinite(screen[i]).all() or z <= 0:
             continue
-        radius = float(STYLES[kind]["radius"])
+        radius = float(STYLES[kind]["radius"]) + (OVERLAY_WIDEN / 2 if overlay else 0.0)
         fill = UNTRUSTED if i in bad else color(kind)
         if radius > 0 and (not overlay or kind in OVERLAY_KINDS):
             out.append(f'<circle class="{kind}" cx="{x:.1f}" cy="{y:.1f}" r="{radius:g}" '
                        f'fill="{fill}"><title>{html.escape(label)}</title></circle>')
         if label and not overlay and (scene.model_view or kind == "origin"):
-            out.append(f'<text x="{x + 5:.1f}" y="{y - 5:.1f}">{html.escape(label)}</text>')
+            below = y + 15 if kind == "joint" else y - 5
+            out.append(f'<text x="{x + 5:.1f}" y="{below:.1f}">{html.escape(label)}</text>')
 
 
 def _untrusted_markers(layer: Layer, k: int) -> set[int]:

@@ -21,7 +21,8 @@ STYLES: dict[str, dict[str, object]] = {
     "cop": {"color": "#a0522d", "width": 0.0, "radius": 4.0},
     "hidden": {"color": "#000000", "width": 0.0, "radius": 0.0},
 }
-OVERLAY = "#b000b0"  # the second run's model
+OVERLAY = "#b000b0"  # the second run's model, drawn under the first, wider and translucent
+OVERLAY_WIDEN, OVERLAY_ALPHA = 3.0, 0.55
 FLAGGED = "#d0021b"  # a frame the file does not trust: its model drawn in this colour
 UNTRUSTED = "#e8a000"  # a marker missing or too far from its model point
 FLOOR = "#d8d8d8"

@@ -125,22 +125,24 @@
     ctx.font = "12px sans-serif";
     floorGrid(W, H, B);
     state.drawn = [];
-    layers.forEach((L, n) => {
-      const overlay = n > 0, flagged = !frameTrusted(L, f);
+    // the second run first, wider and translucent: a halo where the first run covers it
+    [...layers.keys()].reverse().forEach((n) => {
+      const L = layers[n], overlay = n > 0, flagged = !frameTrusted(L, f);
       const keep = (kind) => !overlay || S.overlayKinds.includes(kind);
       const color = (kind) => {
         if (overlay && kind !== "marker") return S.colors.overlay;
         if (flagged && (kind === "segment" || kind === "origin")) return S.colors.flagged;
         return S.styles[kind].color;
       };
-      ctx.globalAlpha = overlay ? 0.8 : 1;
+      ctx.globalAlpha = overlay ? S.overlayAlpha : 1;
       for (let j = 0; j < L.lineKinds.length; j++) {
         const kind = L.kindNames[L.lineKinds[j]];
         if (!keep(kind)) continue;
         const a = point(L, k, L.lines[2 * j]), b = point(L, k, L.lines[2 * j + 1]);
         if (!Number.isFinite(a[0] + b[0])) continue;
         if (kind === "force" && Math.hypot(b[0] - a[0], b[1] - a[1], b[2] - a[2]) < 1e-3) continue;
-        ctx.strokeStyle = color(kind); ctx.lineWidth = S.styles[kind].width;
+        ctx.strokeStyle = color(kind);
+        ctx.lineWidth = S.styles[kind].width + (overlay ? S.overlayWiden : 0);
         line(a, b, W, H, B);
       }
       const markerIndex = new Map(L.markers.map((i, m) => [i, m]));
@@ -158,14 +160,14 @@
         }
         if (r > 0 && keep(kind)) {
           ctx.fillStyle = c; ctx.beginPath();
-          ctx.arc(q[0], q[1], (kind === "marker" && c === S.colors.untrusted) ? r + 1.5 : r,
-            0, 2 * Math.PI);
+          ctx.arc(q[0], q[1], r + (overlay ? S.overlayWiden / 2 : 0), 0, 2 * Math.PI);
           ctx.fill();
         }
         const label = L.labels[i];
         if (label && !overlay && (state.labels ? kind !== "marker" && kind !== "model_point"
           || S.modelView : kind === "origin")) {
-          ctx.fillStyle = "#202020"; ctx.fillText(label, q[0] + 5, q[1] - 5);
+          ctx.fillStyle = "#202020";
+          ctx.fillText(label, q[0] + 5, kind === "joint" ? q[1] + 15 : q[1] - 5);
         }
         if (label && (r > 0 || kind === "tracked_vector")) {
           state.drawn.push({x: q[0], y: q[1], text: `${L.name}: ${label}` + (why ? ` — ${why}` : "")});
@@ -252,7 +254,7 @@
       c.fillStyle = "#202020";
       c.fillText(`${name} (${mine[0].unit})`, left, row * h + 12);
       c.fillText(hi.toPrecision(3), 2, Y(hi) + 4); c.fillText(lo.toPrecision(3), 2, Y(lo));
-      for (const cv of mine) {
+      for (const cv of [...mine].reverse()) {
         const base = cv.layer ? S.colors.overlay : "#1f5fbf";
         if (cv.sd) {
           c.fillStyle = base; c.globalAlpha = 0.18; c.beginPath();
