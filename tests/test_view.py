@@ -209,15 +209,16 @@ def test_curves_are_the_files(five_bar: Path) -> None:
     assert (angle.unit, moment.unit) == ("deg", "N·m")
 
 
-def test_gait_curves_are_the_clinical_ones(gait: Path) -> None:
-    scene = motion_scene(gait, curve="knee_flexion_r")
+@pytest.mark.parametrize("name", ["knee_flexion_r", "ankle_dorsiflexion_r"])  # signs + and −
+def test_gait_curves_are_the_clinical_ones(gait: Path, name: str) -> None:
+    scene = motion_scene(gait, curve=name)
     angle, moment = scene.layers[0].curves
     with h5py.File(gait, "r") as h5:
         clinical = h5["runs/nrm-wls-f6Hz/clinical"]
-        k = [str(n) for n in clinical["angles"].attrs["names"]].index("knee_flexion_r")
+        k = [str(n) for n in clinical["angles"].attrs["names"]].index(name)
         np.testing.assert_allclose(angle.values, clinical["angles"][:, k], atol=1e-9)
         np.testing.assert_allclose(moment.values, clinical["moments"][:, k], atol=1e-9)
-    assert angle.name == "knee_flexion_r (clinical)"
+    assert angle.name == f"{name} (clinical)"
 
 
 def test_plate_forces_start_at_the_centre_of_pressure(gait: Path) -> None:
