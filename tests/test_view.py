@@ -406,7 +406,7 @@ def test_five_bar_page_in_a_browser(flagged: Path, tmp_path: Path) -> None:
         _at(browser, 120)
         moved = _canvas(browser)
         assert _count(moved, _rgb(UNTRUSTED)) > 10
-        hover = browser.evaluate("fccgrbView.state.drawn.map(d => d.text)")
+        hover = browser.evaluate("fccgrbView.state.drawn.map(d => fccgrbView.hoverText(d))")
         assert any(t.startswith(f"nrm-wls-P30: {MOVED[1]} — ") and "beyond" in t
                    for t in hover), hover
         assert not any(t.startswith(f"nrm-wls-P30: {MISSING[1]} — ") for t in hover)
@@ -458,7 +458,7 @@ def test_model_page_in_a_browser(tmp_path: Path) -> None:
     assert run_cli("view", FIVE_BAR, "-o", page).exit_code == 0
     with Browser() as browser:
         _opens_clean(browser, page)
-        drawn = browser.evaluate("fccgrbView.state.drawn.map(d => d.text)")
+        drawn = browser.evaluate("fccgrbView.state.drawn.map(d => fccgrbView.hoverText(d))")
         for label in ("J1 (revolute)", "J4 (spherical)", "B5.P6 ← P6", "B1"):
             assert f"five_bar: {label}" in drawn, (label, drawn)
         canvas = _canvas(browser)

@@ -118,6 +118,19 @@
     return true;
   }
 
+  // per layer, once: each point's kind, each marker's place among the markers
+  layers.forEach((L) => {
+    L.pointKind = Array.from(L.kinds, (n) => L.kindNames[n]);
+    L.lineKind = Array.from(L.lineKinds, (n) => L.kindNames[n]);
+    L.markerOf = new Map(L.markers.map((i, m) => [i, m]));
+    L.screen = new Float64Array(3 * L.nPoints);
+  });
+  // strokes (or fills) batched by style: one path per colour and width
+  function batched(groups, key, add) {
+    if (!groups.has(key)) groups.set(key, []);
+    groups.get(key).push(add);
+  }
+
   function draw() {
     const W = canvas.width, H = canvas.height, B = basis();
     const k = state.k, f = frames[k];
@@ -134,45 +147,53 @@
         if (flagged && (kind === "segment" || kind === "origin")) return S.colors.flagged;
         return S.styles[kind].color;
       };
-      ctx.globalAlpha = overlay ? S.overlayAlpha : 1;
-      for (let j = 0; j < L.lineKinds.length; j++) {
-        const kind = L.kindNames[L.lineKinds[j]];
-        if (!keep(kind)) continue;
-        const a = point(L, k, L.lines[2 * j]), b = point(L, k, L.lines[2 * j + 1]);
-        if (!Number.isFinite(a[0] + b[0])) continue;
-        if (kind === "force" && Math.hypot(b[0] - a[0], b[1] - a[1], b[2] - a[2]) < 1e-3) continue;
-        ctx.strokeStyle = color(kind);
-        ctx.lineWidth = S.styles[kind].width + (overlay ? S.overlayWiden : 0);
-        line(a, b, W, H, B);
-      }
-      const markerIndex = new Map(L.markers.map((i, m) => [i, m]));
+      const P = L.screen;
       for (let i = 0; i < L.nPoints; i++) {
-        const kind = L.kindNames[L.kinds[i]], r = S.styles[kind].radius;
-        const p = point(L, k, i);
-        if (!Number.isFinite(p[0])) continue;
-        const q = project(p, W, H, B);
-        if (!(q[2] > 0)) continue;
-        let c = color(kind), why = "";
-        if (markerIndex.has(i)) {
-          const m = markerState(L, k, markerIndex.get(i));
-          why = m.why;
-          if (m.bad) c = S.colors.untrusted;
+        const q = project(point(L, k, i), W, H, B);
+        P[3 * i] = q[0]; P[3 * i + 1] = q[1]; P[3 * i + 2] = q[2];
+      }
+      const visible = (i) => P[3 * i + 2] > 0;  // NaN (absent) and behind the eye: false
+      ctx.globalAlpha = overlay ? S.overlayAlpha : 1;
+      const strokes = new Map();
+      for (let j = 0; j < L.lineKind.length; j++) {
+        const kind = L.lineKind[j], a = L.lines[2 * j], b = L.lines[2 * j + 1];
+        if (!keep(kind) || !visible(a) || !visible(b)) continue;
+        batched(strokes, `${color(kind)}|${S.styles[kind].width + (overlay ? S.overlayWiden : 0)}`,
+          [a, b]);
+      }
+      for (const [key, segments] of strokes) {
+        const [c, w] = key.split("|");
+        ctx.strokeStyle = c; ctx.lineWidth = Number(w); ctx.beginPath();
+        for (const [a, b] of segments) {
+          ctx.moveTo(P[3 * a], P[3 * a + 1]); ctx.lineTo(P[3 * b], P[3 * b + 1]);
         }
-        if (r > 0 && keep(kind)) {
-          ctx.fillStyle = c; ctx.beginPath();
-          ctx.arc(q[0], q[1], r + (overlay ? S.overlayWiden / 2 : 0), 0, 2 * Math.PI);
-          ctx.fill();
-        }
+        ctx.stroke();
+      }
+      const fills = new Map(), texts = [];
+      for (let i = 0; i < L.nPoints; i++) {
+        if (!visible(i)) continue;
+        const kind = L.pointKind[i], r = S.styles[kind].radius;
+        let c = color(kind);
+        if (L.markerOf.has(i) && markerState(L, k, L.markerOf.get(i)).bad) c = S.colors.untrusted;
+        if (r > 0 && keep(kind)) batched(fills, `${c}|${r + (overlay ? S.overlayWiden / 2 : 0)}`, i);
         const label = L.labels[i];
         if (label && !overlay && (state.labels ? kind !== "marker" && kind !== "model_point"
-          || S.modelView : kind === "origin")) {
-          ctx.fillStyle = "#202020";
-          ctx.fillText(label, q[0] + 5, kind === "joint" ? q[1] + 15 : q[1] - 5);
-        }
+          || S.modelView : kind === "origin")) texts.push([label, i, kind === "joint" ? 15 : -5]);
         if (label && (r > 0 || kind === "tracked_vector")) {
-          state.drawn.push({x: q[0], y: q[1], text: `${L.name}: ${label}` + (why ? ` — ${why}` : "")});
+          state.drawn.push({x: P[3 * i], y: P[3 * i + 1], L, i, k});
         }
       }
+      for (const [key, dots] of fills) {
+        const [c, r] = key.split("|"), radius = Number(r);
+        ctx.fillStyle = c; ctx.beginPath();
+        for (const i of dots) {
+          ctx.moveTo(P[3 * i] + radius, P[3 * i + 1]);
+          ctx.arc(P[3 * i], P[3 * i + 1], radius, 0, 2 * Math.PI);
+        }
+        ctx.fill();
+      }
+      ctx.fillStyle = "#202020";
+      for (const [label, i, dy] of texts) ctx.fillText(label, P[3 * i] + 5, P[3 * i + 1] + dy);
     });
     ctx.globalAlpha = 1;
     const lines = layers.map((L) => {
@@ -188,6 +209,12 @@
       drawCurves();
     }
     state.draws += 1;
+  }
+
+  function hoverText(d) {
+    const m = d.L.markerOf.get(d.i);
+    const why = m === undefined ? "" : markerState(d.L, d.k, m).why;
+    return `${d.L.name}: ${d.L.labels[d.i]}` + (why ? ` — ${why}` : "");
   }
 
   // --- the timeline ---------------------------------------------------------------------
@@ -233,12 +260,16 @@
   // --- the curves -----------------------------------------------------------------------
   const curves = layers.flatMap((L, n) => L.curves.map((c) => ({...c, layer: n})));
   const names = [...new Set(curves.map((c) => c.name))];
-  function drawCurves() {
-    const c = plot.getContext("2d"), W = plot.width, H = plot.height;
+  // the curves drawn once per size into a picture of their own; each frame adds the cursor
+  const still = document.createElement("canvas");
+  const curveX = (t) => 60 + (plot.width - 70) * (t - time[0]) /
+    ((time[S.nFrames - 1] - time[0]) || 1);
+  function drawCurveImage() {
+    still.width = plot.width; still.height = plot.height;
+    const c = still.getContext("2d"), W = still.width, H = still.height;
     c.fillStyle = "#ffffff"; c.fillRect(0, 0, W, H);
     c.font = "12px sans-serif";
-    const t0 = time[0], t1 = time[S.nFrames - 1] || t0 + 1;
-    const h = H / Math.max(names.length, 1), left = 60;
+    const h = H / Math.max(names.length, 1);
     names.forEach((name, row) => {
       const mine = curves.filter((cv) => cv.name === name);
       let lo = Infinity, hi = -Infinity;
@@ -249,37 +280,44 @@
         }
       }
       if (!(hi > lo)) { hi = lo + 1; lo -= 1; }
-      const X = (t) => left + (W - left - 10) * (t - t0) / (t1 - t0);
       const Y = (v) => row * h + 16 + (h - 26) * (hi - v) / (hi - lo);
       c.fillStyle = "#202020";
-      c.fillText(`${name} (${mine[0].unit})`, left, row * h + 12);
+      c.fillText(`${name} (${mine[0].unit})`, 60, row * h + 12);
       c.fillText(hi.toPrecision(3), 2, Y(hi) + 4); c.fillText(lo.toPrecision(3), 2, Y(lo));
       for (const cv of [...mine].reverse()) {
         const base = cv.layer ? S.colors.overlay : "#1f5fbf";
         if (cv.sd) {
           c.fillStyle = base; c.globalAlpha = 0.18; c.beginPath();
-          for (let f = 0; f < cv.values.length; f++) c.lineTo(X(time[f]), Y(cv.values[f] + cv.sd[f]));
-          for (let f = cv.values.length - 1; f >= 0; f--) c.lineTo(X(time[f]), Y(cv.values[f] - cv.sd[f]));
+          for (let f = 0; f < cv.values.length; f++) c.lineTo(curveX(time[f]), Y(cv.values[f] + cv.sd[f]));
+          for (let f = cv.values.length - 1; f >= 0; f--) c.lineTo(curveX(time[f]), Y(cv.values[f] - cv.sd[f]));
           c.fill(); c.globalAlpha = 1;
         }
         c.lineWidth = 1.5;
-        for (let f = 1; f < cv.values.length; f++) {
-          c.strokeStyle = cv.trusted[f] && cv.trusted[f - 1] ? base : "#b8b8b8";
-          c.beginPath(); c.moveTo(X(time[f - 1]), Y(cv.values[f - 1]));
-          c.lineTo(X(time[f]), Y(cv.values[f])); c.stroke();
+        for (const trusted of [true, false]) {  // the untrusted stretches grey
+          c.strokeStyle = trusted ? base : "#b8b8b8"; c.beginPath();
+          for (let f = 1; f < cv.values.length; f++) {
+            if ((cv.trusted[f] === 1 && cv.trusted[f - 1] === 1) !== trusted) continue;
+            c.moveTo(curveX(time[f - 1]), Y(cv.values[f - 1]));
+            c.lineTo(curveX(time[f]), Y(cv.values[f]));
+          }
+          c.stroke();
         }
       }
-      const x = X(time[frames[state.k]]);
-      c.strokeStyle = "#000000"; c.lineWidth = 1;
-      c.beginPath(); c.moveTo(x, row * h + 14); c.lineTo(x, (row + 1) * h - 8); c.stroke();
     });
+  }
+  function drawCurves() {
+    const c = plot.getContext("2d");
+    c.drawImage(still, 0, 0);
+    const x = curveX(time[frames[state.k]]);
+    c.strokeStyle = "#000000"; c.lineWidth = 1;
+    c.beginPath(); c.moveTo(x, 14); c.lineTo(x, plot.height - 8); c.stroke();
   }
 
   // --- input ----------------------------------------------------------------------------
   function size() {
     canvas.width = canvas.clientWidth; canvas.height = canvas.clientHeight;
     strip.width = strip.clientWidth; plot.width = plot.clientWidth;
-    if (!S.modelView) flagStrip();
+    if (!S.modelView) { flagStrip(); drawCurveImage(); }
     draw();
   }
   let drag = null;
@@ -303,7 +341,7 @@
       if (dd < bestD) { best = d; bestD = dd; }
     }
     tip.hidden = !best;
-    if (best) { tip.textContent = best.text; tip.style.left = `${x + 14}px`; tip.style.top = `${y + 10}px`; }
+    if (best) { tip.textContent = hoverText(best); tip.style.left = `${x + 14}px`; tip.style.top = `${y + 10}px`; }
   });
   canvas.addEventListener("wheel", (e) => {
     e.preventDefault(); cam.distance *= Math.exp(e.deltaY * 0.001); draw();
@@ -332,8 +370,8 @@
       play(false); setFrame(k);
     });
     plot.addEventListener("click", (e) => {
-      const r = plot.getBoundingClientRect(), left = 60;
-      const t = time[0] + (e.clientX - r.left - left) / (r.width - left - 10) * (time[S.nFrames - 1] - time[0]);
+      const r = plot.getBoundingClientRect();
+      const t = time[0] + (e.clientX - r.left - 60) / (r.width - 70) * (time[S.nFrames - 1] - time[0]);
       let k = 0;
       while (k + 1 < frames.length && time[frames[k + 1]] <= t) k++;
       play(false); setFrame(k);
@@ -341,7 +379,7 @@
   }
   window.addEventListener("resize", size);
   window.fccgrbView = {state, setFrame, play, preset, project: (p) => project(p, canvas.width, canvas.height),
-    camera: cam, frames, time, layers, reasons};
+    camera: cam, frames, time, layers, reasons, hoverText};
   preset(S.camera);
   size();
 })();
