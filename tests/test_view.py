@@ -37,7 +37,15 @@ from fccgrb_cli.view.camera import PRESETS, Camera, framing, lab_axes, project
 from fccgrb_cli.view.runs import motion_scene
 from fccgrb_cli.view.scene import display_frames, model_scene
 from fccgrb_cli.view.skeleton import body_coordinates, pose_coordinates, skeleton
-from fccgrb_cli.view.styles import FLAGGED, OVERLAY, OVERLAY_ALPHA, STYLES, UNTRUSTED
+from fccgrb_cli.view.styles import (
+    BAND_ALPHA,
+    CURVE,
+    FLAGGED,
+    OVERLAY,
+    OVERLAY_ALPHA,
+    STYLES,
+    UNTRUSTED,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 FIVE_BAR = ROOT / "configs" / "models" / "five_bar.yaml"
@@ -82,6 +90,16 @@ def flagged(five_bar: Path) -> Path:
         ed[frame] = np.linalg.norm(markers[frame] - run["model_points"][frame], axis=1)
         run["markers_input"][...] = markers
         run["ed_input"][...] = ed
+    return path
+
+
+@pytest.fixture(scope="module")
+def smoothed(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The five-bar solved with the whole-trial smoother: every angle and moment with its
+    standard deviation."""
+    path = tmp_path_factory.mktemp("smooth") / "smooth.h5"
+    result = run_cli("solve", FIVE_BAR, TRIAL, "--perturb", 30, "--smooth", "auto", "-o", path)
+    assert result.exit_code == 0, result.output
     return path
 
 
@@ -207,6 +225,16 @@ def test_curves_are_the_files(five_bar: Path) -> None:
         np.testing.assert_allclose(moment.values, run["joint_moments"][:, k])
         np.testing.assert_array_equal(moment.trusted, run["moment_flags"][:, k] == 0)
     assert (angle.unit, moment.unit) == ("deg", "N·m")
+
+
+def test_bands_are_the_files_standard_deviations(smoothed: Path) -> None:
+    angle, moment = motion_scene(smoothed, curve="J2_v").layers[0].curves
+    with h5py.File(smoothed, "r") as h5:
+        run = h5["runs/nrm-wls-P30"]
+        k = [str(n) for n in run["theta"].attrs["names"]].index("J2_v")
+        np.testing.assert_allclose(angle.sd, np.degrees(run["uncertainty/theta_sd"][:, k]))
+        np.testing.assert_allclose(moment.sd, run["uncertainty/moments_sd"][:, k])
+    assert (angle.sd > 0).all() and (moment.sd > 0).all()
 
 
 @pytest.mark.parametrize("name", ["knee_flexion_r", "ankle_dorsiflexion_r"])  # signs + and −
@@ -450,6 +478,36 @@ def test_gait_page_in_a_browser(gait: Path, tmp_path: Path) -> None:
         _check_projection(browser, scene.axes, scene.layers[0].positions[200, :5])
         if SCREENSHOTS:
             Path(SCREENSHOTS, "view_gait.png").write_bytes(browser.screenshot())
+
+
+@needs_chromium
+def test_band_drawn_under_the_curve(smoothed: Path, five_bar: Path, tmp_path: Path) -> None:
+    """The curves' standard-deviation band is on the page's curve canvas (the curve's colour
+    at the band's transparency over white), and not on the page of a run without one. The
+    five-bar's own bands are under a pixel: the copy's moment has a standard deviation of 3 N·m
+    (a seventh of its range), as a noisier trial's would."""
+    wide = tmp_path / "wide.h5"
+    shutil.copyfile(smoothed, wide)
+    with h5py.File(wide, "r+") as h5:
+        run = h5["runs/nrm-wls-P30"]
+        k = [str(n) for n in run["theta"].attrs["names"]].index("J2_v")
+        sd = run["uncertainty/moments_sd"][()]
+        sd[:, k] = 3.0
+        run["uncertainty/moments_sd"][...] = sd
+    band = (np.array(_rgb(CURVE)) * BAND_ALPHA + 255 * (1 - BAND_ALPHA)).round().astype(int)
+    counts = []
+    with Browser() as browser:
+        for results in (wide, five_bar):
+            page = tmp_path / f"{results.stem}.html"
+            result = run_cli("view", results, "--run", "nrm-wls-P30", "--curve", "J2_v", "-o",
+                             page)
+            assert result.exit_code == 0, result.output
+            _opens_clean(browser, page)
+            x, y, w, h = (round(v) for v in browser.evaluate(
+                "(() => { const r = document.getElementById('curves').getBoundingClientRect();"
+                " return [r.left + scrollX, r.top + scrollY, r.width, r.height]; })()"))
+            counts.append(_count(_pixels(browser.screenshot())[y:y + h, x:x + w], band, 3))
+    assert counts[0] > 5000 and counts[1] < 500, counts
 
 
 @needs_chromium

@@ -15,6 +15,8 @@ import numpy as np
 from fccgrb_cli.view.camera import FOV_DEG, PRESETS, framing
 from fccgrb_cli.view.scene import FORCE_M_PER_N, Layer, Scene
 from fccgrb_cli.view.styles import (
+    BAND_ALPHA,
+    CURVE,
     FLAGGED,
     FLOOR,
     OVERLAY,
@@ -105,7 +107,8 @@ def scene_json(scene: Scene, camera: str) -> dict:
         "overlayKinds": sorted(OVERLAY_KINDS), "overlayWiden": OVERLAY_WIDEN,
         "overlayAlpha": OVERLAY_ALPHA,
         "colors": {"overlay": OVERLAY, "flagged": FLAGGED, "untrusted": UNTRUSTED,
-                   "floor": FLOOR, "vertical": VERTICAL},
+                   "floor": FLOOR, "vertical": VERTICAL, "curve": CURVE},
+        "bandAlpha": BAND_ALPHA,
         "layers": [_layer(layer) for layer in scene.layers],
     }
 

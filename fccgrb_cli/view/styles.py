@@ -30,3 +30,4 @@ VERTICAL = "#000000"
 # the kinds the second run draws (its frames' arrows and labels would hide the first run)
 OVERLAY_KINDS = frozenset({"segment", "axis", "gap", "force", "origin", "joint",
                            "model_point", "marker", "cop"})
+CURVE, BAND_ALPHA = "#1f5fbf", 0.18  # the first run's curves and their ±sd band

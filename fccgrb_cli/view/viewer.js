@@ -285,9 +285,9 @@
       c.fillText(`${name} (${mine[0].unit})`, 60, row * h + 12);
       c.fillText(hi.toPrecision(3), 2, Y(hi) + 4); c.fillText(lo.toPrecision(3), 2, Y(lo));
       for (const cv of [...mine].reverse()) {
-        const base = cv.layer ? S.colors.overlay : "#1f5fbf";
+        const base = cv.layer ? S.colors.overlay : S.colors.curve;
         if (cv.sd) {
-          c.fillStyle = base; c.globalAlpha = 0.18; c.beginPath();
+          c.fillStyle = base; c.globalAlpha = S.bandAlpha; c.beginPath();
           for (let f = 0; f < cv.values.length; f++) c.lineTo(curveX(time[f]), Y(cv.values[f] + cv.sd[f]));
           for (let f = cv.values.length - 1; f >= 0; f--) c.lineTo(curveX(time[f]), Y(cv.values[f] - cv.sd[f]));
           c.fill(); c.globalAlpha = 1;
