@@ -312,6 +312,26 @@ def test_still_svg_draws_the_projected_file_points(five_bar: Path, tmp_path: Pat
     assert "frame 123" in text and 'class="vertical"' in text
 
 
+def test_still_svg_colours_what_the_file_distrusts(flagged: Path, tmp_path: Path) -> None:
+    """Frame 60 (flagged): the first run's segments red; frame 120: the moved marker amber, the
+    missing one not drawn; frame 10: neither; the second run drawn translucent under it."""
+    pictures = {}
+    for frame in (10, 60, 120):
+        out = tmp_path / f"{frame}.svg"
+        result = run_cli("view", flagged, "--run", "nrm-wls-P30", "--run", "cno-sqp-P30",
+                         "--frame", frame, "-o", out)
+        assert result.exit_code == 0, result.output
+        pictures[frame] = out.read_text(encoding="utf-8")
+    red = f'class="segment" x1="[^"]*" y1="[^"]*" x2="[^"]*" y2="[^"]*" stroke="{FLAGGED}"'
+    amber = f'fill="{UNTRUSTED}"><title>([^<]*)</title>'
+    assert len(re.findall(red, pictures[60])) > 5 and not re.findall(red, pictures[10])
+    assert re.findall(amber, pictures[120]) == [MOVED[1]]
+    assert not re.findall(amber, pictures[10]) and not re.findall(amber, pictures[60])
+    assert pictures[10].index(f'<g opacity="{OVERLAY_ALPHA:g}">') < pictures[10].index(
+        '<g opacity="1">')  # the second run first, under the first
+    assert f'stroke="{OVERLAY}"' in pictures[10]
+
+
 @pytest.mark.parametrize("args, fragments", [
     (["-o", "{tmp}/x.png"], ["-o", ".html", "screenshot"]),
     (["--frame", 300, "-o", "{tmp}/x.svg"], ["--frame", "0 to 299"]),
