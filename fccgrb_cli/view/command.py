@@ -50,7 +50,9 @@ def view(source: str, output: str, runs: tuple[str, ...] = (), frame: int | None
         if runs or frame is not None or curve is not None:
             raise InputError(f"{source}: a model has no runs, frames or curves; --run, "
                              "--frame and --curve are for a results file")
-        scene = model_scene(_load_model(source))
+        from fccgrb_cli.model import load_model
+
+        scene = model_scene(load_model(source))
         k = 0
     elif kind in RESULTS_SUFFIXES:
         scene, k = _results_scene(source, runs, frame, curve, suffix)
@@ -60,12 +62,6 @@ def view(source: str, output: str, runs: tuple[str, ...] = (), frame: int | None
     with atomic_path(output) as tmp:
         Path(tmp).write_text(text, encoding="utf-8")
     return _summary(output, scene, len(text.encode("utf-8")))
-
-
-def _load_model(path: str):
-    from fccgrb_cli.model import load_model
-
-    return load_model(path)
 
 
 def _results_scene(source: str, runs: tuple[str, ...], frame: int | None, curve: str | None,
