@@ -359,6 +359,19 @@ def test_bad_sources_are_one_line(tmp_path: Path) -> None:
     assert sorted(p.name for p in tmp_path.iterdir()) == ["broken.h5"]
 
 
+def test_three_runs_need_a_choice(five_bar: Path, tmp_path: Path) -> None:
+    three = tmp_path / "three.h5"
+    shutil.copyfile(five_bar, three)
+    with h5py.File(three, "r+") as h5:
+        h5.copy(h5["runs/nrm-wls-P30"], h5["runs"], "again")
+    out = tmp_path / "x.html"
+    one_error_line(run_cli("view", three, "-o", out), "3 runs", "again", "--run")
+    assert not out.exists()
+    result = run_cli("view", three, "--run", "again", "--run", "cno-sqp-P30", "-o", out)
+    assert result.exit_code == 0, result.output
+    assert "again vs cno-sqp-P30" in result.output
+
+
 def test_an_existing_output_survives_an_error(five_bar: Path, tmp_path: Path) -> None:
     out = tmp_path / "motion.html"
     out.write_text("old", encoding="utf-8")
