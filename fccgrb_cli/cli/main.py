@@ -993,3 +993,28 @@ def export(results: str, fmt: str, convention: str, run_name: str | None, trial:
                    f"{run.name!r} are not trusted (exported with their values, marked)",
                    err=True)
     click.echo(f"wrote {target}: run {run.name!r}, {len(run.trusted)} frames, {fmt}")
+
+
+@main.command()
+@click.argument("source")
+@click.option("--run", "runs", multiple=True, metavar="NAME",
+              help="A run to draw; give two to overlay them (e.g. nrm-wls against cno-sqp) "
+                   "[default: the file's runs, when it holds one or two].")
+@click.option("--frame", type=int, default=None,
+              help="For an .svg output: the frame index of the still picture.")
+@click.option("--camera", type=click.Choice(["sagittal", "frontal", "transverse", "orbit"]),
+              default="orbit", show_default=True,
+              help="The camera the page opens on and the still is seen from.")
+@click.option("--curve", default=None, metavar="ANGLE",
+              help="The angle drawn under the motion with its joint moment [default: the "
+                   "first angle with a clinical sign, else the first].")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="The page (.html, one self-contained file) or a still picture (.svg).")
+@reports_input_errors
+def view(source: str, runs: tuple[str, ...], frame: int | None, camera: str,
+         curve: str | None, output: str) -> None:
+    """See a results file's runs move in 3D (the model, markers, plate forces, flags, a curve
+    on a timeline), or a model file in its initial pose, labelled."""
+    from fccgrb_cli.view.command import view as write_view
+
+    click.echo(write_view(source, output, runs, frame, camera, curve))
