@@ -29,6 +29,7 @@ SEED_MAX = 2**32 - 1  # numpy's seeds
 AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
 
 
+REPEATABLE = ("mapping", "plates")  # options given once per value on the command line
 _META = {"flag": None, "unit": "", "choices": (), "low": None, "low_open": False, "high": None,
          "sweep": None, "names": False, "cli": True, "metavar": None}
 
@@ -193,6 +194,18 @@ class SolveOptions:
                     "correction of the whole body's trajectory that trades the residual against "
                     "the markers' misfit; the run's dynamics are then the adjusted model's, the "
                     "first model's residual kept beside them (fccgrb_cli/dynamics/reduction.py).")
+    loads: str | None = _option(
+        None, metavar="LOADS.xml",
+        help="An OpenSim ExternalLoads file (each ExternalForce's applied_to_body and its "
+             "force, point and torque columns in the .mot/.sto it names) as the inverse "
+             "dynamics' external loads, in place of the trial's force plates; the times of "
+             "its data are the trial's clock (a TRC's Time column, a C3D's first frame).")
+    plates: tuple[str, ...] = _option(
+        (), flag="plate", names=True, metavar="N=BODY",
+        help="Force plate N of a C3D trial acts on BODY, as an OpenSim ExternalLoads file "
+             "names a body for each plate (repeatable or comma-separated: --plate 1=calcn_r "
+             "--plate 2=calcn_l); replaces the model's loads.force_plates, and plates left "
+             "out go to the model's contact bodies, if any, by proximity.")
     name: str | None = _option(
         None, help="Run name inside the results file [default: the method, then -truth, "
                    "-f<cutoff>Hz and -P<mm> where they apply, e.g. ad-f6Hz-P30].")
@@ -335,7 +348,7 @@ def click_options(command: Callable) -> Callable:
             kwargs["default"] = None
         elif _kind(f.name) is bool:
             kwargs |= {"is_flag": True, "default": False}
-        elif f.name == "mapping":
+        elif f.name in REPEATABLE:
             kwargs |= {"multiple": True}
         elif _kind(f.name) in (tuple, str):
             kwargs["default"] = None
@@ -356,6 +369,8 @@ def from_cli(values: Mapping[str, Any]) -> SolveOptions:
         value = values[f.name]
         if f.name == "mapping":
             value = _pairs(value)
+        elif f.name in REPEATABLE:
+            value = _coerce(f.name, ",".join(value or ()), f.metadata)
         elif isinstance(f.default, tuple):
             value = _coerce(f.name, value or "", f.metadata)
         out[f.name] = value
@@ -428,7 +443,8 @@ SWEEP_KEYS = tuple(f.metadata["sweep"] or f.name for f in fields(SolveOptions))
 
 
 def prepared(model: Model, options: SolveOptions) -> Model:
-    """The model as the options ask: every body in one form, only some markers tracked."""
+    """The model as the options ask: every body in one form, only some markers tracked, the
+    force plates on the bodies ``--plate`` names."""
     if options.form != "model":
         model = model.with_form(options.form)
     if options.track:
@@ -437,4 +453,8 @@ def prepared(model: Model, options: SolveOptions) -> Model:
             raise InputError(f"--track: expected marker names of {model.source} "
                              f"({', '.join(model.marker_labels)}), got {', '.join(unknown)}")
         model = model.with_tracked(options.track)
+    if options.plates:
+        from fccgrb_cli.opensim.plates import assigned
+
+        model = assigned(model, options.plates)
     return model
