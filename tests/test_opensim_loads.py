@@ -6,16 +6,21 @@ the joints against the power of the force and torque computed from the motion al
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from cli_helpers import one_error_line, run_cli
+
 import fccgrb_cli as fc
 from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.errors import InputError
+from fccgrb_cli.model.elements import PlateAssignment
 from fccgrb_cli.opensim.loads import external_loads, read_external_loads
 from fccgrb_cli.opensim.storage import read_storage, write_storage
+from fccgrb_cli.options import SolveOptions, prepared
 from fccgrb_cli.pipeline import points_along
 from fccgrb_cli.system import compile_system
 
@@ -215,3 +220,36 @@ def test_load_set_drives_the_inverse_dynamics(tmp_path):
 def _cross_matrix(a: np.ndarray) -> np.ndarray:
     """ã with ã b = a × b."""
     return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+def test_plate_assignment_replaces_the_models():
+    model = fc.load_model(PENDULUM)
+    options = SolveOptions.from_mapping({"plates": "2=link2, 1=link1"})
+    assert prepared(model, options).force_plates == (PlateAssignment(2, "link2"),
+                                                    PlateAssignment(1, "link1"))
+    for pairs, message in (("1=foot", "--plate: expected a body of the model (link1, link2), "
+                                      "got 'foot'"),
+                           ("1=link1,1=link2", "expected each plate assigned once, got plate 1"),
+                           ("0=link1", "expected a plate number 1, 2, … before '=', got '0'"),
+                           ("link1", "expected PLATE=BODY (e.g. 1=calcn_r), got 'link1'")):
+        with pytest.raises(InputError, match=re.escape(message)):
+            prepared(model, SolveOptions.from_mapping({"plates": pairs}))
+
+
+@pytest.mark.parametrize("args, fragments", [
+    (("--plate", "1=link1", "--plate", "3=hand"), ("--plate: expected a body of the model",
+                                                   "got 'hand'")),
+    (("--loads", "{bad}"), ("tip.xml: OpenSimDocument/ExternalLoads[name=loads]/objects/"
+                            "ExternalForce[name=Tip]/force_expressed_in_body: expected ground",)),
+    (("--loads", "{missing}"), ("nothing.xml: cannot read",)),
+])
+def test_cli_refuses_bad_loads_and_plates_writing_nothing(tmp_path, args, fragments):
+    time = np.arange(5) / 100.0
+    bad = _load_files(tmp_path, time, np.ones((5, 3)), np.zeros((5, 3)), np.zeros((5, 3)),
+                      frame="link1")
+    out = tmp_path / "out.h5"
+    args = [a.format(bad=bad, missing=tmp_path / "nothing.xml") for a in args]
+    result = run_cli("solve", PENDULUM, PENDULUM_TRIAL, *args, "-o", out)
+    one_error_line(result, *fragments)
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["tip.mot", "tip.xml"]
