@@ -129,6 +129,13 @@ class SolveOptions:
         help="Model marker name → trial label, where they differ (CLI: repeatable NAME=LABEL, "
              "comma-separated pairs, or a YAML file of NAME: LABEL lines); a label may be a "
              "virtual marker, mid(A,B) or mean(A,B,...) of trial labels.")
+    tasks: tuple[tuple[str, float], ...] = _option(
+        (), metavar="TASKS.xml",
+        help="An OpenSim IK task set (an IKTaskSet file, or an IK setup holding one): track "
+             "only the markers of its applied IKMarkerTasks of weight above 0, each weighted "
+             "by its task's weight times {tracking_weight} (OpenSim's weights are relative); "
+             "its IKCoordinateTasks need an OpenSim model and are not read. In a sweep or the "
+             "API: the file, or a list of [marker, weight] pairs.")
     # --- perturbation ----------------------------------------------------------------------
     perturb_mm: float = _option(
         0.0, flag="perturb", unit="mm", low=0.0, high=1000.0, sweep="level",
@@ -253,6 +260,8 @@ class SolveOptions:
 
 
 def _coerce(name: str, value: Any, meta: Mapping[str, Any]) -> Any:
+    if name == "tasks":
+        return _tasks(value)
     if name == "mapping" and isinstance(value, Mapping):
         return tuple((str(k), str(v)) for k, v in value.items())
     if name == "mapping" and isinstance(value, str):
@@ -264,6 +273,22 @@ def _coerce(name: str, value: Any, meta: Mapping[str, Any]) -> Any:
     if meta["names"] and isinstance(value, str):
         return tuple(part.strip() for part in value.split(",") if part.strip())
     return value
+
+
+def _tasks(value: Any) -> tuple[tuple[str, float], ...]:
+    """``--tasks``: an IK task set file read into (marker, weight) pairs, or the pairs."""
+    if isinstance(value, str):
+        if not value.strip():
+            return ()
+        from fccgrb_cli.opensim.setups import read_task_set
+
+        return tuple(read_task_set(value.strip()).marker_weights().items())
+    if isinstance(value, (list, tuple)) and all(
+            isinstance(pair, (list, tuple)) and len(pair) == 2 and isinstance(pair[0], str)
+            and in_range(pair[1], float, 0.0, True, 1e12) for pair in value):
+        return tuple((name, float(weight)) for name, weight in value)
+    raise InputError(f"tasks: expected an IK task set file or [marker, weight] pairs with "
+                     f"weights above 0, got {shown(value)}")
 
 
 def _kind(name: str) -> type:
@@ -442,9 +467,23 @@ def label_map_file(path: str) -> list[tuple[str, str]]:
 SWEEP_KEYS = tuple(f.metadata["sweep"] or f.name for f in fields(SolveOptions))
 
 
+def _weighted(model: Model, options: SolveOptions) -> Model:
+    """The model tracking the markers ``--tasks`` weighs, each point's weight that weight times
+    ``--tracking-weight``."""
+    weights = dict(options.tasks)
+    keep = tuple(name for name in model.marker_labels if name in weights)
+    if not keep:
+        raise InputError(f"--tasks: expected marker tasks naming markers of {model.source} "
+                         f"({', '.join(model.marker_labels)[:200]}), got none of them")
+    model = model.with_tracked(keep)
+    points = tuple(replace(tp, weight=options.tracking_weight * weights[tp.marker])
+                   for tp in model.tracked_points)
+    return replace(model, tracked_points=points)
+
+
 def prepared(model: Model, options: SolveOptions) -> Model:
-    """The model as the options ask: every body in one form, only some markers tracked, the
-    force plates on the bodies ``--plate`` names."""
+    """The model as the options ask: every body in one form, only some markers tracked (and
+    weighted, ``--tasks``), the force plates on the bodies ``--plate`` names."""
     if options.form != "model":
         model = model.with_form(options.form)
     if options.track:
@@ -453,6 +492,8 @@ def prepared(model: Model, options: SolveOptions) -> Model:
             raise InputError(f"--track: expected marker names of {model.source} "
                              f"({', '.join(model.marker_labels)}), got {', '.join(unknown)}")
         model = model.with_tracked(options.track)
+    if options.tasks:
+        model = _weighted(model, options)
     if options.plates:
         from fccgrb_cli.opensim.plates import assigned
 

@@ -166,3 +166,54 @@ def test_doctype_refused(tmp_path):
                     "<OpenSimDocument><InverseKinematicsTool/></OpenSimDocument>")
     with pytest.raises(InputError, match="refused: a DOCTYPE declaration"):
         read_ik_setup(path)
+
+
+TASKS = """<IKTaskSet name="t"><objects>
+  <IKMarkerTask name="P1"><apply>true</apply><weight>2</weight></IKMarkerTask>
+  <IKMarkerTask name="P2"><apply>false</apply><weight>1</weight></IKMarkerTask>
+  <IKMarkerTask name="P3"><apply>true</apply><weight>0.5</weight></IKMarkerTask>
+  <IKMarkerTask name="Head"><apply>true</apply><weight>1</weight></IKMarkerTask>
+</objects></IKTaskSet>"""
+PENDULUM = Path(__file__).resolve().parents[1] / "configs" / "models" / "pendulum.yaml"
+PENDULUM_TRIAL = Path(__file__).resolve().parents[1] / "sample_data" / "pendulum.c3d"
+
+
+def test_task_weights_reach_the_tracked_points(tmp_path):
+    from fccgrb_cli.model import load_model
+    from fccgrb_cli.options import SolveOptions, prepared
+
+    path = tmp_path / "tasks.xml"
+    path.write_text(TASKS)
+    options = SolveOptions.from_mapping({"tasks": str(path), "tracking_weight": 0.01})
+    assert options.tasks == (("P1", 2.0), ("P3", 0.5), ("Head", 1.0))
+    assert SolveOptions.from_json(options.to_json()) == options  # kept in the results as pairs
+    model = prepared(load_model(PENDULUM), options)
+    assert [(tp.marker, tp.weight) for tp in model.tracked_points] == [("P1", 0.02),
+                                                                       ("P3", 0.005)]
+    with pytest.raises(InputError, match="--tasks: expected marker tasks naming markers of"):
+        prepared(load_model(PENDULUM), SolveOptions(tasks=(("Head", 1.0),)))
+    with pytest.raises(InputError, match=r"tasks: expected an IK task set file or \[marker, "
+                                         r"weight\] pairs with weights above 0"):
+        SolveOptions.from_mapping({"tasks": [["P1", -1]]})
+
+
+def test_cli_solves_with_a_task_set(tmp_path):
+    from cli_helpers import one_error_line, run_cli
+
+    import fccgrb_cli as fc
+
+    path = tmp_path / "tasks.xml"
+    path.write_text(TASKS)
+    out = tmp_path / "out.h5"
+    result = run_cli("solve", PENDULUM, PENDULUM_TRIAL, "--tasks", path, "--no-dynamics",
+                     "-o", out)
+    assert result.exit_code == 0, result.stderr
+    (run,) = fc.read_results(out).values()
+    assert run.labels == ("P1", "P3")
+    broken = tmp_path / "broken.xml"
+    broken.write_text(TASKS.replace("<weight>2</weight>", "<weight>-2</weight>"))
+    one_error_line(run_cli("solve", PENDULUM, PENDULUM_TRIAL, "--tasks", broken, "-o",
+                           tmp_path / "no.h5"),
+                   "broken.xml: IKTaskSet[name=t]/objects/IKMarkerTask[name=P1]/weight: "
+                   "expected a weight of at least 0, got -2")
+    assert not (tmp_path / "no.h5").exists()
