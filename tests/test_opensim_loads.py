@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from cli_helpers import one_error_line, run_cli
 
 import fccgrb_cli as fc
@@ -241,7 +240,7 @@ def test_plate_assignment_replaces_the_models():
                                                    "got 'hand'")),
     (("--loads", "{bad}"), ("tip.xml: OpenSimDocument/ExternalLoads[name=loads]/objects/"
                             "ExternalForce[name=Tip]/force_expressed_in_body: expected ground",)),
-    (("--loads", "{missing}"), ("nothing.xml: cannot read",)),
+    (("--loads", "{missing}"), ("nothing.xml: XML file not found",)),
 ])
 def test_cli_refuses_bad_loads_and_plates_writing_nothing(tmp_path, args, fragments):
     time = np.arange(5) / 100.0

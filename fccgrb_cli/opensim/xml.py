@@ -16,6 +16,7 @@ from pathlib import Path
 from xml.parsers.expat import ExpatError, ParserCreate
 
 from fccgrb_cli.errors import InputError
+from fccgrb_cli.inputs import read_bytes
 
 __all__ = ["MAX_BYTES", "MAX_DEPTH", "MAX_MAGNITUDE", "element_path", "number", "numbers",
            "parse", "parse_bytes"]
@@ -35,19 +36,10 @@ def parse(path: str | Path) -> ET.Element:
     Raises
     ------
     InputError
-        Naming the file: unreadable, too large, not well formed, a DOCTYPE (entities), or nesting
-        deeper than ``MAX_DEPTH``.
+        Naming the file: missing, not a regular file (a FIFO would block the read), too large,
+        not well formed, a DOCTYPE (entities), or nesting deeper than ``MAX_DEPTH``.
     """
-    path = Path(path)
-    try:
-        size = path.stat().st_size
-        if size > MAX_BYTES:
-            raise InputError(f"{path}: {size} bytes, more than the {MAX_BYTES} an XML input may "
-                             f"have")
-        data = path.read_bytes()
-    except OSError as error:
-        raise InputError(f"{path}: cannot read ({error.strerror or error})") from None
-    return parse_bytes(data, str(path))
+    return parse_bytes(read_bytes(path, "XML file", MAX_BYTES), str(path))
 
 
 def parse_bytes(data: bytes, name: str) -> ET.Element:
