@@ -252,3 +252,19 @@ def test_cli_refuses_bad_loads_and_plates_writing_nothing(tmp_path, args, fragme
     one_error_line(result, *fragments)
     assert not out.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["tip.mot", "tip.xml"]
+
+
+def test_loads_are_taken_at_the_trials_clock(tmp_path):
+    """A TRC starting at 0.4 s reads the load file's rows at 0.4 s onwards: a force whose x is
+    the time itself comes out equal to each frame's time on the file's clock."""
+    from fccgrb_cli.io.trial import Trial
+    from fccgrb_cli.opensim.loads import trial_loads
+
+    model = fc.load_model(PENDULUM)
+    trial = Trial("walk.trc", ("P1",), np.zeros((30, 1, 3)), 60.0, start=0.4)
+    time = np.arange(0, 241) / 120.0  # 0–2 s at 120 Hz
+    force = np.column_stack([time, np.ones_like(time), np.zeros_like(time)])
+    path = _load_files(tmp_path, time, force, np.zeros((241, 3)), np.zeros((241, 3)))
+    (load,), notes = trial_loads(path, model, trial)
+    np.testing.assert_allclose(load.force[:, 0], 0.4 + np.arange(30) / 60.0, rtol=0, atol=1e-12)
+    assert notes[0].startswith(f"external loads from {path} (tip.mot): Tip → link2")
