@@ -152,3 +152,29 @@ def test_an_offset_pulling_the_subject_is_no_contact():
     loaded = np.abs(plate.force).any(axis=1)
     assert (plate.force[loaded, 2] >= THRESHOLD).all()
     assert (plate.force[~loaded] == 0).all()
+
+
+@pytest.mark.parametrize("trial", TRIALS)
+def test_frames_are_the_wrench_averaged_over_the_frames_window(trial):
+    """Each loaded frame's centre of pressure and free moment are those of the force and the
+    moment about the plate's centre averaged over the frame's window (samples 8 j − 4 … 8 j + 4,
+    the ends at half weight), by the plate's own formulas: for the surface z = 0, p − o =
+    (−M_y / f_z, M_x / f_z, 0) and τ = M_z − ((p − o) × f)_z."""
+    found = plate_file(DATA / f"{trial}.c3d")
+    for plate, raw in zip(_plates(trial), found.plates, strict=True):
+        force, cop, free = plate_samples(raw)
+        centre = plate.corners.mean(axis=0)
+        assert np.allclose(cop[:, 2], centre[2]) and np.allclose(plate.corners[:, 2], centre[2])
+        moment = np.cross(cop - centre, force) + free
+        weight = np.r_[0.5, np.ones(7), 0.5]
+        loaded = np.flatnonzero(np.abs(plate.force).any(axis=1))
+        loaded = loaded[(loaded > 0) & (loaded < len(plate.force) - 1)]
+        for j in loaded:
+            window = slice(8 * j - 4, 8 * j + 5)
+            f = weight @ force[window] / weight.sum()
+            m = weight @ moment[window] / weight.sum()
+            arm = np.array([-m[1] / f[2], m[0] / f[2], 0.0])
+            np.testing.assert_allclose(plate.force[j], f, rtol=1e-12, atol=1e-9)
+            np.testing.assert_allclose(plate.cop[j] - centre, arm, rtol=0, atol=1e-9)
+            np.testing.assert_allclose(plate.free_moment[j], [0, 0, m[2] - np.cross(arm, f)[2]],
+                                       rtol=0, atol=1e-9)
