@@ -217,3 +217,16 @@ def test_cli_solves_with_a_task_set(tmp_path):
                    "broken.xml: IKTaskSet[name=t]/objects/IKMarkerTask[name=P1]/weight: "
                    "expected a weight of at least 0, got -2")
     assert not (tmp_path / "no.h5").exists()
+
+
+@pytest.mark.parametrize("cutoff, expected", [("-1", None), ("-1.0", None), ("", None),
+                                              ("6", 6.0), ("12.5", 12.5)])
+def test_id_cutoff_negative_is_no_filter(tmp_path, cutoff, expected):
+    path = tmp_path / "id.xml"
+    path.write_text("<OpenSimDocument><InverseDynamicsTool name='x'>"
+                    f"<lowpass_cutoff_frequency_for_coordinates>{cutoff}"
+                    "</lowpass_cutoff_frequency_for_coordinates><coordinates_in_degrees>false"
+                    "</coordinates_in_degrees></InverseDynamicsTool></OpenSimDocument>")
+    setup = read_id_setup(path)
+    assert setup.lowpass_cutoff == expected and setup.coordinates_in_degrees is False
+    assert setup.time_range is None and setup.external_loads_file is None
