@@ -148,6 +148,11 @@ HOSTILE = {
     "no datafile": ({"datafile": ""}, "ExternalLoads[name=loads]/datafile: expected the "
                                       "storage file"),
     "missing datafile": ({"datafile": "none.mot"}, "none.mot: storage file not found"),
+    "name with a slash": ({"more": "<ExternalForce name='a/b'/>"},
+                          "ExternalForce[name=a/b]: the name='…' attribute: expected a name "
+                          "without '/'"),
+    "no name": ({"more": "<ExternalForce><applied_to_body>B</applied_to_body></ExternalForce>"},
+                "objects/ExternalForce: the name='…' attribute: expected a non-empty name"),
     "flag": ({"more": "<ExternalForce name='B'><appliesForce>sometimes</appliesForce>"
                       "</ExternalForce>"}, "appliesForce: expected true or false"),
 }

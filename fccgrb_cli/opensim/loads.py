@@ -25,6 +25,7 @@ import numpy as np
 
 from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.errors import InputError
+from fccgrb_cli.inputs import check_name
 from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.model import Model
 from fccgrb_cli.opensim.storage import Storage, read_storage
@@ -231,6 +232,7 @@ def _force(element: ET.Element, where: str, source: str) -> ExternalForce | None
         not _flag(element, "isDisabled", False, where, source)
     if not applies:
         return None
+    name = check_name(element.get("name") or "", f"{source}: {where}: the name='…' attribute")
 
     def text(tag: str, default: str = "") -> str:
         return (element.findtext(tag) or "").strip() or default
@@ -239,7 +241,7 @@ def _force(element: ET.Element, where: str, source: str) -> ExternalForce | None
     if not body:
         raise InputError(f"{source}: {where}/applied_to_body: expected the name of the body "
                          "the force acts on, got none")
-    force = ExternalForce(element.get("name") or "", body,
+    force = ExternalForce(name, body,
                           text("force_expressed_in_body", GROUND),
                           text("point_expressed_in_body", GROUND), text("force_identifier"),
                           text("point_identifier"), text("torque_identifier"),
@@ -294,6 +296,6 @@ def trial_loads(path: str | Path, model: Model, trial: Trial
     loads = read_external_loads(path)
     time = trial.start + trial.time
     out = external_loads(loads, time, [body.name for body in model.bodies])
-    said = ", ".join(f"{force.name or 'force'} → {force.body}" for force in loads.forces)
+    said = ", ".join(f"{force.name} → {force.body}" for force in loads.forces)
     return out, [f"external loads from {path} ({loads.datafile.name}): {said}",
                  *loads.data.notes]
