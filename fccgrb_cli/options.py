@@ -220,6 +220,9 @@ class SolveOptions:
     def __post_init__(self) -> None:
         for f in fields(self):
             _check(f.name, getattr(self, f.name), f.metadata)
+        if self.loads is not None and self.plates:
+            raise InputError("plates: expected the trial's plates assigned or an OpenSim load "
+                             "set (--loads) in their place, got both")
 
     @property
     def perturb_level_m(self) -> float:

@@ -246,6 +246,8 @@ def test_plate_assignment_replaces_the_models():
     (("--loads", "{bad}"), ("tip.xml: OpenSimDocument/ExternalLoads[name=loads]/objects/"
                             "ExternalForce[name=Tip]/force_expressed_in_body: expected ground",)),
     (("--loads", "{missing}"), ("nothing.xml: XML file not found",)),
+    (("--loads", "{bad}", "--plate", "1=link1"), ("--plate: expected the trial's plates "
+                                                  "assigned or an OpenSim load set",)),
 ])
 def test_cli_refuses_bad_loads_and_plates_writing_nothing(tmp_path, args, fragments):
     time = np.arange(5) / 100.0
