@@ -9,7 +9,8 @@ SIMM and OpenSim 1–3 files state ``name``, ``datarows``, ``datacolumns`` and `
 A file is refused in one line naming it and the line, row or column when it has no
 ``endheader``, a header count or flag that is not one, a row of a length other than the names
 line's, a row count other than the header's, a number that is not finite or beyond
-``MAX_MAGNITUDE``, a time that does not increase, or more than ``MAX_BYTES``. Time steps that
+``MAX_MAGNITUDE``, a time that does not increase, or more than ``MAX_BYTES`` (read whole, at
+about three times its size in memory). Time steps that
 are not uniform are accepted and said in ``Storage.notes`` (OpenSim's resampled outputs end on
 a shorter last step)."""
 
@@ -30,7 +31,8 @@ from fccgrb_cli.io.atomic import atomic_path
 __all__ = ["MAX_BYTES", "MAX_HEADER_LINES", "MAX_MAGNITUDE", "Storage", "read_storage",
            "storage_text", "write_storage"]
 
-MAX_BYTES = 1 << 30          # a 10-minute, 2000 Hz table of 30 columns is ~0.7 GB
+MAX_BYTES = 256 << 20        # a 10-minute, 1000 Hz table of 19 columns is ~0.15 GB
+BLOCK = 20_000               # rows parsed at a time
 MAX_HEADER_LINES = 1000      # OpenSim's headers are a dozen lines
 MAX_MAGNITUDE = 1e12         # as the XML readers' numbers
 UNIFORM = 0.05               # of a step: times farther from a uniform grid are not uniform
@@ -96,13 +98,12 @@ def read_storage(path: str | Path, missing: bool = False) -> Storage:
         raise InputError(f"{source}: expected a line of column names after endheader "
                          f"(line {end + 1}), got the end of the file")
     names = _names(lines[names_at], names_at + 1, source)
-    rows = [(k + 1, line) for k, line in enumerate(lines[names_at + 1:], start=names_at + 1)
-            if line.strip()]
-    table = _table(rows, len(names), source, missing)
+    table = _table(lines[names_at + 1:], names_at + 2, len(names), source, missing)
+    del lines, text
     counts = _counts(header, source)
-    if "rows" in counts and counts["rows"] != len(rows):
+    if "rows" in counts and counts["rows"] != len(table):
         raise InputError(f"{source}: header {counts['rows key']}: expected the number of data "
-                         f"rows, {len(rows)}, got {counts['rows']}")
+                         f"rows, {len(table)}, got {counts['rows']}")
     if "columns" in counts and counts["columns"] != len(names):
         raise InputError(f"{source}: header {counts['columns key']}: expected the number of "
                          f"columns with time, {len(names)}, got {counts['columns']}")
@@ -185,21 +186,32 @@ def _names(line: str, number: int, source: str) -> list[str]:
     return names
 
 
-def _table(rows: list[tuple[int, str]], width: int, source: str,
+def _table(lines: list[str], first: int, width: int, source: str,
            missing: bool) -> np.ndarray:
-    """The rows' numbers (rows × width), each row ``width`` long, finite (or NaN when
-    ``missing``) and bounded."""
-    if not rows:
+    """The numbers of the non-blank ``lines`` (the ``first`` being line ``first`` of the file)
+    as rows × width, each row ``width`` long, finite (or NaN when ``missing``) and bounded;
+    read ``BLOCK`` lines at a time, so that the words of a large file are never all held."""
+    blocks = []
+    for start in range(0, len(lines), BLOCK):
+        numbered = [(first + k, line) for k, line in
+                    enumerate(lines[start:start + BLOCK], start=start) if line.strip()]
+        if numbered:
+            blocks.append(_block(numbered, width, source, missing))
+    if not blocks:
         raise InputError(f"{source}: expected at least one data row after the column names, "
                          "got none")
+    return np.vstack(blocks)
+
+
+def _block(rows: list[tuple[int, str]], width: int, source: str,
+           missing: bool) -> np.ndarray:
     words = [line.split() for _, line in rows]
     for (number, _), row in zip(rows, words, strict=True):
         if len(row) != width:
             raise InputError(f"{source}: line {number}: expected {width} numbers as the "
                              f"column names, got {len(row)}")
-    flat = [w for row in words for w in row]
     try:
-        table = np.array(flat, dtype=float).reshape(len(rows), width)
+        table = np.array([w for row in words for w in row], dtype=float).reshape(-1, width)
     except ValueError:
         for (number, _), row in zip(rows, words, strict=True):
             for column, word in enumerate(row):

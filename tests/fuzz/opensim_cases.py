@@ -131,7 +131,7 @@ def storage_cases() -> Iterator[Case]:
             ("missing-columns", storage().replace("f_tz", "g_tz")),
             ("too-short", storage(rows=20))):
         yield _loads(f"storage-{name}", k, ("f.mot", "L.xml"), xml, write("f.mot", text))
-    yield _loads("storage-huge", k, ("f.mot",), xml, sparse("f.mot", (1 << 30) + 1))
+    yield _loads("storage-huge", k, ("f.mot",), xml, sparse("f.mot", (256 << 20) + 1))
     yield _loads("storage-fifo", k, ("f.mot",), xml, fifo("f.mot"))
     yield Case(k, "storage-good-is-valid", (
         Step((*SOLVE, "--loads", "L.xml", "-o", "n.h5"), "ok", outputs=("n.h5",)),),
