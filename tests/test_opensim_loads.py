@@ -12,15 +12,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 from cli_helpers import one_error_line, run_cli
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.pipeline.options import SolveOptions, prepared
+from fccgrb_cli.pipeline.solve import points_along
 
 import fccgrb_cli as fc
 from fccgrb_cli.dynamics.loads import ExternalLoad
-from fccgrb_cli.errors import InputError
 from fccgrb_cli.model.elements import PlateAssignment
 from fccgrb_cli.opensim.loads import external_loads, read_external_loads
 from fccgrb_cli.opensim.storage import read_storage, write_storage
-from fccgrb_cli.options import SolveOptions, prepared
-from fccgrb_cli.pipeline import points_along
 from fccgrb_cli.system import compile_system
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -264,7 +264,8 @@ def test_cli_refuses_bad_loads_and_plates_writing_nothing(tmp_path, args, fragme
 def test_loads_are_taken_at_the_trials_clock(tmp_path):
     """A TRC starting at 0.4 s reads the load file's rows at 0.4 s onwards: a force whose x is
     the time itself comes out equal to each frame's time on the file's clock."""
-    from fccgrb_cli.io.trial import Trial
+    from fccgrb_cli.trial.record import Trial
+
     from fccgrb_cli.opensim.loads import trial_loads
 
     model = fc.load_model(PENDULUM)

@@ -22,9 +22,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fccgrb_cli.trial.forceplates import plate_file, plate_samples, read_force_plates
+from fccgrb_cli.trial.record import read_trial
 
-from fccgrb_cli.io.forceplates import plate_file, plate_samples, read_force_plates
-from fccgrb_cli.io.trial import read_trial
 from fccgrb_cli.opensim.storage import read_storage
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "opensim" / "c3d_walking"

@@ -7,8 +7,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from fccgrb_cli.core.errors import InputError
 
-from fccgrb_cli.errors import InputError
 from fccgrb_cli.opensim.setups import (
     CoordinateTask,
     MarkerTask,
@@ -179,8 +179,9 @@ PENDULUM_TRIAL = Path(__file__).resolve().parents[1] / "sample_data" / "pendulum
 
 
 def test_task_weights_reach_the_tracked_points(tmp_path):
+    from fccgrb_cli.pipeline.options import SolveOptions, prepared
+
     from fccgrb_cli.model import load_model
-    from fccgrb_cli.options import SolveOptions, prepared
 
     path = tmp_path / "tasks.xml"
     path.write_text(TASKS)

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fccgrb_cli.core.errors import InputError
 
-from fccgrb_cli.errors import InputError
 from fccgrb_cli.opensim import storage
 from fccgrb_cli.opensim.storage import read_storage, storage_text, write_storage
 

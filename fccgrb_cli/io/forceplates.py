@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.errors import InputError
 
 _LENGTH = {"mm": 1e-3, "m": 1.0, "cm": 1e-2}
 _MOMENT = {"Nmm": 1e-3, "Nm": 1.0, "N.mm": 1e-3, "N.m": 1.0}

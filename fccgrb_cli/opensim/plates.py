@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import replace
 
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model import Model
 from fccgrb_cli.model.elements import PlateAssignment
 

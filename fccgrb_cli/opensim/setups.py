@@ -15,7 +15,7 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.opensim.xml import MAX_MAGNITUDE, element_path, number, numbers, parse
 
 __all__ = ["CoordinateTask", "IDSetup", "IKSetup", "MarkerTask", "TaskSet", "read_id_setup",

@@ -24,9 +24,9 @@ from types import MappingProxyType
 
 import numpy as np
 
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.inputs import decode, read_bytes
-from fccgrb_cli.io.atomic import atomic_path
+from fccgrb_cli.core.atomic import atomic_path
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.core.inputs import decode, read_bytes
 
 __all__ = ["MAX_BYTES", "MAX_HEADER_LINES", "MAX_MAGNITUDE", "Storage", "read_storage",
            "storage_text", "write_storage"]

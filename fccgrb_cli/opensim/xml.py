@@ -15,8 +15,8 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from xml.parsers.expat import ExpatError, ParserCreate
 
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.inputs import read_bytes
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.core.inputs import read_bytes
 
 __all__ = ["MAX_BYTES", "MAX_DEPTH", "MAX_MAGNITUDE", "element_path", "number", "numbers",
            "parse", "parse_bytes"]
