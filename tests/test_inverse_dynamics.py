@@ -381,8 +381,14 @@ def test_qualisys_force_plates_are_plausible() -> None:
             assert np.isfinite(getattr(plate, key)).all()
         # metres: the file's FORCE_PLATFORM:CORNERS are in mm
         assert np.allclose(plate.corners, corners_mm[:, :, plate.number - 1].T * 1e-3)
-        # N, and 10 analog samples (2000 Hz) averaged per frame (200 Hz)
-        block = np.asarray(raw["force"], float).reshape(3, 340, 10).mean(axis=2).T
+        # N, and 10 analog samples (2000 Hz) per frame (200 Hz) averaged over a window centred
+        # on the frame's own sample 10 j: samples 10 j − 5 … 10 j + 5, the two ends at half weight
+        samples = np.asarray(raw["force"], float).T
+        padded = np.vstack([np.full((5, 3), np.nan), samples, np.full((5, 3), np.nan)])
+        weight = np.r_[0.5, np.ones(9), 0.5]
+        block = np.array([np.nansum(weight[:, None] * padded[10 * j:10 * j + 11], axis=0)
+                          / weight[np.isfinite(padded[10 * j:10 * j + 11, 0])].sum()
+                          for j in range(340)])
         loaded = np.abs(plate.force).sum(axis=1) > 0
         assert np.allclose(plate.force[loaded], block[loaded])
         assert (np.abs(block[~loaded, 2]) < 20.0).all()  # zero below the 20 N threshold

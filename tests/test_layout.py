@@ -14,7 +14,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "fccgrb_cli"
 MAX_PARAMETERS = 8
 
 # Lowest first: a package may import its own modules and those of the packages before it.
-LAYERS = ("core", "model", "system", "signals", "trial", "opensim", "solvers", "dynamics",
+LAYERS = ("core", "model", "system", "signals", "trial", "solvers", "dynamics", "opensim",
           "anatomy", "plugin_gait", "gait", "pipeline", "results", "batch", "presentation", "view",
           "cli")
 # The public entry points, the only modules at the top: above every layer.

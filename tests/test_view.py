@@ -560,7 +560,7 @@ def test_model_page_in_a_browser(tmp_path: Path) -> None:
 
 
 def test_presets_are_the_cli_choices() -> None:
-    from fccgrb_cli.cli import view
+    from fccgrb_cli.cli.main import view
 
     choices = next(p for p in view.params if p.name == "camera").type.choices
     assert list(choices) == list(PRESETS)

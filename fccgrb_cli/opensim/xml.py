@@ -3,7 +3,9 @@
 OpenSim's models, external loads and setups are XML written by anyone. A document is refused, in
 one line naming the file, when it declares a DOCTYPE (entity expansion — "billion laughs" — and
 external entities both need one; OpenSim never writes one), nests deeper than ``MAX_DEPTH``, is
-larger than ``MAX_BYTES`` or is not well formed. Numbers are read by ``number``, which refuses
+larger than ``MAX_BYTES`` or is not well formed up to the end of its root element (what follows
+that end is not read, as OpenSim's parser does not: opensim-core's ``gait2354_IK_Tasks.xml``
+closes an ``OpenSimDocument`` it never opened). Numbers are read by ``number``, which refuses
 what is not finite or beyond ``MAX_MAGNITUDE``."""
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from pathlib import Path
 from xml.parsers.expat import ExpatError, ParserCreate
 
 from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.core.inputs import read_bytes
 
 __all__ = ["MAX_BYTES", "MAX_DEPTH", "MAX_MAGNITUDE", "element_path", "number", "numbers",
            "parse", "parse_bytes"]
@@ -33,24 +36,15 @@ def parse(path: str | Path) -> ET.Element:
     Raises
     ------
     InputError
-        Naming the file: unreadable, too large, not well formed, a DOCTYPE (entities), or nesting
-        deeper than ``MAX_DEPTH``.
+        Naming the file: missing, not a regular file (a FIFO would block the read), too large,
+        not well formed, a DOCTYPE (entities), or nesting deeper than ``MAX_DEPTH``.
     """
-    path = Path(path)
-    try:
-        size = path.stat().st_size
-        if size > MAX_BYTES:
-            raise InputError(f"{path}: {size} bytes, more than the {MAX_BYTES} an XML input may "
-                             f"have")
-        data = path.read_bytes()
-    except OSError as error:
-        raise InputError(f"{path}: cannot read ({error.strerror or error})") from None
-    return parse_bytes(data, str(path))
+    return parse_bytes(read_bytes(path, "XML file", MAX_BYTES), str(path))
 
 
 def parse_bytes(data: bytes, name: str) -> ET.Element:
     """The root element of the XML document ``data``; ``name`` names it in errors."""
-    depth = 0
+    depth, closed = 0, False
 
     def start(tag, attrs):
         nonlocal depth
@@ -60,9 +54,10 @@ def parse_bytes(data: bytes, name: str) -> ET.Element:
         builder.start(tag, attrs)
 
     def end(tag):
-        nonlocal depth
+        nonlocal depth, closed
         depth -= 1
         builder.end(tag)
+        closed = depth == 0
 
     def doctype(*_):
         raise _Refused("a DOCTYPE declaration (entities are not accepted)")
@@ -82,7 +77,9 @@ def parse_bytes(data: bytes, name: str) -> ET.Element:
     except _Refused as why:
         raise InputError(f"{name}: refused: {why}") from None
     except ExpatError as error:
-        raise InputError(f"{name}: not well-formed XML ({error})") from None
+        if not closed:
+            raise InputError(f"{name}: not well-formed XML ({error})") from None
+        root = builder.close()  # what follows the root element is not read (as OpenSim)
     return root
 
 

@@ -29,6 +29,7 @@ WORKERS_MAX = max(8, 4 * (os.cpu_count() or 1))
 SEED_MAX = 2**32 - 1  # numpy's seeds
 
 
+REPEATABLE = ("mapping", "plates")  # options given once per value on the command line
 _META = {"flag": None, "unit": "", "choices": (), "low": None, "low_open": False, "high": None,
          "sweep": None, "names": False, "cli": True, "metavar": None}
 
@@ -134,6 +135,13 @@ class SolveOptions:
         help="Model marker name → trial label, where they differ (CLI: repeatable NAME=LABEL, "
              "comma-separated pairs, or a YAML file of NAME: LABEL lines); a label may be a "
              "virtual marker, mid(A,B) or mean(A,B,...) of trial labels.")
+    tasks: tuple[tuple[str, float], ...] = _option(
+        (), metavar="TASKS.xml",
+        help="An OpenSim IK task set (an IKTaskSet file, or an IK setup holding one): track "
+             "only the markers of its applied IKMarkerTasks of weight above 0, each weighted "
+             "by its task's weight times {tracking_weight} (OpenSim's weights are relative); "
+             "its IKCoordinateTasks need an OpenSim model and are not read. In a sweep or the "
+             "API: the file, or a list of [marker, weight] pairs.")
     # --- perturbation ----------------------------------------------------------------------
     perturb_mm: float = _option(
         0.0, flag="perturb", unit="mm", low=0.0, high=1000.0, sweep="level",
@@ -199,6 +207,18 @@ class SolveOptions:
                     "correction of the whole body's trajectory that trades the residual against "
                     "the markers' misfit; the run's dynamics are then the adjusted model's, the "
                     "first model's residual kept beside them (fccgrb_cli/dynamics/reduction.py).")
+    loads: str | None = _option(
+        None, metavar="LOADS.xml",
+        help="An OpenSim ExternalLoads file (each ExternalForce's applied_to_body and its "
+             "force, point and torque columns in the .mot/.sto it names) as the inverse "
+             "dynamics' external loads, in place of the trial's force plates; the times of "
+             "its data are the trial's clock (a TRC's Time column, a C3D's first frame).")
+    plates: tuple[str, ...] = _option(
+        (), flag="plate", names=True, metavar="N=BODY",
+        help="Force plate N of a C3D trial acts on BODY, as an OpenSim ExternalLoads file "
+             "names a body for each plate (repeatable or comma-separated: --plate 1=calcn_r "
+             "--plate 2=calcn_l); replaces the model's loads.force_plates, and plates left "
+             "out go to the model's contact bodies, if any, by proximity.")
     name: str | None = _option(
         None, help="Run name inside the results file [default: the method, then -truth, "
                    "-f<cutoff>Hz and -P<mm> where they apply, e.g. ad-f6Hz-P30].")
@@ -206,6 +226,9 @@ class SolveOptions:
     def __post_init__(self) -> None:
         for f in fields(self):
             _check(f.name, getattr(self, f.name), f.metadata)
+        if self.loads is not None and self.plates:
+            raise InputError("plates: expected the trial's plates assigned or an OpenSim load "
+                             "set (--loads) in their place, got both")
 
     @property
     def perturb_level_m(self) -> float:
@@ -246,6 +269,8 @@ class SolveOptions:
 
 
 def _coerce(name: str, value: Any, meta: Mapping[str, Any]) -> Any:
+    if name == "tasks":
+        return _tasks(value)
     if name == "mapping" and isinstance(value, Mapping):
         return tuple((str(k), str(v)) for k, v in value.items())
     if name == "mapping" and isinstance(value, str):
@@ -257,6 +282,22 @@ def _coerce(name: str, value: Any, meta: Mapping[str, Any]) -> Any:
     if meta["names"] and isinstance(value, str):
         return tuple(part.strip() for part in value.split(",") if part.strip())
     return value
+
+
+def _tasks(value: Any) -> tuple[tuple[str, float], ...]:
+    """``--tasks``: an IK task set file read into (marker, weight) pairs, or the pairs."""
+    if isinstance(value, str):
+        if not value.strip():
+            return ()
+        from fccgrb_cli.opensim.setups import read_task_set
+
+        return tuple(read_task_set(value.strip()).marker_weights().items())
+    if isinstance(value, (list, tuple)) and all(
+            isinstance(pair, (list, tuple)) and len(pair) == 2 and isinstance(pair[0], str)
+            and in_range(pair[1], float, 0.0, True, 1e12) for pair in value):
+        return tuple((name, float(weight)) for name, weight in value)
+    raise InputError(f"tasks: expected an IK task set file or [marker, weight] pairs with "
+                     f"weights above 0, got {shown(value)}")
 
 
 def _kind(name: str) -> type:
@@ -341,7 +382,7 @@ def click_options(command: Callable) -> Callable:
             kwargs["default"] = None
         elif _kind(f.name) is bool:
             kwargs |= {"is_flag": True, "default": False}
-        elif f.name == "mapping":
+        elif f.name in REPEATABLE:
             kwargs |= {"multiple": True}
         elif _kind(f.name) in (tuple, str):
             kwargs["default"] = None
@@ -362,6 +403,8 @@ def from_cli(values: Mapping[str, Any]) -> SolveOptions:
         value = values[f.name]
         if f.name == "mapping":
             value = _pairs(value)
+        elif f.name in REPEATABLE:
+            value = _coerce(f.name, ",".join(value or ()), f.metadata)
         elif isinstance(f.default, tuple):
             value = _coerce(f.name, value or "", f.metadata)
         out[f.name] = value
@@ -420,8 +463,23 @@ def label_map_file(path: str) -> list[tuple[str, str]]:
 SWEEP_KEYS = tuple(f.metadata["sweep"] or f.name for f in fields(SolveOptions))
 
 
+def _weighted(model: Model, options: SolveOptions) -> Model:
+    """The model tracking the markers ``--tasks`` weighs, each point's weight that weight times
+    ``--tracking-weight``."""
+    weights = dict(options.tasks)
+    keep = tuple(name for name in model.marker_labels if name in weights)
+    if not keep:
+        raise InputError(f"--tasks: expected marker tasks naming markers of {model.source} "
+                         f"({', '.join(model.marker_labels)[:200]}), got none of them")
+    model = model.with_tracked(keep)
+    points = tuple(replace(tp, weight=options.tracking_weight * weights[tp.marker])
+                   for tp in model.tracked_points)
+    return replace(model, tracked_points=points)
+
+
 def prepared(model: Model, options: SolveOptions) -> Model:
-    """The model as the options ask: every body in one form, only some markers tracked."""
+    """The model as the options ask: every body in one form, only some markers tracked (and
+    weighted, ``--tasks``), the force plates on the bodies ``--plate`` names."""
     if options.form != "model":
         model = model.with_form(options.form)
     if options.track:
@@ -430,4 +488,10 @@ def prepared(model: Model, options: SolveOptions) -> Model:
             raise InputError(f"--track: expected marker names of {model.source} "
                              f"({', '.join(model.marker_labels)}), got {', '.join(unknown)}")
         model = model.with_tracked(options.track)
+    if options.tasks:
+        model = _weighted(model, options)
+    if options.plates:
+        from fccgrb_cli.opensim.plates import assigned
+
+        model = assigned(model, options.plates)
     return model

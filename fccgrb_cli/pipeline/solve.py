@@ -19,9 +19,11 @@ from fccgrb_cli.anatomy.lab_axes import lab_axes
 from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.core.stretches import merged, runs, shifted, shortest, spans, take
 from fccgrb_cli.dynamics.convert import Dynamics, classical_dynamics, smoothed_dynamics
+from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.dynamics.plate_loads import plate_loads
 from fccgrb_cli.gait.analysis import analyse_gait, find_events, landmark_labels
 from fccgrb_cli.model import Model
+from fccgrb_cli.opensim.loads import trial_loads
 from fccgrb_cli.pipeline.assessment import (
     contact_events,
     curve_trust,
@@ -68,6 +70,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
     options = options or SolveOptions()
     _check_length(trial, options)
     model = prepared(model, options)
+    given = None if options.loads is None else trial_loads(options.loads, model, trial)
     trial, mapping = resolved(model, trial, dict(options.mapping), set(model.marker_labels))
     labels = match_labels(model, trial, mapping)
     unknown = sorted(set(options.perturb_markers) - set(model.marker_labels))
@@ -114,7 +117,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
                                       ("model_points", points)))
         stance: dict[str, np.ndarray] = {}
         solved_dynamics = _dynamics(model, trial, system, bridged, options,
-                                    _Notes(warnings, notes, stance), smoothing)
+                                    _Notes(warnings, notes, stance), smoothing, given)
         uncertainty = None
         if smoothing is not None:
             uncertainty = _blank(smoothing.uncertainty(
@@ -357,14 +360,16 @@ class _Notes:
 
 def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResult,
               options: SolveOptions, report: _Notes,
-              smoothing: Smoothing | None = None) -> Dynamics | None:
+              smoothing: Smoothing | None = None,
+              given: tuple[list[ExternalLoad], list[str]] | None = None) -> Dynamics | None:
     """The inverse dynamics of the classical model driven by the run's angles
-    (docs/formulation.md §4), with the trial's force plates, on every stretch of solved frames long
-    enough for its rates (``stretches.shortest``): θ̇, θ̈ and the filter within each stretch, never
-    across a gap; None, with a warning, when it cannot or need not run, or no stretch is long
-    enough. With ``smoothing`` the model is driven by the smoothed rates over the whole trial (the
-    smoother bridged its gaps with the model; their frames stay untrusted and so do their moments)
-    and the plates are smoothed alike (smoothing.py)."""
+    (docs/formulation.md §4), with the trial's force plates (or the ``--loads`` set, ``given``:
+    loads and notes), on every stretch of solved frames long enough for its rates
+    (``stretches.shortest``): θ̇, θ̈ and the filter within each stretch, never across a gap;
+    None, with a warning, when it cannot or need not run, or no stretch is long enough. With
+    ``smoothing`` the model is driven by the smoothed rates over the whole trial (the smoother
+    bridged its gaps with the model; their frames stay untrusted and so do their moments) and the
+    plates are smoothed alike (smoothing.py)."""
     warnings, notes, stance = report.warnings, report.notes, report.stance
     if options.dynamics is None and not model.has_inertia:
         warnings.append(f"{model.source}: no mass and inertia on every body; inverse dynamics "
@@ -401,7 +406,11 @@ def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResul
     baseline = Method(options.method).drives_angles and options.ad_drivers == "markers"
     contact_points = {body: _body_points(system, result.q, body)
                       for body in model.contact_bodies}
-    loads = plate_loads(model, trial, warnings, contact_points, notes)
+    if given is None:
+        loads = plate_loads(model, trial, warnings, contact_points, notes)
+    else:  # --loads: an OpenSim load set names each force's body in place of the plates
+        loads, said = given
+        notes.extend(said)
     del contact_points  # frames × points × 3 each: not for the drive
     for load in loads:
         on = np.abs(load.force).any(axis=1)

@@ -26,6 +26,7 @@ import numpy as np
 
 from fccgrb_cli.core.atomic import atomic_path
 from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.opensim.storage import storage_text
 from fccgrb_cli.pipeline.run import Run
 
 FORMATS = ("mot", "sto", "csv", "c3d")
@@ -92,18 +93,15 @@ def moments_trusted(run: Run) -> np.ndarray:
 
 def _storage_text(run: Run, curves: Curves, title: str, in_degrees: bool,
                   trusted: np.ndarray | None = None) -> str:
-    """OpenSim's Storage layout (read by OpenSim 3 and 4): a name line, key=value lines,
-    ``endheader``, then a tab-separated table whose first column is time (on the trial file's
-    clock); ``trusted``: per frame (default the run's)."""
+    """OpenSim's Storage layout (``opensim.storage``: read by OpenSim 3 and 4): a name line,
+    ``version``, ``nRows``, ``nColumns``, ``inDegrees`` and fccgrb's ``untrustedFrames`` and
+    ``units``, ``endheader``, then a tab-separated table whose first column is time (on the
+    trial file's clock); ``trusted``: per frame (default the run's)."""
     time = run.result.time + run.start_time
     untrusted = int((~(run.trusted if trusted is None else trusted)).sum())
-    lines = [title, "version=1", f"nRows={len(time)}", f"nColumns={1 + len(curves.names)}",
-             f"inDegrees={'yes' if in_degrees else 'no'}", f"untrustedFrames={untrusted}",
-             f"units={' '.join(sorted(set(curves.units)))}", "endheader",
-             "\t".join(["time", *curves.names])]
-    table = np.column_stack([time, curves.values])
-    lines += ["\t".join(f"{v:.10g}" for v in row) for row in table]
-    return "\n".join(lines) + "\n"
+    return storage_text(curves.names, time, curves.values, in_degrees, title,
+                        {"untrustedFrames": str(untrusted),
+                         "units": " ".join(sorted(set(curves.units)))})
 
 
 def write_mot(run: Run, path: str | Path) -> None:

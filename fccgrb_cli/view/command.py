@@ -6,9 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.inputs import refuse_inputs, regular_file
-from fccgrb_cli.io.atomic import atomic_path, check_target
+from fccgrb_cli.core.atomic import atomic_path, check_target
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.core.inputs import refuse_inputs, regular_file
 from fccgrb_cli.view.camera import PRESETS
 from fccgrb_cli.view.page import page
 from fccgrb_cli.view.scene import Scene, model_scene

@@ -10,11 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.io.datasets import open_results
-from fccgrb_cli.io.results_format import reading
-from fccgrb_cli.io.runs import read_runs
-from fccgrb_cli.run import Run
+from fccgrb_cli.core.datasets import open_results
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.pipeline.run import Run
+from fccgrb_cli.results.format import reading
+from fccgrb_cli.results.runs import read_runs
 from fccgrb_cli.solvers.quality import FRAME_BITS
 from fccgrb_cli.view.camera import lab_axes
 from fccgrb_cli.view.scene import (

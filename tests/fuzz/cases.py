@@ -30,6 +30,8 @@ CLASSES = (
     "own output unreadable",
     "silently accepted nonsense",
     "C3D bytes",
+    "OpenSim XML",
+    "OpenSim storage",
 )
 
 Action = Callable[[Path], None]
@@ -761,10 +763,13 @@ def _bomb(width: int, levels: int) -> str:
 
 def generate(seed: int = 0, full: bool = True) -> list[Case]:
     """Every case, the random parts drawn from ``seed``."""
+    from .opensim_cases import storage_cases, xml_cases
+
     rng = random.Random(seed)
     cases = [*overwritten(), *outside(), *run_names(), *numbers(), *header_values(),
              *yaml_files(), *results_files(), *half_written(), *own_output(full), *nonsense(),
-             *c3d_bytes(rng, 20 if full else 8), *drawn(rng, 15 if full else 3)]
+             *c3d_bytes(rng, 20 if full else 8), *drawn(rng, 15 if full else 3),
+             *xml_cases(), *storage_cases()]
     names = [c.name for c in cases]
     twice = {n for n in names if names.count(n) > 1}
     if twice:
