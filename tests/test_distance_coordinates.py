@@ -143,7 +143,7 @@ def test_results_file_labels_each_column(runs: dict[str, fc.Run], tmp_path: Path
 
     run = runs["nrm-wls"]
     path = tmp_path / "r.h5"
-    run.to_hdf5(path)
+    fc.write_results(run, path)
     units = list(run.angles.units)
     with h5py.File(path, "r") as h5:
         g = h5[f"runs/{run.name}"]

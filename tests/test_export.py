@@ -36,7 +36,7 @@ def read_storage(path: Path) -> tuple[dict[str, str], list[str], np.ndarray]:
 def five_bar(tmp_path_factory) -> tuple[Path, fc.Run]:
     out = tmp_path_factory.mktemp("export") / "five_bar.h5"
     run = fc.solve(fc.load_model(MODEL), fc.read_trial(TRIAL), perturb_mm=7.5, seed=2)
-    run.to_hdf5(out)
+    fc.write_results(run, out)
     return out, run
 
 
@@ -106,7 +106,7 @@ def test_gait_c3d_keeps_analogs_events_and_plates_and_adds_clinical_curves(tmp_p
     model = fc.calibrate(fc.load_model(ROOT / "configs" / "models" / "lower_limb.yaml"), trial,
                          mass=67)
     results = tmp_path / "gait.h5"
-    fc.solve(model, trial, filter_cutoff=6).to_hdf5(results)
+    fc.write_results(fc.solve(model, trial, filter_cutoff=6), results)
     target = tmp_path / "gait.c3d"
     assert run_cli("export", results, "--format", "c3d", "-o", target).exit_code == 0
     original, out = ezc3d.c3d(str(GAIT)), ezc3d.c3d(str(target))
@@ -124,8 +124,9 @@ def test_untrusted_frames_are_exported_marked_and_counted(tmp_path: Path):
     """Goal attainment at 30 mm jumps between per-frame optima: every frame is flagged, and the
     exports say so instead of passing the numbers on as good."""
     results = tmp_path / "mo.h5"
-    fc.solve(fc.load_model(MODEL), fc.read_trial(TRIAL), method="mo-ed", perturb_mm=30,
-             dynamics=False).to_hdf5(results)
+    run = fc.solve(fc.load_model(MODEL), fc.read_trial(TRIAL), method="mo-ed", perturb_mm=30,
+                   dynamics=False)
+    fc.write_results(run, results)
     result = run_cli("export", results, "--format", "mot", "-o", tmp_path / "mo.mot")
     assert result.exit_code == 0
     assert "300 of 300 frames" in result.stderr and "not trusted" in result.stderr
@@ -140,12 +141,11 @@ def test_untrusted_frames_are_exported_marked_and_counted(tmp_path: Path):
 def test_export_refuses_what_it_cannot_write(five_bar, tmp_path: Path):
     results, _ = five_bar
     kinematic = tmp_path / "kin.h5"
-    fc.solve(fc.load_model(MODEL), fc.read_trial(TRIAL), dynamics=False, name="a").to_hdf5(
-        kinematic)
+    model, trial = fc.load_model(MODEL), fc.read_trial(TRIAL)
+    fc.write_results(fc.solve(model, trial, dynamics=False, name="a"), kinematic)
     one_error_line(run_cli("export", kinematic, "--format", "sto", "-o", tmp_path / "x.sto"),
                    "no joint moments")
-    fc.solve(fc.load_model(MODEL), fc.read_trial(TRIAL), dynamics=False, name="b").to_hdf5(
-        kinematic)
+    fc.write_results(fc.solve(model, trial, dynamics=False, name="b"), kinematic)
     one_error_line(run_cli("export", kinematic, "--format", "mot"), "expected --run NAME")
     one_error_line(run_cli("export", kinematic, "--format", "mot", "--run", "c"),
                    "no run 'c'", "a, b")

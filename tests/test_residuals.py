@@ -278,7 +278,7 @@ def test_the_reduction_is_stored_and_reported(qualisys, tmp_path: Path) -> None:
 
     _, _, run = qualisys
     path = tmp_path / "walk.h5"
-    run.to_hdf5(path)
+    fc.write_results(run, path)
     back = fc.read_results(path)[run.name]
     assert back.residuals.over_single == run.residuals.over_single
     assert back.reduction.before.over_single == run.reduction.before.over_single

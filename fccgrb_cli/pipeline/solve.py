@@ -461,7 +461,7 @@ def run_name(method: str, ad_drivers: str, cutoff: float | None, level_m: float,
     """The default run name: the method as the solver labels it (e.g. cno-sqp-ed-parallel), AD
     drivers, filter, perturbation and the perturbed subset, e.g. ad-f6Hz-P30-P4+P9."""
     parts = [method]
-    if Method(method).drives_angles and ad_drivers == "truth":
+    if method == Method.AD and ad_drivers == "truth":  # the solver's label: "ad" alone
         parts.append("truth")
     if cutoff is not None:
         parts.append(f"f{cutoff:g}Hz")
