@@ -1,0 +1,182 @@
+"""Joints whose child frame moves in the parent frame as a function of coordinates.
+
+A spatial transform (OpenSim's CustomJoint and every joint OpenSim defines through one) places
+the child's joint frame C in the parent's joint frame P by
+
+    R_PC(θ) = R(a_1, n_1) R(a_2, n_2) R(a_3, n_3),      p_PC(θ) = Σ_m b_m t_m,
+
+three rotations by a_k = f_k(θ) about unit axes n_k of the turning frame (body-fixed), and a
+translation along unit axes t_m of P by b_m = g_m(θ), every amount a function of one coordinate
+(or a constant). The joint's rows (docs/opensim.md) need R_PC and p_PC with their first and
+second derivatives in the coordinates; :meth:`SpatialTransform.terms` gives them as 12 values in
+the order of the rows: R_PC row by row (R_ij = e_i^P · e_j^C), then p_PC's components in P.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Protocol
+
+import numpy as np
+
+__all__ = ["Coupling", "JointCoordinate", "MovingJoint", "ScalarFunction", "SpatialAxis",
+           "SpatialTransform", "axis_rotation"]
+
+Vec3 = tuple[float, float, float]
+
+
+class ScalarFunction(Protocol):
+    """f(x) with f′ and f″ (OpenSim's functions, ``fccgrb_cli.opensim.functions``)."""
+
+    def terms(self, x: float) -> tuple[float, float, float]: ...
+
+
+def skew3(n: np.ndarray) -> np.ndarray:
+    """ñ (3 × 3) with ñ b = n × b."""
+    return np.array([[0.0, -n[2], n[1]], [n[2], 0.0, -n[0]], [-n[1], n[0], 0.0]])
+
+
+def axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rotation by ``angle`` (rad) about the unit ``axis``: I + sin a ñ + (1 − cos a) ñ²."""
+    K = skew3(np.asarray(axis, dtype=float))
+    return np.eye(3) + np.sin(angle) * K + (1.0 - np.cos(angle)) * K @ K
+
+
+@dataclass(frozen=True)
+class SpatialAxis:
+    """One axis of a spatial transform: a rotation about or a translation along the unit
+    ``axis`` by ``function(coordinate)`` (rad or m); ``coordinate`` None: a constant."""
+
+    kind: str  # "rotation" or "translation"
+    axis: Vec3
+    coordinate: str | None
+    function: ScalarFunction
+
+
+@dataclass(frozen=True)
+class SpatialTransform:
+    """Three rotation axes, then three translation axes (see the module)."""
+
+    axes: tuple[SpatialAxis, ...]
+
+    @cached_property
+    def coordinates(self) -> tuple[str, ...]:
+        """The distinct coordinates the transform depends on, in the order of first use."""
+        out: list[str] = []
+        for a in self.axes:
+            if a.coordinate is not None and a.coordinate not in out:
+                out.append(a.coordinate)
+        return tuple(out)
+
+    def terms(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """h (12,), ∂h/∂θ (12 × k) and ∂²h/∂θ² (12 × k × k) at the values (k,) of
+        :attr:`coordinates`: h = [R_PC row by row, p_PC] (rad-free numbers and m)."""
+        k = len(self.coordinates)
+        index = {name: i for i, name in enumerate(self.coordinates)}
+        h, h1, h2 = np.zeros(12), np.zeros((12, k)), np.zeros((12, k, k))
+        # rotations: G[o] = dᵒR_k/da_kᵒ for o = 0, 1, 2
+        rotations = [a for a in self.axes if a.kind == "rotation"]
+        factors, slots, d1s, d2s = [], [], [], []
+        for a in rotations:
+            n = np.asarray(a.axis, dtype=float)
+            x = values[index[a.coordinate]] if a.coordinate is not None else 0.0
+            f, d1, d2 = a.function.terms(float(x))
+            R, K = axis_rotation(n, f), skew3(n)
+            factors.append((R, K @ R, K @ K @ R))
+            slots.append(index.get(a.coordinate, -1) if a.coordinate is not None else -1)
+            d1s.append(d1)
+            d2s.append(d2)
+
+        def product(orders: list[int]) -> np.ndarray:
+            out = np.eye(3)
+            for g, o in zip(factors, orders, strict=True):
+                out = out @ g[o]
+            return out
+
+        m = len(factors)
+        h[:9] = product([0] * m).ravel()
+        for a_ in range(m):
+            if slots[a_] < 0:
+                continue
+            orders = [0] * m
+            orders[a_] = 1
+            dR = product(orders).ravel()
+            h1[:9, slots[a_]] += d1s[a_] * dR
+            h2[:9, slots[a_], slots[a_]] += d2s[a_] * dR
+            for b_ in range(m):
+                if slots[b_] < 0:
+                    continue
+                orders = [0] * m
+                orders[a_] += 1
+                orders[b_] += 1
+                h2[:9, slots[a_], slots[b_]] += d1s[a_] * d1s[b_] * product(orders).ravel()
+        for a in self.axes:
+            if a.kind != "translation":
+                continue
+            t = np.asarray(a.axis, dtype=float)
+            x = values[index[a.coordinate]] if a.coordinate is not None else 0.0
+            f, d1, d2 = a.function.terms(float(x))
+            h[9:] += f * t
+            if a.coordinate is not None:
+                j = index[a.coordinate]
+                h1[9:, j] += d1 * t
+                h2[9:, j, j] += d2 * t
+        return h, h1, h2
+
+
+@dataclass(frozen=True)
+class MovingJoint:
+    """A joint between ``parent`` and ``child`` (bodies; ``parent`` may be the ground): the
+    child's joint frame (origin point ``child_origin`` and axes ``child_axes``, names of the
+    child's point and three vectors) moves in the parent's joint frame (``parent_origin``,
+    ``parent_axes`` of the parent) by ``transform``."""
+
+    name: str
+    parent: str
+    child: str
+    parent_origin: str
+    parent_axes: tuple[str, str, str]
+    child_origin: str
+    child_axes: tuple[str, str, str]
+    transform: SpatialTransform
+
+
+@dataclass(frozen=True)
+class Coupling:
+    """θ_dependent = function(θ_independent): a coupler constraint (OpenSim's
+    CoordinateCouplerConstraint), or with ``independent`` None and a constant function, a
+    locked coordinate."""
+
+    name: str
+    dependent: str
+    independent: str | None
+    function: ScalarFunction
+
+
+@dataclass(frozen=True)
+class JointCoordinate:
+    """A coordinate of a moving joint, solved as a mixed coordinate: rad, or m when
+    ``translational``; ``default`` its value in the model's initial pose."""
+
+    name: str
+    translational: bool
+    default: float
+    range: tuple[float, float]
+    motion: None = None
+    clinical_sign: None = None
+    clinical_range: None = None
+
+    @property
+    def kind(self) -> str:
+        """"joint": the coordinate has no row of its own; its joint's rows hold it."""
+        return "joint"
+
+    @property
+    def full(self) -> bool:
+        """Any value is allowed (no 0–π cosine ambiguity: the rows hold R(θ) itself)."""
+        return True
+
+    def clinical(self, theta: np.ndarray) -> None:
+        """No clinical angle is declared for an imported coordinate."""
+        return None
