@@ -13,6 +13,7 @@ the bodies placed by the coordinates' default values.
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -38,7 +39,8 @@ from fccgrb_cli.model.spatial import (
 from fccgrb_cli.opensim.functions import Constant
 from fccgrb_cli.opensim.osim import OsimFrame, OsimJoint, OsimModel, parse_osim, read_osim
 
-__all__ = ["body_poses", "load_osim", "model_from_osim", "parse_osim_model"]
+__all__ = ["body_poses", "for_trial", "load_osim", "model_from_osim", "parse_osim_model",
+           "unobserved", "with_marker_tasks"]
 
 AXES = ("x", "y", "z")
 
@@ -157,6 +159,59 @@ def model_from_osim(osim: OsimModel, text: str = "") -> Model:
         moving_joints=tuple(moving),
         couplings=tuple(couplings),
     )
+
+
+def for_trial(model: Model, trial, mapping: dict[str, str]) -> Model:
+    """The model as OpenSim's inverse kinematics uses it on ``trial``: tracking only its
+    markers the trial has (by name, or by a ``mapping`` name → label), and holding at its
+    default every coordinate that moves none of them (no marker beyond its joint: a toe without
+    markers), which the markers cannot determine; a note on stderr names each."""
+    present = tuple(m for m in model.marker_labels if trial.find(mapping.get(m, m)) is not None)
+    left = [m for m in model.marker_labels if m not in present]
+    if left and present:
+        sys.stderr.write(f"fccgrb: note: {model.source}: {len(left)} model markers are not in "
+                         f"{trial.path} and are not tracked: {', '.join(left)}\n")
+        model = model.with_tracked(present)
+    unseen = unobserved(model)
+    if unseen:
+        sys.stderr.write(f"fccgrb: note: {model.source}: no tracked marker moves with "
+                         f"{', '.join(unseen)}: held at the default value\n")
+        defaults = {c.name: c.default for c in model.angles}
+        held = tuple(Coupling(f"{name} held", name, None, Constant(defaults[name]))
+                     for name in unseen)
+        model = replace(model, couplings=model.couplings + held)
+    return model
+
+
+def unobserved(model: Model) -> list[str]:
+    """The coordinates that move no tracked point: every joint they drive has no tracked point
+    on its child or beyond, and no coupling makes another coordinate follow them."""
+    children: dict[str, list[str]] = {}
+    for joint in model.moving_joints:
+        children.setdefault(joint.parent, []).append(joint.child)
+    tracked = {tp.body for tp in model.tracked_points}
+
+    def seen_beyond(body: str) -> bool:
+        return body in tracked or any(seen_beyond(c) for c in children.get(body, []))
+
+    held = {c.dependent for c in model.couplings if c.independent is None}
+    moving = set()
+    for joint in model.moving_joints:
+        if seen_beyond(joint.child):
+            moving.update(joint.transform.coordinates)
+    moving.update(c.independent for c in model.couplings if c.dependent in moving)
+    return [c.name for c in model.angles if c.name not in moving and c.name not in held]
+
+
+def with_marker_tasks(model: Model, weights: dict[str, float], unit: float | None) -> Model:
+    """The model tracking the markers of an IK task set, each with its task's weight times
+    ``unit`` (the weight a task weight of 1 gets: NRM-WLS's tracking weight against the joints'
+    1; 1 for the optimizers, whose objective weighs markers against one another only); None
+    leaves the weights to the method (all markers alike)."""
+    kept = tuple(tp for tp in model.tracked_points if tp.marker in weights)
+    if unit is not None:
+        kept = tuple(replace(tp, weight=unit * weights[tp.marker]) for tp in kept)
+    return replace(model, tracked_points=kept)
 
 
 def parse_osim_model(text: str, source: str) -> Model:

@@ -51,6 +51,7 @@ def parse(path: str | Path) -> ET.Element:
 def parse_bytes(data: bytes, name: str) -> ET.Element:
     """The root element of the XML document ``data``; ``name`` names it in errors."""
     depth = 0
+    closed = False  # the root element has ended: what follows is ignored, as OpenSim does
 
     def start(tag, attrs):
         nonlocal depth
@@ -60,9 +61,10 @@ def parse_bytes(data: bytes, name: str) -> ET.Element:
         builder.start(tag, attrs)
 
     def end(tag):
-        nonlocal depth
+        nonlocal depth, closed
         depth -= 1
         builder.end(tag)
+        closed = depth == 0
 
     def doctype(*_):
         raise _Refused("a DOCTYPE declaration (entities are not accepted)")
@@ -82,7 +84,9 @@ def parse_bytes(data: bytes, name: str) -> ET.Element:
     except _Refused as why:
         raise InputError(f"{name}: refused: {why}") from None
     except ExpatError as error:
-        raise InputError(f"{name}: not well-formed XML ({error})") from None
+        if not closed:
+            raise InputError(f"{name}: not well-formed XML ({error})") from None
+        root = builder.close()  # e.g. a stray end tag after the root (OpenSim's own task sets)
     return root
 
 

@@ -1,0 +1,68 @@
+"""OpenSim's own IK regression test, passed with OpenSim's criterion: on its synthetic Gait2354
+trial (markers generated on the model, 31 markers, 73 frames) every coordinate's RMS difference
+to OpenSim's own solution (std_subject01_walk1_ik.mot) is below 0.2° — translations below
+0.2 mm, the same criterion in metres at the scale of the markers' rounding — for the uniform
+and the weighted task sets, solved with the mixed coordinates by NRM-WLS and by CNO-SQP."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fccgrb_cli.api import solve
+from fccgrb_cli.io.trial import read_trc
+from fccgrb_cli.model import load_model
+from fccgrb_cli.opensim.convert import with_marker_tasks
+from fccgrb_cli.opensim.tasks import read_marker_tasks
+
+IK_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "opensim" / \
+    "ik_gait2354_synthetic"
+pytestmark = pytest.mark.skipif(not IK_DIR.is_dir(), reason="../shared/data/opensim not here")
+DEGREES = 0.2      # OpenSim's tolerance for its IK regression test, per coordinate (RMS)
+METRES = 0.2e-3    # translations (pelvis_tx/ty/tz)
+WLS_UNIT = 1e-3    # NRM-WLS: a task weight of 1 is the default tracking weight
+
+
+def opensim_solution() -> tuple[list[str], np.ndarray]:
+    """OpenSim's IK output: time and 23 coordinates (rotations in degrees, as IK writes them)."""
+    lines = (IK_DIR / "std_subject01_walk1_ik.mot").read_text().splitlines()
+    end = next(k for k, line in enumerate(lines) if line.strip() == "endheader")
+    names = lines[end + 1].split()
+    rows = np.array([[float(v) for v in line.split()] for line in lines[end + 2:] if line.strip()])
+    return names, rows
+
+
+@pytest.fixture(scope="module")
+def gait():
+    return (load_model(IK_DIR / "subject01_simbody.osim"),
+            read_trc(IK_DIR / "subject01_synthetic_marker_data.trc"))
+
+
+@pytest.mark.parametrize("tasks", ["gait2354_IK_Tasks_uniform.xml", "gait2354_IK_Tasks.xml"])
+@pytest.mark.parametrize("method", ["nrm-wls", "cno-sqp"])
+def test_opensims_ik_regression_passes_with_its_own_criterion(gait, method, tasks):
+    model, trial = gait
+    weights = read_marker_tasks(IK_DIR / tasks).weights
+    model = with_marker_tasks(model, weights, WLS_UNIT if method == "nrm-wls" else 1.0)
+    run = solve(model, trial, method=method, dynamics=False)
+    names, reference = opensim_solution()
+    assert len(reference) == trial.n_frames == run.result.n_frames
+    assert np.allclose(reference[:, 0], trial.start + np.arange(trial.n_frames) / trial.rate,
+                       atol=6e-4)  # the .mot rounds times to 1 ms
+    assert run.result.converged.all()
+    theta = run.result.q[:, -len(model.angles):]
+    order = [c.name for c in model.angles]
+    worst = {}
+    for k, name in enumerate(names[1:], start=1):
+        coordinate = model.angles[order.index(name)]
+        ours = theta[:, order.index(name)]
+        if coordinate.translational:
+            rms = float(np.sqrt(np.mean((ours - reference[:, k]) ** 2)))
+            assert rms < METRES, (name, rms)
+        else:
+            rms = float(np.sqrt(np.mean((np.degrees(ours) - reference[:, k]) ** 2)))
+            assert rms < DEGREES, (name, rms)
+        worst[name] = rms
+    assert len(worst) == 23
