@@ -69,9 +69,11 @@ class SpatialTransform:
                 out.append(a.coordinate)
         return tuple(out)
 
-    def terms(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """h (12,), ∂h/∂θ (12 × k) and ∂²h/∂θ² (12 × k × k) at the values (k,) of
-        :attr:`coordinates`: h = [R_PC row by row, p_PC] (rad-free numbers and m)."""
+    def terms(self, values: np.ndarray, second: bool = True
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """h (12,), ∂h/∂θ (12 × k) and ∂²h/∂θ² (12 × k × k; zeros unless ``second``) at the
+        values (k,) of :attr:`coordinates`: h = [R_PC row by row, p_PC] (rad-free numbers
+        and m)."""
         k = len(self.coordinates)
         index = {name: i for i, name in enumerate(self.coordinates)}
         h, h1, h2 = np.zeros(12), np.zeros((12, k)), np.zeros((12, k, k))
@@ -104,7 +106,7 @@ class SpatialTransform:
             dR = product(orders).ravel()
             h1[:9, slots[a_]] += d1s[a_] * dR
             h2[:9, slots[a_], slots[a_]] += d2s[a_] * dR
-            for b_ in range(m):
+            for b_ in range(m if second else 0):
                 if slots[b_] < 0:
                     continue
                 orders = [0] * m

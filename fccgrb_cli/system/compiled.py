@@ -147,7 +147,7 @@ class System:
             if len(self.sine_rows):
                 dot[self.sine_rows] -= np.sin(theta[self.sine_of])
         if self.functions is not None:
-            dot[self.functions.rows] -= self.functions.terms(self._theta(q, drive))[0]
+            dot[self.functions.rows] -= self.functions.terms(self._theta(q, drive), False)[0]
         return np.concatenate([lin, dot])
 
     def g_terms(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -170,7 +170,7 @@ class System:
                 J = np.hstack([J, np.zeros((len(J), len(self.layout.angle_names)))])
         if self.mixed and self.functions is not None:
             n = self.layout.n_body_q
-            J[self.n_linear_rows + self.functions.rows, n:] = -self.functions.terms(q[n:])[1]
+            J[self.n_linear_rows + self.functions.rows, n:] = -self.functions.terms(q[n:], False)[1]
         elif self.mixed:
             n = self.layout.n_body_q
             J[self.n_linear_rows + self.angle_rows, n + np.arange(len(self.angle_rows))] = \
@@ -206,7 +206,7 @@ class System:
             nu[self.n_linear_rows + self.sine_rows] = np.cos(drive.theta[k]) * drive.theta_d[k]
         if self.functions is not None and not self.mixed:
             nu[self.n_linear_rows + self.functions.rows] = \
-                self.functions.terms(drive.theta)[1] @ drive.theta_d
+                self.functions.terms(drive.theta, False)[1] @ drive.theta_d
         return nu
 
     def gamma(self, q: np.ndarray, qd: np.ndarray, drive: Drive) -> np.ndarray:

@@ -19,7 +19,7 @@ pose, where any three of them would lose rank at some rotations), which the solv
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -43,14 +43,26 @@ class FunctionRows:
     n_coordinates: int
     defaults: np.ndarray
     translational: np.ndarray
+    _last: list = field(default_factory=list)
 
-    def terms(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """h (n_rows,), ∂h/∂θ (n_rows × n_θ) and ∂²h/∂θ² (n_rows × n_θ × n_θ) at θ, rows in the
-        order of :attr:`rows`."""
+    def terms(self, theta: np.ndarray, second: bool = True
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """h (n_rows,), ∂h/∂θ (n_rows × n_θ) and ∂²h/∂θ² (n_rows × n_θ × n_θ; zeros unless
+        ``second``) at θ, rows in the order of :attr:`rows`. The last evaluation is kept: an
+        iteration asks for the same θ's residual, Jacobian and curvature in turn."""
+        key = np.asarray(theta, dtype=float).tobytes()
+        if self._last and self._last[0] == key and (self._last[1] or not second):
+            return self._last[2]
+        out = self._terms(theta, second)
+        self._last[:] = [key, second, out]
+        return out
+
+    def _terms(self, theta: np.ndarray, second: bool
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         n, nt = len(self.rows), self.n_coordinates
         h, h1, h2 = np.zeros(n), np.zeros((n, nt)), np.zeros((n, nt, nt))
         for first, transform, index in self.joints:
-            value, d1, d2 = transform.terms(theta[index])
+            value, d1, d2 = transform.terms(theta[index], second)
             block = slice(first, first + 12)
             h[block] = value
             h1[block][:, index] = d1

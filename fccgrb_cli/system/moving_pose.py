@@ -55,7 +55,7 @@ def pose_from_coordinates(system: System, theta: np.ndarray) -> np.ndarray:
         p_local, A_P = _frame(model, joint.parent, joint.parent_origin, joint.parent_axes)
         R_P, o_P = R_body @ A_P, r_body + R_body @ p_local
         index = [names.index(c) for c in joint.transform.coordinates]
-        h = joint.transform.terms(np.asarray(theta, dtype=float)[index])[0]
+        h = joint.transform.terms(np.asarray(theta, dtype=float)[index], second=False)[0]
         R_C, o_C = R_P @ h[:9].reshape(3, 3), o_P + R_P @ h[9:]
         c_local, A_C = _frame(model, joint.child, joint.child_origin, joint.child_axes)
         R_child = R_C @ A_C.T
