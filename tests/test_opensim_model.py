@@ -165,3 +165,16 @@ def test_a_good_generated_model_loads_with_one_note(tmp_path, capsys):
     assert [c.name for c in model.angles] == ["rx", "ry", "rz", "tx", "ty", "tz", "knee",
                                               "patella"]
     assert model_from_osim(read_osim(path)).bodies == model.bodies
+
+
+def test_inertia_and_orientation_follow_opensims_conventions():
+    # inertia: Ixx Iyy Izz Ixy Ixz Iyz; orientation: body-fixed X-Y-Z (scipy's intrinsic 'XYZ')
+    from scipy.spatial.transform import Rotation
+
+    from fccgrb_cli.opensim.osim import rotation_xyz
+
+    thigh = parse_osim(knee_model().encode(), "knee.osim").bodies[0]
+    assert thigh.inertia == ((0.12, 0.002, -0.001), (0.002, 0.03, 0.004), (-0.001, 0.004, 0.11))
+    angles = (0.3, -0.7, 1.1)
+    expected = Rotation.from_euler("XYZ", angles).as_matrix()
+    assert np.allclose(rotation_xyz(angles), expected, atol=1e-14)
