@@ -178,3 +178,26 @@ def test_inertia_and_orientation_follow_opensims_conventions():
     angles = (0.3, -0.7, 1.1)
     expected = Rotation.from_euler("XYZ", angles).as_matrix()
     assert np.allclose(rotation_xyz(angles), expected, atol=1e-14)
+
+
+def test_check_refuses_a_hostile_model_in_one_line_and_writes_nothing(tmp_path):
+    from cli_helpers import one_error_line, run_cli
+
+    path = tmp_path / "hostile.osim"
+    path.write_text(knee_model().replace("<mass>8.0</mass>", "<mass>-inf</mass>"))
+    before = sorted(tmp_path.iterdir())
+    one_error_line(run_cli("check", path), str(path),
+                   "Model[name=knee]/BodySet/objects/Body[name=thigh]/mass")
+    assert sorted(tmp_path.iterdir()) == before
+
+
+@needs_data
+def test_check_takes_opensims_gait_model():
+    from cli_helpers import run_cli
+
+    result = run_cli("check", IK_DIR / "subject01_simbody.osim")
+    assert result.exit_code == 0, result.stderr
+    # 23 coordinates, the two toes (no marker on them) held: 21 degrees of freedom
+    assert "rank 146: 21 degrees of freedom" in result.stdout
+    assert "MC Jacobian rank 167 of 167" in result.stdout
+    assert "redundant equations: none" in result.stdout

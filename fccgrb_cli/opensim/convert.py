@@ -30,6 +30,7 @@ from fccgrb_cli.model.elements import (
     Vector,
     _frozen,
 )
+from fccgrb_cli.model.observed import holding_unobserved
 from fccgrb_cli.model.spatial import (
     Coupling,
     JointCoordinate,
@@ -40,7 +41,7 @@ from fccgrb_cli.opensim.functions import Constant
 from fccgrb_cli.opensim.osim import OsimFrame, OsimJoint, OsimModel, parse_osim, read_osim
 
 __all__ = ["body_poses", "for_trial", "load_osim", "model_from_osim", "parse_osim_model",
-           "unobserved", "with_marker_tasks"]
+           "with_marker_tasks"]
 
 AXES = ("x", "y", "z")
 
@@ -172,35 +173,11 @@ def for_trial(model: Model, trial, mapping: dict[str, str]) -> Model:
         sys.stderr.write(f"fccgrb: note: {model.source}: {len(left)} model markers are not in "
                          f"{trial.path} and are not tracked: {', '.join(left)}\n")
         model = model.with_tracked(present)
-    unseen = unobserved(model)
+    model, unseen = holding_unobserved(model)
     if unseen:
         sys.stderr.write(f"fccgrb: note: {model.source}: no tracked marker moves with "
                          f"{', '.join(unseen)}: held at the default value\n")
-        defaults = {c.name: c.default for c in model.angles}
-        held = tuple(Coupling(f"{name} held", name, None, Constant(defaults[name]))
-                     for name in unseen)
-        model = replace(model, couplings=model.couplings + held)
     return model
-
-
-def unobserved(model: Model) -> list[str]:
-    """The coordinates that move no tracked point: every joint they drive has no tracked point
-    on its child or beyond, and no coupling makes another coordinate follow them."""
-    children: dict[str, list[str]] = {}
-    for joint in model.moving_joints:
-        children.setdefault(joint.parent, []).append(joint.child)
-    tracked = {tp.body for tp in model.tracked_points}
-
-    def seen_beyond(body: str) -> bool:
-        return body in tracked or any(seen_beyond(c) for c in children.get(body, []))
-
-    held = {c.dependent for c in model.couplings if c.independent is None}
-    moving = set()
-    for joint in model.moving_joints:
-        if seen_beyond(joint.child):
-            moving.update(joint.transform.coordinates)
-    moving.update(c.independent for c in model.couplings if c.dependent in moving)
-    return [c.name for c in model.angles if c.name not in moving and c.name not in held]
 
 
 def with_marker_tasks(model: Model, weights: dict[str, float], unit: float | None) -> Model:

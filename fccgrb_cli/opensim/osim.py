@@ -414,7 +414,7 @@ def _read_3x(r: _Reader, model: ET.Element, top: list[ET.Element], bodies: list[
     body_set = model.find("BodySet")
     objects = body_set.find("objects") if body_set is not None else None
     if objects is None:
-        r.fail(element_path(top, model), "expected a <BodySet> with <objects>")
+        r.fail(element_path(top[:-1], model), "expected a <BodySet> with <objects>")
     parents = [*top, body_set, objects]
     for element in objects:
         if element.tag != "Body":
@@ -489,7 +489,7 @@ def _read_4x(r: _Reader, model: ET.Element, top: list[ET.Element], bodies: list[
             if element.tag != "Body":
                 r.fail(r.where(parents, element), f"expected a Body, got {element.tag}")
             bodies.append(_body(r, element, parents))
-    _unique(r, [b.name for b in bodies] + [GROUND], "body", element_path(top, model))
+    _unique(r, [b.name for b in bodies] + [GROUND], "body", element_path(top[:-1], model))
     known = {b.name for b in bodies} | {GROUND}
     joint_set = model.find("JointSet/objects")
     if joint_set is None:
@@ -537,7 +537,7 @@ def _markers(r: _Reader, model: ET.Element, top: list[ET.Element], known: set[st
         if name not in known:
             r.fail(where, f"marker on {body.strip()!r}, which is not a body of the model")
         out.append(OsimMarker(_name(element), name, r.vec3(element, "location", parents)))
-    _unique(r, [m.name for m in out], "marker", r.where(top, model))
+    _unique(r, [m.name for m in out], "marker", r.where(top[:-1], model))
     return out
 
 
@@ -610,16 +610,16 @@ def parse_osim_root(root: ET.Element, source: str) -> OsimModel:
     model = root.find("Model") if root.tag == "OpenSimDocument" else None
     if model is None:
         r.fail(root.tag, "expected an OpenSimDocument holding a <Model>")
-    top = [root]
+    top = [root, model]  # every element's ancestors, for messages
     for child in model:
         if child.tag not in KNOWN_MODEL_CHILDREN:
-            r.fail(r.where([*top, model], child), f"cannot represent a {child.tag}")
+            r.fail(r.where(top, child), f"cannot represent a {child.tag}")
         if child.tag in IGNORED and any(len(part) for part in child):
             r.ignored.add(child.tag)
     units = (model.findtext("length_units") or "meters").strip().lower()
     if units not in ("meters", "m"):
-        r.fail(f"{r.where(top, model)}/length_units", f"expected meters, got {units!r:.20}")
-    gravity = r.vec3(model, "gravity", top, (0.0, -9.80665, 0.0))
+        r.fail(f"{r.where([root], model)}/length_units", f"expected meters, got {units!r:.20}")
+    gravity = r.vec3(model, "gravity", [root], (0.0, -9.80665, 0.0))
     bodies: list[OsimBody] = []
     joints: list[OsimJoint] = []
     coordinates: list[OsimCoordinate] = []
@@ -627,7 +627,7 @@ def parse_osim_root(root: ET.Element, source: str) -> OsimModel:
         _read_4x(r, model, top, bodies, joints, coordinates)
     else:
         _read_3x(r, model, top, bodies, joints, coordinates)
-    where = r.where(top, model)
+    where = r.where([root], model)
     _unique(r, [b.name for b in bodies] + [GROUND], "body", where)
     _unique(r, [c.name for c in coordinates], "coordinate", where)
     known = {b.name for b in bodies} | {GROUND}
