@@ -18,6 +18,7 @@ from fccgrb_cli import __version__, scratch
 from fccgrb_cli.errors import InputError
 from fccgrb_cli.inputs import refuse_inputs
 from fccgrb_cli.model import Model, load_model
+from fccgrb_cli.model.elements import in_metres
 from fccgrb_cli.options import AXES, SEED_MAX, WORKERS_MAX, SolveOptions, click_options, from_cli
 from fccgrb_cli.params import Bounded, Widths
 from fccgrb_cli.progress import Progress
@@ -196,7 +197,7 @@ def synth(model: str, output: str, duration: float, rate: float, units: str, for
 
 def _coordinate_ranges(model: Model, theta: np.ndarray) -> str:
     """'angles A..B deg' and, with distance coordinates, ', distances C..D mm'."""
-    distance = np.array([a.kind == "distance" for a in model.angles], dtype=bool)
+    distance = np.array([in_metres(a) for a in model.angles], dtype=bool)
     parts = []
     for mask, what, convert, unit in ((~distance, "angles", np.degrees, "deg"),
                                       (distance, "distances", lambda d: 1e3 * d, "mm")):

@@ -18,6 +18,7 @@ from fccgrb_cli.gait.analysis import GaitResults
 from fccgrb_cli.gait.plugin_gait_outputs import PluginGaitResults
 from fccgrb_cli.io.lab_axes import LabAxes
 from fccgrb_cli.model import Model
+from fccgrb_cli.model.elements import in_metres
 from fccgrb_cli.named import NamedArray
 from fccgrb_cli.options import SolveOptions
 from fccgrb_cli.smoothing import Uncertainty
@@ -115,8 +116,7 @@ class Run:
 
     @property
     def _angle_units(self) -> tuple[str, ...]:
-        return tuple("m" if getattr(a, "kind", "angle") == "distance" else "rad"
-                     for a in self.model.angles)
+        return tuple("m" if in_metres(a) else "rad" for a in self.model.angles)
 
     @property
     def angles(self) -> NamedArray:

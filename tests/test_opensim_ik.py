@@ -66,3 +66,29 @@ def test_opensims_ik_regression_passes_with_its_own_criterion(gait, method, task
             assert rms < DEGREES, (name, rms)
         worst[name] = rms
     assert len(worst) == 23
+
+
+def test_the_command_line_solves_an_osim_model_and_exports_opensims_coordinates(tmp_path):
+    # fccgrb solve MODEL.osim TRIAL.trc, then export --format mot: OpenSim's columns, rotations
+    # in degrees and translations in metres, within OpenSim's criterion of its own solution
+    from cli_helpers import run_cli
+
+    results, motion = tmp_path / "r.h5", tmp_path / "ik.mot"
+    solved = run_cli("solve", IK_DIR / "subject01_simbody.osim",
+                     IK_DIR / "subject01_synthetic_marker_data.trc", "--method", "nrm-wls",
+                     "-o", results)
+    assert solved.exit_code == 0, solved.stderr
+    assert "numpy reference engine" in solved.stderr
+    exported = run_cli("export", results, "--format", "mot", "-o", motion)
+    assert exported.exit_code == 0, exported.stderr
+    lines = motion.read_text().splitlines()
+    assert "inDegrees=yes" in lines
+    end = lines.index("endheader")
+    ours_names = lines[end + 1].split()
+    ours = np.array([[float(v) for v in line.split()] for line in lines[end + 2:]])
+    names, reference = opensim_solution()
+    assert sorted(ours_names) == sorted(names)
+    for k, name in enumerate(names[1:], start=1):
+        difference = ours[:, ours_names.index(name)] - reference[:, k]
+        limit = METRES if name in ("pelvis_tx", "pelvis_ty", "pelvis_tz") else DEGREES
+        assert np.sqrt(np.mean(difference**2)) < limit, name

@@ -222,6 +222,11 @@ class DistanceCoordinate:
 Coordinate = AngularCoordinate | DistanceCoordinate | JointCoordinate
 
 
+def in_metres(coordinate: Coordinate) -> bool:
+    """Whether a coordinate is a length (m): a distance, or a moving joint's translation."""
+    return coordinate.kind == "distance" or getattr(coordinate, "translational", False)
+
+
 @dataclass(frozen=True)
 class TrackedPoint:
     """A model point that follows a marker (tracking constraint TC, Eq. 29–36)."""
@@ -388,4 +393,5 @@ __all__ = [
     "Vector",
     "_frozen",
     "floating_bases",
+    "in_metres",
 ]
