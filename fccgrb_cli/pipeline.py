@@ -68,6 +68,10 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
     options = options or SolveOptions()
     _check_length(trial, options)
     model = prepared(model, options)
+    if model.moving_joints and options.method == "ad":
+        raise InputError(f"--method ad: {model.source}: the angular-driver baseline computes "
+                         f"angles from segment frames, which an imported OpenSim model's "
+                         f"coordinates are not; use a mixed-coordinate method (nrm-wls, cno-sqp …)")
     if model.moving_joints:  # an OpenSim model tracks the markers the trial has, as its IK does
         from fccgrb_cli.opensim.convert import for_trial
 

@@ -92,3 +92,15 @@ def test_the_command_line_solves_an_osim_model_and_exports_opensims_coordinates(
         difference = ours[:, ours_names.index(name)] - reference[:, k]
         limit = METRES if name in ("pelvis_tx", "pelvis_ty", "pelvis_tz") else DEGREES
         assert np.sqrt(np.mean(difference**2)) < limit, name
+
+
+def test_methods_that_cannot_take_an_imported_model_say_so_and_write_nothing(tmp_path):
+    from cli_helpers import run_cli
+
+    results = tmp_path / "r.h5"
+    refused = run_cli("solve", IK_DIR / "subject01_simbody.osim",
+                      IK_DIR / "subject01_synthetic_marker_data.trc", "--method", "ad",
+                      "-o", results)
+    assert refused.exit_code == 2 and "Traceback" not in refused.output
+    assert refused.stderr.splitlines()[-1].startswith("fccgrb: error: --method ad: ")
+    assert not results.exists()
