@@ -61,6 +61,20 @@ class SpatialTransform:
     axes: tuple[SpatialAxis, ...]
 
     @cached_property
+    def _index(self) -> dict[str, int]:
+        return {name: i for i, name in enumerate(self.coordinates)}
+
+    @cached_property
+    def _rotations(self) -> tuple:
+        """Per rotation axis: the axis, ñ and ñ² (constant)."""
+        out = []
+        for a in self.axes:
+            if a.kind == "rotation":
+                K = skew3(np.asarray(a.axis, dtype=float))
+                out.append((a, K, K @ K))
+        return tuple(out)
+
+    @cached_property
     def coordinates(self) -> tuple[str, ...]:
         """The distinct coordinates the transform depends on, in the order of first use."""
         out: list[str] = []
@@ -75,44 +89,45 @@ class SpatialTransform:
         values (k,) of :attr:`coordinates`: h = [R_PC row by row, p_PC] (rad-free numbers
         and m)."""
         k = len(self.coordinates)
-        index = {name: i for i, name in enumerate(self.coordinates)}
+        index = self._index
         h, h1, h2 = np.zeros(12), np.zeros((12, k)), np.zeros((12, k, k))
-        # rotations: G[o] = dᵒR_k/da_kᵒ for o = 0, 1, 2
-        rotations = [a for a in self.axes if a.kind == "rotation"]
+        # rotations: G[o] = dᵒR_j/da_jᵒ (o = 0, 1, 2) = ñ_jᵒ R_j; products through prefixes
+        # P_j = G0_1 … G0_(j−1) and suffixes S_j = G0_j … G0_m
         factors, slots, d1s, d2s = [], [], [], []
-        for a in rotations:
-            n = np.asarray(a.axis, dtype=float)
+        for a, K, KK in self._rotations:
             x = values[index[a.coordinate]] if a.coordinate is not None else 0.0
             f, d1, d2 = a.function.terms(float(x))
-            R, K = axis_rotation(n, f), skew3(n)
-            factors.append((R, K @ R, K @ K @ R))
-            slots.append(index.get(a.coordinate, -1) if a.coordinate is not None else -1)
+            R = np.eye(3) + np.sin(f) * K + (1.0 - np.cos(f)) * KK
+            factors.append((R, K @ R, KK @ R))
+            slots.append(index[a.coordinate] if a.coordinate is not None else -1)
             d1s.append(d1)
             d2s.append(d2)
-
-        def product(orders: list[int]) -> np.ndarray:
-            out = np.eye(3)
-            for g, o in zip(factors, orders, strict=True):
-                out = out @ g[o]
-            return out
-
         m = len(factors)
-        h[:9] = product([0] * m).ravel()
+        prefix = [np.eye(3)]
+        for g in factors:
+            prefix.append(prefix[-1] @ g[0])
+        suffix = [np.eye(3)] * (m + 1)
+        for j in range(m - 1, -1, -1):
+            suffix[j] = factors[j][0] @ suffix[j + 1]
+        h[:9] = prefix[m].ravel()
         for a_ in range(m):
             if slots[a_] < 0:
                 continue
-            orders = [0] * m
-            orders[a_] = 1
-            dR = product(orders).ravel()
-            h1[:9, slots[a_]] += d1s[a_] * dR
-            h2[:9, slots[a_], slots[a_]] += d2s[a_] * dR
-            for b_ in range(m if second else 0):
-                if slots[b_] < 0:
-                    continue
-                orders = [0] * m
-                orders[a_] += 1
-                orders[b_] += 1
-                h2[:9, slots[a_], slots[b_]] += d1s[a_] * d1s[b_] * product(orders).ravel()
+            left = prefix[a_] @ factors[a_][1]
+            h1[:9, slots[a_]] += d1s[a_] * (left @ suffix[a_ + 1]).ravel()
+            if not second:
+                continue
+            h2[:9, slots[a_], slots[a_]] += (
+                d2s[a_] * (left @ suffix[a_ + 1])
+                + d1s[a_] ** 2 * (prefix[a_] @ factors[a_][2] @ suffix[a_ + 1])).ravel()
+            middle = left
+            for b_ in range(a_ + 1, m):
+                if slots[b_] >= 0:
+                    both = (d1s[a_] * d1s[b_]
+                            * (middle @ factors[b_][1] @ suffix[b_ + 1])).ravel()
+                    h2[:9, slots[a_], slots[b_]] += both
+                    h2[:9, slots[b_], slots[a_]] += both
+                middle = middle @ factors[b_][0]
         for a in self.axes:
             if a.kind != "translation":
                 continue

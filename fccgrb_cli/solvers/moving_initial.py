@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fccgrb_cli.solvers.newton import linear_solve
 from fccgrb_cli.system import System
 from fccgrb_cli.system.moving_pose import pose_from_coordinates
 
@@ -41,8 +42,21 @@ def moving_initial_guess(system: System, targets: np.ndarray) -> np.ndarray:
         q = pose_from_coordinates(system, coordinates(values))
         return (system.point_positions(q, which) - wanted).ravel()
 
+    nb = system.layout.n_body_q
+    top = np.flatnonzero(system.kinds == 0)
+    first = 3 * len(system.lin_a)
+    tracked = (first + 3 * np.flatnonzero(seen)[:, None] + np.arange(3)).ravel()
+    others = np.concatenate([np.arange(nb), nb + np.array(sorted(dependent), dtype=int)])
+
+    def jacobian(values: np.ndarray) -> np.ndarray:
+        # along the joints: Φ_top,others d(others) = −Φ_top,free d(free), so the points move by
+        # their rows' Jacobian on the others times that solution (x and the coupled θ follow)
+        J = system.jacobian(pose_from_coordinates(system, coordinates(values)))
+        follow = linear_solve(J[np.ix_(top, others)], -J[np.ix_(top, nb + free)])
+        return J[np.ix_(tracked, others)] @ follow
+
     start = functions.defaults[free]
     if not which or not len(free):
         return pose_from_coordinates(system, coordinates(start))
-    fit = least_squares(misfit, start, method="trf", max_nfev=100 * len(start))
+    fit = least_squares(misfit, start, jac=jacobian, method="trf", max_nfev=100 * len(start))
     return pose_from_coordinates(system, coordinates(fit.x))
