@@ -14,9 +14,15 @@ COORDINATE = """<Coordinate name="{name}"><motion_type>{motion}</motion_type>
 <clamped>false</clamped></Coordinate>"""
 
 
+def named(function: str, name: str = "function") -> str:
+    """A function element as OpenSim 4 writes a property: ``<SimmSpline name="function">``."""
+    tag_end = function.index(">")
+    return f'{function[:tag_end]} name="{name}"{function[tag_end:]}'
+
+
 def axis(name: str, coordinate: str, direction: str, function: str) -> str:
     return (f'<TransformAxis name="{name}"><coordinates>{coordinate}</coordinates>'
-            f'<axis>{direction}</axis><function>{function}</function></TransformAxis>')
+            f'<axis>{direction}</axis>{named(function)}</TransformAxis>')
 
 
 def custom_joint(name: str, parent: str, child: str, coordinates: list[str], axes: list[str],
@@ -65,9 +71,9 @@ def knee_model(*, marker_body: str = "/bodyset/shank", parent: str = "/bodyset/t
                  axis("rotation3", "patella", "1 0 0", LINEAR),
                  axis("translation1", "knee", "1 0 0", spline),
                  axis("translation2", "knee", "0 1 0",
-                      "<MultiplierFunction><function>"
-                      + simm("-2 -1 0 1", "-0.42 -0.41 -0.40 -0.395")
-                      + "</function><scale>1.1</scale></MultiplierFunction>"),
+                      "<MultiplierFunction>"
+                      + named(simm("-2 -1 0 1", "-0.42 -0.41 -0.40 -0.395"))
+                      + "<scale>1.1</scale></MultiplierFunction>"),
                  axis("translation3", "", "0 0 1", ZERO)]
     joints = (custom_joint("hip", "/ground", "/bodyset/thigh", hip_coordinates, hip_axes,
                            ("0 0 0", "0 0 0"), ("0 0 0", "0 0 0"))

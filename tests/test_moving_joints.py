@@ -10,7 +10,7 @@ import pytest
 from fccgrb_cli.opensim.convert import body_poses, parse_osim_model
 from fccgrb_cli.opensim.osim import parse_osim
 from fccgrb_cli.system.compiled import Drive, compile_system
-from tests.osim_text import COORDINATE, LINEAR, axis, custom_joint, knee_model, simm
+from tests.osim_text import COORDINATE, LINEAR, axis, custom_joint, knee_model, named, simm
 
 
 def random_model_text(seed: int) -> str:
@@ -44,8 +44,8 @@ def random_model_text(seed: int) -> str:
     foot = ('<Body name="foot"><mass>1.2</mass><mass_center>0.1 0 0</mass_center>'
             '<inertia>0.01 0.02 0.02 0 0 0</inertia></Body>')
     coupler = ('<CoordinateCouplerConstraint name="couple"><isEnforced>true</isEnforced>'
-               '<coupled_coordinates_function>' + spline() + '</coupled_coordinates_function>'
-               '<independent_coordinate_names>knee</independent_coordinate_names>'
+               + named(spline(), "coupled_coordinates_function")
+               + '<independent_coordinate_names>knee</independent_coordinate_names>'
                '<dependent_coordinate_name>patella</dependent_coordinate_name>'
                '</CoordinateCouplerConstraint>')
     text = knee_model(extra_body=foot, coupler=coupler)

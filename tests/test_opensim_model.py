@@ -110,7 +110,7 @@ HOSTILE = {
     "a joint with an unknown parent": (lambda t: t.replace(
         "<socket_parent>/bodyset/thigh</socket_parent>",
         "<socket_parent>/bodyset/femur</socket_parent>"), "'/bodyset/femur' is neither"),
-    "an unknown function type": (lambda t: t.replace("<SimmSpline>", "<StepFunction>", 1)
+    "an unknown function type": (lambda t: t.replace("<SimmSpline", "<StepFunction", 1)
                                  .replace("</SimmSpline>", "</StepFunction>", 1),
                                  "unknown function type StepFunction"),
     "an unknown joint type": (lambda t: t.replace('<CustomJoint name="knee">',
@@ -201,3 +201,21 @@ def test_check_takes_opensims_gait_model():
     assert "rank 146: 21 degrees of freedom" in result.stdout
     assert "MC Jacobian rank 167 of 167" in result.stdout
     assert "redundant equations: none" in result.stdout
+
+
+def test_a_function_is_read_in_both_property_styles_and_never_assumed():
+    # 3.x wraps a property (<function><SimmSpline>), 4.x names it (<SimmSpline name="function">)
+    wrapped = knee_model().replace('<SimmSpline name="function">', "<function><SimmSpline>", 1)
+    first = wrapped.index("<function><SimmSpline>")
+    end = wrapped.index("</SimmSpline>", first) + len("</SimmSpline>")
+    wrapped = wrapped[:end] + "</function>" + wrapped[end:]
+    a = parse_osim(knee_model().encode(), "a.osim").joints[1].axes[3].function
+    b = parse_osim(wrapped.encode(), "b.osim").joints[1].axes[3].function
+    assert a == b and isinstance(a, type(b)) and a.terms(0.3)[0] != 0.0
+    # a moving axis without a function is refused, not taken as linear
+    start = knee_model().index('<SimmSpline name="function">')
+    stop = knee_model().index("</SimmSpline>", start) + len("</SimmSpline>")
+    bare = knee_model()[:start] + knee_model()[stop:]
+    with pytest.raises(InputError, match="TransformAxis\\[name=translation1\\]: expected a "
+                                         "function of knee"):
+        parse_osim(bare.encode(), "bare.osim")

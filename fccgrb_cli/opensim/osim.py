@@ -224,6 +224,20 @@ def _function(r: _Reader, holder: ET.Element, parents: list[ET.Element]) -> Func
     return _function_element(r, kids[0], [*parents, holder])
 
 
+def _property_function(r: _Reader, element: ET.Element, name: str, parents: list[ET.Element]
+                       ) -> Function | None:
+    """The function held by ``element``'s property ``name``: 3.x wraps it
+    (``<function><SimmSpline>…``), 4.x names it (``<SimmSpline name="function">…``); None when
+    there is neither."""
+    holder = element.find(name)
+    if holder is not None:
+        return _function(r, holder, [*parents, element])
+    for child in element:
+        if child.get("name") == name:
+            return _function_element(r, child, [*parents, element])
+    return None
+
+
 def _knots(r: _Reader, element: ET.Element, parents: list[ET.Element]
            ) -> tuple[tuple[float, ...], tuple[float, ...]]:
     where = f"{r.source}: {r.where(parents, element)}"
@@ -250,11 +264,10 @@ def _function_element(r: _Reader, element: ET.Element, parents: list[ET.Element]
             r.fail(where, "expected at least one coefficient")
         return Polynomial(c)
     if tag == "MultiplierFunction":
-        holder = element.find("function")
-        if holder is None:
-            r.fail(where, "expected a <function>")
-        return Multiplier(_function(r, holder, [*parents, element]),
-                          r.scalar(element, "scale", parents, 1.0))
+        inner = _property_function(r, element, "function", parents)
+        if inner is None:
+            r.fail(where, "expected a function")
+        return Multiplier(inner, r.scalar(element, "scale", parents, 1.0))
     if tag in ("SimmSpline", "NaturalCubicSpline", "PiecewiseLinearFunction", "GCVSpline"):
         x, y = _knots(r, element, parents)
         if tag == "SimmSpline":
@@ -347,11 +360,10 @@ def _transform_axis(r: _Reader, element: ET.Element, parents: list[ET.Element], 
     if np.linalg.norm(axis) < 1e-9:
         r.fail(f"{where}/axis", "expected a non-zero axis")
     names = tuple((element.findtext("coordinates") or "").split())
-    holder = element.find("function")
-    if holder is None:
-        function: Function = Constant(0.0) if not names else LinearFunction(1.0, 0.0)
-    else:
-        function = _function(r, holder, [*parents, element])
+    found = _property_function(r, element, "function", parents)
+    if found is None and names:  # no default is assumed for a moving axis
+        r.fail(where, f"expected a function of {names[0]}")
+    function = Constant(0.0) if found is None else found
     if len(names) > 1:
         r.fail(where, f"expected at most one coordinate per transform axis, got {len(names)}")
     if names and names[0] not in coordinate_names:
@@ -556,12 +568,11 @@ def _couplers(r: _Reader, model: ET.Element, top: list[ET.Element]) -> list[Coup
             independent = r.text(element, "independent_coordinate_names", parents).split()
             if len(independent) != 1:
                 r.fail(where, f"expected one independent coordinate, got {len(independent)}")
-            function = element.find("coupled_coordinates_function")
+            function = _property_function(r, element, "coupled_coordinates_function", parents)
             if function is None:
-                r.fail(where, "expected a <coupled_coordinates_function>")
+                r.fail(where, "expected a coupled_coordinates_function")
             out.append(Coupler(_name(element), independent[0],
-                               r.text(element, "dependent_coordinate_name", parents),
-                               _function(r, function, [*parents, element])))
+                               r.text(element, "dependent_coordinate_name", parents), function))
     return out
 
 
