@@ -107,10 +107,6 @@ class OsimJoint:
     child: OsimFrame
     axes: tuple[TransformAxis, ...]
 
-    @property
-    def child_body(self) -> str:
-        return self.child.body
-
 
 @dataclass(frozen=True)
 class Coupler:
@@ -166,9 +162,6 @@ class _Reader:
 
     def where(self, parents: list[ET.Element], element: ET.Element) -> str:
         return element_path(parents, element)
-
-    def child(self, element: ET.Element, tag: str) -> ET.Element | None:
-        return element.find(tag)
 
     def text(self, element: ET.Element, tag: str, parents: list[ET.Element],
              default: str | None = None) -> str:
@@ -318,7 +311,7 @@ def _coordinate(r: _Reader, element: ET.Element, parents: list[ET.Element], join
                           r.flag(element, "locked", parents), r.flag(element, "clamped", parents))
 
 
-def _frame(r: _Reader, body: str, translation: Vec3, orientation: Vec3) -> OsimFrame:
+def _frame(body: str, translation: Vec3, orientation: Vec3) -> OsimFrame:
     R = rotation_xyz(orientation)
     return OsimFrame(body, translation, tuple(tuple(float(v) for v in row) for row in R))
 
@@ -450,9 +443,9 @@ def _read_3x(r: _Reader, model: ET.Element, top: list[ET.Element], bodies: list[
         names = tuple(c.name for c in found)
         axes = _joint_axes(r, joint, inside, names)
         parent = r.text(joint, "parent_body", inside)
-        parent_frame = _frame(r, parent, r.vec3(joint, "location_in_parent", inside, (0, 0, 0)),
+        parent_frame = _frame(parent, r.vec3(joint, "location_in_parent", inside, (0, 0, 0)),
                               r.vec3(joint, "orientation_in_parent", inside, (0, 0, 0)))
-        child_frame = _frame(r, body.name, r.vec3(joint, "location", inside, (0, 0, 0)),
+        child_frame = _frame(body.name, r.vec3(joint, "location", inside, (0, 0, 0)),
                              r.vec3(joint, "orientation", inside, (0, 0, 0)))
         joints.append(OsimJoint(_name(joint), joint.tag, parent_frame, child_frame, axes))
 
