@@ -24,7 +24,7 @@ from fccgrb_cli.dynamics.mass import gravity_forces, mass_matrix
 from fccgrb_cli.system.compiled import Drive, System
 from fccgrb_cli.system.moving_pose import pose_from_coordinates
 
-__all__ = ["coordinate_forces"]
+__all__ = ["coordinate_forces", "forces_from_coordinates"]
 
 
 def coordinate_forces(system: System, theta: np.ndarray, theta_d: np.ndarray,
@@ -63,3 +63,42 @@ def coordinate_forces(system: System, theta: np.ndarray, theta_d: np.ndarray,
         lam = lstsq(Jx.T, g - M @ xdd)[0]
         out[f] = Jt.T @ lam
     return out
+
+
+def forces_from_coordinates(system: System, time: np.ndarray, theta: np.ndarray,
+                            cutoff: float | None = None, order: int = 4
+                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The inverse dynamics of a coordinates file, as OpenSim's ID tool runs it: the
+    coordinates low-passed (zero-lag Butterworth of ``order`` at ``cutoff`` Hz, None: not
+    filtered), their rates and accelerations from the natural quintic spline through them
+    (f‴ = f⁗ = 0 at the ends; OpenSim's GCVSpline of degree 5 without smoothing), then
+    :func:`coordinate_forces`.
+
+    Parameters
+    ----------
+    system
+        As for :func:`coordinate_forces`.
+    time
+        Sample times (frames,), s, increasing, evenly spaced when ``cutoff`` is given.
+    theta
+        The coordinates (frames × n_θ; rad, m) in the order of ``model.angles``.
+    cutoff, order
+        The low-pass filter's cutoff (Hz) and order.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        τ (frames × n_θ; N·m, N), and the θ, θ̇, θ̈ it was computed from.
+    """
+    from scipy.interpolate import make_interp_spline
+
+    from fccgrb_cli.filtering import lowpass
+
+    time = np.asarray(time, dtype=float)
+    theta = np.asarray(theta, dtype=float)
+    if cutoff is not None:
+        theta = lowpass(theta, 1.0 / float(np.mean(np.diff(time))), cutoff, order)
+    natural = [(3, 0.0), (4, 0.0)]
+    spline = make_interp_spline(time, theta, k=5, bc_type=(natural, natural))
+    smooth, rate, acceleration = spline(time), spline(time, 1), spline(time, 2)
+    return coordinate_forces(system, smooth, rate, acceleration), smooth, rate, acceleration
