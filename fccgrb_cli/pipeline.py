@@ -103,6 +103,9 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
         result = assessed(unassessed, points, inputs, found)
         warnings: list[str] = [*trial.warnings, *axes.warnings, *_quality_advice(result)]
         notes: list[str] = [axes.note()] if axes.chosen_by != "ground" else []
+        if model.moving_joints:  # recorded with the run: which engine solved it
+            notes.append("engine: numpy reference (the compiled kernels do not take moving "
+                         "joints)")
         smoothing = smoothed_or_warned(model, result, inputs, options, warnings)
         bridged = result
         if smoothing is not None:  # checked again where the smoother put the model
