@@ -178,3 +178,21 @@ def test_bodies_placed_by_forward_kinematics_keep_the_joint_frames_together():
     e_c = R_s @ np.asarray(joint.child.rotation)
     assert e_p[:, 0] @ e_c[:, 0] == pytest.approx(np.cos(0.7))
     assert np.cross(e_p[:, 0], e_c[:, 0]) @ e_p[:, 2] == pytest.approx(np.sin(0.7))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_stacked_evaluation_equals_each_joint_on_its_own(seed):
+    # the solve's batched evaluation against SpatialTransform.terms, joint by joint
+    rng = np.random.default_rng(40 + seed)
+    system = system_of(seed)
+    functions = system.functions
+    theta = rng.normal(size=functions.n_coordinates)
+    h, h1, h2 = functions.terms(theta)
+    for first, transform, index in functions.joints:
+        value, d1, d2 = transform.terms(theta[index])
+        block = slice(first, first + 12)
+        assert np.allclose(h[block], value, atol=1e-14)
+        assert np.allclose(h1[block][:, index], d1, atol=1e-13)
+        assert np.allclose(h2[block][:, index[:, None], index[None, :]], d2, atol=1e-12)
+        others = np.setdiff1d(np.arange(functions.n_coordinates), index)
+        assert not h1[block][:, others].any() and not h2[block][:, others].any()

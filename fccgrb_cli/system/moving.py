@@ -20,11 +20,13 @@ pose, where any three of them would lose rank at some rotations), which the solv
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
 from fccgrb_cli.model import GROUND, Model
 from fccgrb_cli.system.features import FeatureTable
+from fccgrb_cli.system.moving_batch import StackedTransforms
 
 __all__ = ["FunctionRows", "collect_function_rows"]
 
@@ -57,16 +59,17 @@ class FunctionRows:
         self._last[:] = [key, second, out]
         return out
 
+    @cached_property
+    def _stacked(self) -> StackedTransforms:
+        """The joints' transforms evaluated together (system/moving_batch.py)."""
+        return StackedTransforms(self.joints, self.n_coordinates)
+
     def _terms(self, theta: np.ndarray, second: bool
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         n, nt = len(self.rows), self.n_coordinates
         h, h1, h2 = np.zeros(n), np.zeros((n, nt)), np.zeros((n, nt, nt))
-        for first, transform, index in self.joints:
-            value, d1, d2 = transform.terms(theta[index], second)
-            block = slice(first, first + 12)
-            h[block] = value
-            h1[block][:, index] = d1
-            h2[block][:, index[:, None], index[None, :]] = d2
+        if self.joints:
+            self._stacked.add(np.asarray(theta, dtype=float), second, h, h1, h2)
         for row, dependent, independent, function in self.couplings:
             # θ_d − f(θ_i) = −h  →  h = f(θ_i) − θ_d
             f, d1, d2 = function.terms(float(theta[independent]) if independent >= 0 else 0.0)
