@@ -87,7 +87,8 @@ class SpatialTransform:
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """h (12,), ∂h/∂θ (12 × k) and ∂²h/∂θ² (12 × k × k; zeros unless ``second``) at the
         values (k,) of :attr:`coordinates`: h = [R_PC row by row, p_PC] (rad-free numbers
-        and m)."""
+        and m). One joint at a time: the forward kinematics' form, and the reference that a
+        solve's evaluation of all joints together (system/moving_batch.py) is tested against."""
         k = len(self.coordinates)
         index = self._index
         h, h1, h2 = np.zeros(12), np.zeros((12, k)), np.zeros((12, k, k))
