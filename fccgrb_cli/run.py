@@ -1,5 +1,5 @@
 """A solved trial (:class:`Run`): what ``pipeline.solve_trial`` returns, the results file
-stores (``io.results`` writes it, ``io.runs`` reads it back) and the Python API hands out, with
+stores (``results.storage`` writes it, ``results.runs`` reads it back) and the Python API hands out, with
 the one-row summary the command line prints."""
 
 from __future__ import annotations
@@ -10,18 +10,18 @@ from pathlib import Path
 
 import numpy as np
 
-from fccgrb_cli.clinical import ClinicalResults
+from fccgrb_cli.anatomy.clinical import ClinicalResults
+from fccgrb_cli.anatomy.lab_axes import LabAxes
+from fccgrb_cli.core.named import NamedArray
 from fccgrb_cli.dynamics.convert import Dynamics
 from fccgrb_cli.dynamics.reduction import Reduction
 from fccgrb_cli.dynamics.residuals import ResidualReport
 from fccgrb_cli.gait.analysis import GaitResults
-from fccgrb_cli.gait.plugin_gait_outputs import PluginGaitResults
-from fccgrb_cli.io.lab_axes import LabAxes
 from fccgrb_cli.model import Model
 from fccgrb_cli.model.elements import in_metres
-from fccgrb_cli.named import NamedArray
-from fccgrb_cli.options import SolveOptions
-from fccgrb_cli.smoothing import Uncertainty
+from fccgrb_cli.pipeline.options import SolveOptions
+from fccgrb_cli.pipeline.smoothing import Uncertainty
+from fccgrb_cli.plugin_gait.outputs import PluginGaitResults
 from fccgrb_cli.solvers.result import KinematicResult
 
 __all__ = ["Run", "mean_jump", "summary"]
@@ -105,7 +105,7 @@ class Run:
         """The model as solved (the run's YAML with the options' form and tracked markers, and
         the gravity of the lab's axes)."""
         from fccgrb_cli.model import parse_model
-        from fccgrb_cli.options import prepared
+        from fccgrb_cli.pipeline.options import prepared
 
         model = prepared(parse_model(self.model_text, self.trial_path), self.options)
         return model if self.axes is None else model.with_gravity(self.axes.gravity)
@@ -246,7 +246,7 @@ class Run:
 
     def to_hdf5(self, path: str | Path, command: str = "fccgrb_cli.solve (Python API)") -> None:
         """Add this run to a results file (created when absent), atomically."""
-        from fccgrb_cli.io.results import write_run
+        from fccgrb_cli.results.storage import write_run
 
         write_run(path, self, command)
 

@@ -32,9 +32,9 @@ from itertools import pairwise
 
 import numpy as np
 
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.dynamics.uncertainty import moment_uncertainty
-from fccgrb_cli.errors import InputError
 from fccgrb_cli.model import Model
 from fccgrb_cli.solvers.batched import Drives, Stacked, blocks
 from fccgrb_cli.solvers.rates import consistent_rates

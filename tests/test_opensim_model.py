@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.trial.record import read_trc
 
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.io.trial import read_trc
 from fccgrb_cli.model import load_model
 from fccgrb_cli.opensim.convert import body_poses, model_from_osim
 from fccgrb_cli.opensim.osim import parse_osim, read_osim

@@ -7,8 +7,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from fccgrb_cli.core.errors import InputError
 
-from fccgrb_cli.errors import InputError
 from fccgrb_cli.opensim.tasks import read_marker_tasks
 
 IK_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "opensim" / \

@@ -92,7 +92,7 @@ def forces_from_coordinates(system: System, time: np.ndarray, theta: np.ndarray,
     """
     from scipy.interpolate import make_interp_spline
 
-    from fccgrb_cli.filtering import lowpass
+    from fccgrb_cli.signals.butterworth import lowpass
 
     time = np.asarray(time, dtype=float)
     theta = np.asarray(theta, dtype=float)

@@ -35,10 +35,10 @@ from pathlib import Path
 
 import numpy as np
 
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.io.trial import Trial
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model import GROUND, Model
-from fccgrb_cli.options import AXES
+from fccgrb_cli.pipeline.options import AXES
+from fccgrb_cli.trial.record import Trial
 
 VERTICALS = ("auto", *AXES)
 SNAP_DEG = 25.0      # a cue within this angle of a lab axis names that axis
@@ -138,7 +138,7 @@ def screen_cue(path: str) -> Cue | None:
     """POINT:Y_SCREEN of a C3D, the axis its software draws upwards (None without one)."""
     if not path.lower().endswith(".c3d") or not Path(path).is_file():
         return None
-    from fccgrb_cli.io.c3d_header import read_parameters
+    from fccgrb_cli.trial.c3d_header import read_parameters
 
     value = read_parameters(path).get("POINT:Y_SCREEN")
     text = str(value.values[0]).strip().lower() if value is not None and value.values.size \
@@ -152,8 +152,8 @@ def plate_cue(model: Model, trial: Trial) -> Cue | None:
     """The plates' normals signed by the force on the subject over their loaded frames."""
     if not trial.path.lower().endswith(".c3d") or not Path(trial.path).is_file():
         return None  # a trial made in memory has no plates
-    from fccgrb_cli.io.c3d_header import WORD_LIMIT, read_layout, read_parameters
-    from fccgrb_cli.io.forceplates import plate_normal, read_force_plates
+    from fccgrb_cli.trial.c3d_header import WORD_LIMIT, read_layout, read_parameters
+    from fccgrb_cli.trial.forceplates import plate_normal, read_force_plates
 
     used = read_parameters(trial.path).get("FORCE_PLATFORM:USED")
     if used is None or not used.values.size or not used.values[0] or \

@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 import yaml
 
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.inputs import load_yaml, read_text, shown
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.core.inputs import load_yaml, read_text, shown
 from fccgrb_cli.model.elements import (
     GROUND,
     JOINT_EQUATIONS,

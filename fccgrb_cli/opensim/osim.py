@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model.spatial import SpatialAxis as TransformAxis
 from fccgrb_cli.model.spatial import axis_rotation
 from fccgrb_cli.opensim.functions import (

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.opensim.xml import element_path, number, parse
 
 __all__ = ["MarkerTasks", "read_marker_tasks"]

@@ -13,7 +13,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from xml.parsers.expat import ExpatError, ParserCreate
 
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.errors import InputError
 
 __all__ = ["MAX_BYTES", "MAX_DEPTH", "MAX_MAGNITUDE", "element_path", "number", "numbers",
            "parse", "parse_bytes"]

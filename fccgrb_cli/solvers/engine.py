@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.errors import InputError
 
 
 def use_kernels(engine: str, takes: bool) -> bool:

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model import GROUND, Joint, Model
 from fccgrb_cli.system.features import FeatureTable, perpendiculars
 

@@ -10,7 +10,7 @@ dependent rows are reported only when there are more than those six per moving j
 
 from __future__ import annotations
 
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model import Model
 from fccgrb_cli.model.observed import holding_unobserved
 from fccgrb_cli.system.compiled import compile_system
