@@ -115,7 +115,12 @@ def model_defines_lab(model: Model) -> str | None:
     for joint in model.joints:
         if GROUND in joint.bodies:
             return f"joint {joint.name}"
+    for moving in model.moving_joints:
+        if moving.parent == GROUND:
+            return f"joint {moving.name}"
     for coordinate in model.angles:
+        if coordinate.kind == "joint":  # held by a moving joint, named above
+            continue
         ends = (coordinate.body1, coordinate.body2)
         axis = getattr(coordinate, "axis", None)
         if GROUND in ends or (isinstance(axis, tuple) and axis[0] == GROUND):

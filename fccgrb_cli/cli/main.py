@@ -21,6 +21,7 @@ from fccgrb_cli.core.inputs import refuse_inputs
 from fccgrb_cli.core.params import Bounded, Widths
 from fccgrb_cli.core.progress import Progress
 from fccgrb_cli.model import Model, load_model
+from fccgrb_cli.model.elements import in_metres
 from fccgrb_cli.pipeline.options import (
     AXES,
     SEED_MAX,
@@ -204,7 +205,7 @@ def synth(model: str, output: str, duration: float, rate: float, units: str, for
 
 def _coordinate_ranges(model: Model, theta: np.ndarray) -> str:
     """'angles A..B deg' and, with distance coordinates, ', distances C..D mm'."""
-    distance = np.array([a.kind == "distance" for a in model.angles], dtype=bool)
+    distance = np.array([in_metres(a) for a in model.angles], dtype=bool)
     parts = []
     for mask, what, convert, unit in ((~distance, "angles", np.degrees, "deg"),
                                       (distance, "distances", lambda d: 1e3 * d, "mm")):

@@ -9,6 +9,7 @@ from typing import Literal
 import numpy as np
 
 from fccgrb_cli.model.motion import BaseMotion, Motion
+from fccgrb_cli.model.spatial import Coupling, JointCoordinate, MovingJoint
 from fccgrb_cli.model.subject import SubjectMeasurements
 
 GROUND = "ground"
@@ -218,7 +219,12 @@ class DistanceCoordinate:
         return None
 
 
-Coordinate = AngularCoordinate | DistanceCoordinate
+Coordinate = AngularCoordinate | DistanceCoordinate | JointCoordinate
+
+
+def in_metres(coordinate: Coordinate) -> bool:
+    """Whether a coordinate is a length (m): a distance, or a moving joint's translation."""
+    return coordinate.kind == "distance" or getattr(coordinate, "translational", False)
 
 
 @dataclass(frozen=True)
@@ -290,6 +296,8 @@ class Model:
     source: str = "<model>"
     text: str = ""
     calibrated: CalibrationRecord | None = None
+    moving_joints: tuple[MovingJoint, ...] = ()
+    couplings: tuple[Coupling, ...] = ()
 
     @property
     def template(self) -> bool:
@@ -312,7 +320,7 @@ class Model:
     @property
     def floating_bases(self) -> tuple[str, ...]:
         """The first body of every group of bodies no chain of joints ties to the ground."""
-        return floating_bases(self.bodies, self.joints)
+        return floating_bases(self.bodies, self.joints, self.moving_joints)
 
     @property
     def marker_labels(self) -> tuple[str, ...]:
@@ -336,12 +344,14 @@ class Model:
         )
 
 
-def floating_bases(bodies: tuple[Body, ...], joints: tuple[Joint, ...]) -> tuple[str, ...]:
-    """The first body of every group of bodies that no chain of joints ties to the ground: a
-    floating base, whose 6 degrees of freedom the markers (MC) or base drivers (AD) determine."""
+def floating_bases(bodies: tuple[Body, ...], joints: tuple[Joint, ...],
+                   moving: tuple[MovingJoint, ...] = ()) -> tuple[str, ...]:
+    """The first body of every group of bodies that no chain of joints (``moving`` ones
+    included) ties to the ground: a floating base, whose 6 degrees of freedom the markers (MC)
+    or base drivers (AD) determine."""
     neighbours: dict[str, set[str]] = {GROUND: set(), **{b.name: set() for b in bodies}}
-    for j in joints:
-        a, b = j.bodies
+    pairs = [j.bodies for j in joints] + [(m.parent, m.child) for m in moving]
+    for a, b in pairs:
         neighbours[a].add(b)
         neighbours[b].add(a)
     seen: set[str] = set()
@@ -383,4 +393,5 @@ __all__ = [
     "Vector",
     "_frozen",
     "floating_bases",
+    "in_metres",
 ]

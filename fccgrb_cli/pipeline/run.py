@@ -18,6 +18,7 @@ from fccgrb_cli.dynamics.reduction import Reduction
 from fccgrb_cli.dynamics.residuals import ResidualReport
 from fccgrb_cli.gait.analysis import GaitResults
 from fccgrb_cli.model import Model
+from fccgrb_cli.model.elements import in_metres
 from fccgrb_cli.pipeline.options import SolveOptions
 from fccgrb_cli.pipeline.smoothing import Uncertainty
 from fccgrb_cli.plugin_gait.outputs import PluginGaitResults
@@ -159,8 +160,7 @@ class Run:
 
     @property
     def _angle_units(self) -> tuple[str, ...]:
-        return tuple("m" if getattr(a, "kind", "angle") == "distance" else "rad"
-                     for a in self.model.angles)
+        return tuple("m" if in_metres(a) else "rad" for a in self.model.angles)
 
     @property
     def angles(self) -> NamedArray:

@@ -230,6 +230,8 @@ def applies(options, model: Model) -> str | None:
         return "--filter-cutoff asks for the Butterworth filter instead"
     if model.tracked_vectors:
         return "the model tracks vectors; the smoother takes tracked points only"
+    if model.moving_joints:
+        return "the smoother does not take moving joints (an imported OpenSim model) yet"
     return None
 
 

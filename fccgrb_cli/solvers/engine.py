@@ -22,7 +22,8 @@ def use_kernels(engine: str, takes: bool) -> bool:
     if engine == "compiled":
         if not takes:
             raise InputError("--engine compiled: the compiled kernels take models without "
-                             "reduced bodies (form: full); use --engine numpy or auto")
+                             "reduced bodies (form: full) or moving joints (an imported "
+                             "OpenSim model); use --engine numpy or auto")
         if not numba_available():
             raise InputError("--engine compiled needs numba (pip install numba)")
         return True

@@ -164,6 +164,10 @@ def _world_vector(model, placed: dict, body: str, name: str) -> np.ndarray:
 
 def initial_guess(system: System, targets: np.ndarray) -> np.ndarray:
     """q for the first frame from the tracked markers (targets: n_targets × 3, NaN in gaps)."""
+    if system.functions is not None:  # bodies placed by coordinates: fitted in θ alone
+        from fccgrb_cli.solvers.moving_initial import moving_initial_guess
+
+        return moving_initial_guess(system, targets)
     model, layout = system.model, system.layout
     q = layout.pose_q(model)
     tracked: dict[str, list[tuple[tuple, np.ndarray]]] = {b.name: [] for b in model.bodies}

@@ -13,6 +13,9 @@ F = A x + f0 the features and x the fully-defined equivalent coordinates (Eq. 5)
 * a signed angle (``range: full``) adds a sine row, (s1 × s2)·n − sin θ written as a dot row
   F_a·F_b − sin θ (docs/signed_angles.md): Φ_θ = −cos θ, ν = cos θ* θ̇*, γ += −sin θ θ̇² (MCR)
   or −sin θ* θ̇*² + cos θ* θ̈* (AR), Hessian += c sin θ.
+* moving joints and couplings (an imported OpenSim model) have rows F_a·F_b − h_r(θ) with h_r any
+  smooth function of several coordinates (system/moving.py, docs/opensim.md): Φ_θ = −∂h/∂θ,
+  γ += θ̇ᵀ ∂²h/∂θ² θ̇ (+ ∂h/∂θ θ̈* as drivers, ν = ∂h/∂θ θ̇*), Hessian −= Σ c_r ∂²h_r/∂θ².
 
 Then Φ_q = Φ_x X_q with X_q = V (Eq. 7) for reduced bodies.
 """
@@ -28,6 +31,7 @@ from fccgrb_cli.model import Model
 from fccgrb_cli.system.constraints import AXES, collect
 from fccgrb_cli.system.features import FeatureTable
 from fccgrb_cli.system.layout import Layout, build_layout, skew
+from fccgrb_cli.system.moving import FunctionRows, collect_function_rows
 from fccgrb_cli.system.rank import rank_of
 
 TOPOLOGY, DRIVER, TRACKING = 0, 1, 2
@@ -93,6 +97,7 @@ class System:
     labels: tuple[str, ...]
     kinds: np.ndarray
     n_base_slots: int = 0
+    functions: FunctionRows | None = None
 
     # --- sizes -------------------------------------------------------------------------------
     @property
@@ -141,6 +146,8 @@ class System:
             dot[self.angle_rows] -= self.g_terms(theta)[0]
             if len(self.sine_rows):
                 dot[self.sine_rows] -= np.sin(theta[self.sine_of])
+        if self.functions is not None:
+            dot[self.functions.rows] -= self.functions.terms(self._theta(q, drive), False)[0]
         return np.concatenate([lin, dot])
 
     def g_terms(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -160,8 +167,11 @@ class System:
         if xq is not None:
             J = J @ xq
             if self.mixed:
-                J = np.hstack([J, np.zeros((len(J), len(self.angle_rows)))])
-        if self.mixed:
+                J = np.hstack([J, np.zeros((len(J), len(self.layout.angle_names)))])
+        if self.mixed and self.functions is not None:
+            n = self.layout.n_body_q
+            J[self.n_linear_rows + self.functions.rows, n:] = -self.functions.terms(q[n:], False)[1]
+        elif self.mixed:
             n = self.layout.n_body_q
             J[self.n_linear_rows + self.angle_rows, n + np.arange(len(self.angle_rows))] = \
                 -self.g_terms(q[n:])[1]
@@ -194,6 +204,9 @@ class System:
                 self.g_terms(drive.theta)[1] * drive.theta_d
             k = self.sine_of
             nu[self.n_linear_rows + self.sine_rows] = np.cos(drive.theta[k]) * drive.theta_d[k]
+        if self.functions is not None and not self.mixed:
+            nu[self.n_linear_rows + self.functions.rows] = \
+                self.functions.terms(drive.theta, False)[1] @ drive.theta_d
         return nu
 
     def gamma(self, q: np.ndarray, qd: np.ndarray, drive: Drive) -> np.ndarray:
@@ -220,6 +233,16 @@ class System:
                 gamma[rows] += g2 * drive.theta_d**2 + g1 * drive.theta_dd
                 th, thd, thdd = drive.theta[k], drive.theta_d[k], drive.theta_dd[k]
                 gamma[sines] += -np.sin(th) * thd**2 + np.cos(th) * thdd
+        if self.functions is not None:
+            rows = start + self.functions.rows
+            if self.mixed:
+                theta, theta_d = q[layout.n_body_q:], qd[layout.n_body_q:]
+                gamma[rows] += np.einsum("rij,i,j->r", self.functions.terms(theta)[2],
+                                         theta_d, theta_d)
+            else:
+                _, h1, h2 = self.functions.terms(drive.theta)
+                gamma[rows] += (np.einsum("rij,i,j->r", h2, drive.theta_d, drive.theta_d)
+                                + h1 @ drive.theta_dd)
         return gamma
 
     def residual_hessian(self, q: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -246,7 +269,10 @@ class System:
                 block = skew(g[w])
                 H[np.ix_(u, v)] -= block
                 H[np.ix_(v, u)] += block
-        if self.mixed:
+        if self.mixed and self.functions is not None:
+            H[nb:, nb:] -= np.einsum("r,rij->ij", dots[self.functions.rows],
+                                     self.functions.terms(q[nb:])[2])
+        elif self.mixed:
             rows = self.angle_rows
             H[nb + np.arange(len(rows)), nb + np.arange(len(rows))] -= \
                 dots[rows] * self.g_terms(q[nb:])[2]
@@ -279,7 +305,11 @@ class System:
     def angles_at(self, q: np.ndarray) -> np.ndarray:
         """Every coordinate's value at q, whatever the mode: acos(s1·s2) for an angle (rad),
         atan2((s1 × s2)·n, s1·s2) in (−π, π] for a signed one, (r_Q − r_P)·s for a distance
-        (m)."""
+        (m). A moving joint's coordinates are not functions of the bodies' coordinates alone:
+        q's own θ when they are mixed coordinates, NaN (unknown) when they are driven."""
+        if self.functions is not None:
+            n = self.layout.n_body_q
+            return q[n:].copy() if self.mixed else np.full(self.functions.n_coordinates, np.nan)
         F = self.features(self.layout.expand(q))
         dot = np.einsum("ij,ij->i", F[self.dot_a[self.angle_rows]], F[self.dot_b[self.angle_rows]])
         out = np.where(self.distance_rows, dot, np.arccos(np.clip(dot, -1.0, 1.0)))
@@ -292,15 +322,19 @@ class System:
     def pose(self) -> np.ndarray:
         """q at the model's pose, mixed coordinates set to the angles the pose has."""
         q = self.layout.pose_q(self.model)
-        if self.mixed:
+        if self.mixed and self.functions is not None:
+            q[self.layout.n_body_q:] = self.functions.defaults
+        elif self.mixed:
             q[self.layout.n_body_q:] = self.angles_at(q)
         return q
 
     @property
     def full_angles(self) -> np.ndarray:
         """Per coordinate: a signed angle that may take any value (``range: full``)."""
-        out = np.zeros(len(self.angle_rows), dtype=bool)
+        out = np.zeros(len(self.distance_rows), dtype=bool)
         out[self.sine_of] = True
+        if self.functions is not None:  # a moving joint's coordinate may take any value
+            out[:] = True
         return out
 
     def base_reference(self, q: np.ndarray) -> np.ndarray:
@@ -339,6 +373,7 @@ def compile_system(model: Model, *, angles: str = "driver", track: bool = False)
     layout = build_layout(model, names)
     table = FeatureTable(model, layout)
     cl = collect(model, table, angles=angles, track=track, base=angles == "driver")
+    functions = collect_function_rows(table, cl, model, tuple(a.name for a in model.angles))
     A, f0 = table.arrays()
     nx = layout.nx
 
@@ -399,12 +434,14 @@ def compile_system(model: Model, *, angles: str = "driver", track: bool = False)
         dot_b3=(3 * dot_b[:, None] + np.arange(3)).ravel(),
         dot_c=np.array([c for _, _, c, _ in cl.dots], dtype=float),
         angle_rows=idx(cl.angle_dots),
-        distance_rows=np.array(cl.distance_dots, dtype=bool),
+        distance_rows=(functions.translational if functions is not None
+                       else np.array(cl.distance_dots, dtype=bool)),
         sine_rows=idx(cl.sine_dots),
         sine_of=idx(cl.sine_of),
         labels=tuple(labels),
         kinds=np.array(kinds, dtype=int),
         n_base_slots=cl.n_base,
+        functions=functions,
     )
 
 

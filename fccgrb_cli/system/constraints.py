@@ -97,6 +97,8 @@ def angular(features: FeatureTable, out: ConstraintList, model: Model, kind: str
     Eq. 10). ``out.distance_dots`` marks the distance rows (g(d) = d)."""
     tag = "AR" if kind == "driver" else "MCR"
     for coord in model.angles:
+        if coord.kind == "joint":  # held by its moving joint's rows (system/moving.py)
+            continue
         if coord.kind == "distance":
             offset = features.difference(features.point(coord.body2, coord.point2),
                                          features.point(coord.body1, coord.point1))
@@ -155,8 +157,8 @@ def tracking(features: FeatureTable, out: ConstraintList, model: Model) -> None:
 def joint_neighbours(model: Model) -> dict[str, set[str]]:
     """Every body (and the ground) → the bodies a joint connects it to."""
     neighbours: dict[str, set[str]] = {GROUND: set(), **{b.name: set() for b in model.bodies}}
-    for j in model.joints:
-        a, b = j.bodies
+    pairs = [j.bodies for j in model.joints] + [(m.parent, m.child) for m in model.moving_joints]
+    for a, b in pairs:
         neighbours[a].add(b)
         neighbours[b].add(a)
     return neighbours

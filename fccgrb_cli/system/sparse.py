@@ -73,9 +73,26 @@ def supported(system: System) -> bool:
 
 def compilable(system: System) -> bool:
     """Fully-defined bodies only: x is q's body part (the classical model's kernels need no
-    more; the mixed ones need tracking too, see :func:`supported`)."""
+    more; the mixed ones need tracking too, see :func:`supported`), and no moving joint (their
+    rows' functions of the coordinates are numpy's only: such a model runs in the numpy
+    reference engine, which a line on stderr says once per process)."""
+    if system.functions is not None:
+        _tell_moving_numpy()
+        return False
     layout = system.layout
     return not len(layout.reduced_w) and layout.n_body_q == layout.nx
+
+
+_TOLD: list[bool] = []
+
+
+def _tell_moving_numpy() -> None:
+    import sys
+
+    if not _TOLD:
+        _TOLD.append(True)
+        sys.stderr.write("fccgrb: note: the compiled kernels do not take moving joints (an "
+                         "imported OpenSim model): the numpy reference engine solves it\n")
 
 
 def sparse_system(system: System) -> SparseSystem:

@@ -90,6 +90,10 @@ def check_tracking(model: Model, report: StructureReport) -> None:
 
 def analyse(model: Model) -> StructureReport:
     """Rank analysis; raises InputError when the constraints cannot determine the coordinates."""
+    if model.moving_joints:
+        from fccgrb_cli.system.moving_structure import analyse_moving
+
+        return analyse_moving(model, StructureReport)
     ad = compile_system(model, angles="driver")
     J = ad.jacobian(ad.pose())
     top = ad.masks()["topology"]

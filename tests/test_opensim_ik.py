@@ -1,0 +1,112 @@
+"""OpenSim's own IK regression test, passed with OpenSim's criterion: on its synthetic Gait2354
+trial (markers generated on the model, 31 markers, 73 frames) every coordinate's RMS difference
+to OpenSim's own solution (std_subject01_walk1_ik.mot) is below 0.2° — translations below
+0.2 mm, the same criterion in metres at the scale of the markers' rounding — for the uniform
+and the weighted task sets, solved with the mixed coordinates by NRM-WLS and by CNO-SQP."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fccgrb_cli.api import solve
+from fccgrb_cli.model import load_model
+from fccgrb_cli.opensim.convert import with_marker_tasks
+from fccgrb_cli.opensim.tasks import read_marker_tasks
+from fccgrb_cli.trial.record import read_trc
+
+IK_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "opensim" / \
+    "ik_gait2354_synthetic"
+pytestmark = pytest.mark.skipif(not IK_DIR.is_dir(), reason="../shared/data/opensim not here")
+DEGREES = 0.2      # OpenSim's tolerance for its IK regression test, per coordinate (RMS)
+METRES = 0.2e-3    # translations (pelvis_tx/ty/tz)
+WLS_UNIT = 1e-3    # NRM-WLS: a task weight of 1 is the default tracking weight
+
+
+def opensim_solution() -> tuple[list[str], np.ndarray]:
+    """OpenSim's IK output: time and 23 coordinates (rotations in degrees, as IK writes them)."""
+    lines = (IK_DIR / "std_subject01_walk1_ik.mot").read_text().splitlines()
+    end = next(k for k, line in enumerate(lines) if line.strip() == "endheader")
+    names = lines[end + 1].split()
+    rows = np.array([[float(v) for v in line.split()] for line in lines[end + 2:] if line.strip()])
+    return names, rows
+
+
+@pytest.fixture(scope="module")
+def gait():
+    return (load_model(IK_DIR / "subject01_simbody.osim"),
+            read_trc(IK_DIR / "subject01_synthetic_marker_data.trc"))
+
+
+@pytest.mark.parametrize("tasks", ["gait2354_IK_Tasks_uniform.xml", "gait2354_IK_Tasks.xml"])
+@pytest.mark.parametrize("method", ["nrm-wls", "cno-sqp"])
+def test_opensims_ik_regression_passes_with_its_own_criterion(gait, method, tasks):
+    model, trial = gait
+    weights = read_marker_tasks(IK_DIR / tasks).weights
+    model = with_marker_tasks(model, weights, WLS_UNIT if method == "nrm-wls" else 1.0)
+    run = solve(model, trial, method=method, dynamics=False)
+    assert any(note.startswith("engine: numpy reference") for note in run.notes)
+    names, reference = opensim_solution()
+    assert len(reference) == trial.n_frames == run.result.n_frames
+    assert np.allclose(reference[:, 0], trial.start + np.arange(trial.n_frames) / trial.rate,
+                       atol=6e-4)  # the .mot rounds times to 1 ms
+    assert run.result.converged.all()
+    theta = run.result.q[:, -len(model.angles):]
+    order = [c.name for c in model.angles]
+    worst = {}
+    for k, name in enumerate(names[1:], start=1):
+        coordinate = model.angles[order.index(name)]
+        ours = theta[:, order.index(name)]
+        if coordinate.translational:
+            rms = float(np.sqrt(np.mean((ours - reference[:, k]) ** 2)))
+            assert rms < METRES, (name, rms)
+        else:
+            rms = float(np.sqrt(np.mean((np.degrees(ours) - reference[:, k]) ** 2)))
+            assert rms < DEGREES, (name, rms)
+        worst[name] = rms
+    assert len(worst) == 23
+
+
+def test_the_command_line_solves_an_osim_model_and_exports_opensims_coordinates(tmp_path,
+                                                                              monkeypatch):
+    # fccgrb solve MODEL.osim TRIAL.trc, then export --format mot: OpenSim's columns, rotations
+    # in degrees and translations in metres, within OpenSim's criterion of its own solution
+    from cli_helpers import run_cli
+
+    from fccgrb_cli.system import sparse
+
+    monkeypatch.setattr(sparse, "_TOLD", [])  # the engine's note is once per process
+
+    results, motion = tmp_path / "r.h5", tmp_path / "ik.mot"
+    solved = run_cli("solve", IK_DIR / "subject01_simbody.osim",
+                     IK_DIR / "subject01_synthetic_marker_data.trc", "--method", "nrm-wls",
+                     "-o", results)
+    assert solved.exit_code == 0, solved.stderr
+    assert "numpy reference engine" in solved.stderr
+    exported = run_cli("export", results, "--format", "mot", "-o", motion)
+    assert exported.exit_code == 0, exported.stderr
+    lines = motion.read_text().splitlines()
+    assert "inDegrees=yes" in lines
+    end = lines.index("endheader")
+    ours_names = lines[end + 1].split()
+    ours = np.array([[float(v) for v in line.split()] for line in lines[end + 2:]])
+    names, reference = opensim_solution()
+    assert sorted(ours_names) == sorted(names)
+    for k, name in enumerate(names[1:], start=1):
+        difference = ours[:, ours_names.index(name)] - reference[:, k]
+        limit = METRES if name in ("pelvis_tx", "pelvis_ty", "pelvis_tz") else DEGREES
+        assert np.sqrt(np.mean(difference**2)) < limit, name
+
+
+def test_methods_that_cannot_take_an_imported_model_say_so_and_write_nothing(tmp_path):
+    from cli_helpers import run_cli
+
+    results = tmp_path / "r.h5"
+    refused = run_cli("solve", IK_DIR / "subject01_simbody.osim",
+                      IK_DIR / "subject01_synthetic_marker_data.trc", "--method", "ad",
+                      "-o", results)
+    assert refused.exit_code == 2 and "Traceback" not in refused.output
+    assert refused.stderr.splitlines()[-1].startswith("fccgrb: error: --method ad: ")
+    assert not results.exists()
