@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fccgrb_cli.opensim.convert import body_poses, parse_osim_model
-from fccgrb_cli.opensim.osim import parse_osim
+from fccgrb_cli.model.osim.convert import body_poses, parse_osim_model
+from fccgrb_cli.model.osim.document import parse_osim
 from fccgrb_cli.system.compiled import Drive, compile_system
 from tests.osim_text import COORDINATE, LINEAR, axis, custom_joint, knee_model, named, simm
 

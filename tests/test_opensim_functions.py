@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import CubicSpline, make_interp_spline
 
-from fccgrb_cli.opensim.functions import (
+from fccgrb_cli.model.osim.functions import (
     Constant,
     LinearFunction,
     Multiplier,

@@ -12,7 +12,7 @@ import pytest
 from fccgrb_cli.dynamics.mass import gravity_forces, mass_matrix
 from fccgrb_cli.dynamics.moving import coordinate_forces, forces_from_coordinates
 from fccgrb_cli.model import load_model
-from fccgrb_cli.opensim.convert import parse_osim_model
+from fccgrb_cli.model.osim.convert import parse_osim_model
 from fccgrb_cli.system.compiled import compile_system
 from fccgrb_cli.system.moving_pose import pose_from_coordinates
 from tests.osim_text import knee_model

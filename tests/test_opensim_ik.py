@@ -13,7 +13,7 @@ import pytest
 
 from fccgrb_cli.api import solve
 from fccgrb_cli.model import load_model
-from fccgrb_cli.opensim.convert import with_marker_tasks
+from fccgrb_cli.model.osim.convert import with_marker_tasks
 from fccgrb_cli.opensim.tasks import read_marker_tasks
 from fccgrb_cli.trial.record import read_trc
 

@@ -11,8 +11,8 @@ import pytest
 
 from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model import load_model
-from fccgrb_cli.opensim.convert import body_poses, model_from_osim
-from fccgrb_cli.opensim.osim import parse_osim, read_osim
+from fccgrb_cli.model.osim.convert import body_poses, model_from_osim
+from fccgrb_cli.model.osim.document import parse_osim, read_osim
 from fccgrb_cli.system.compiled import Drive, compile_system
 from fccgrb_cli.trial.record import read_trc
 from tests.osim_text import knee_model
@@ -171,7 +171,7 @@ def test_inertia_and_orientation_follow_opensims_conventions():
     # inertia: Ixx Iyy Izz Ixy Ixz Iyz; orientation: body-fixed X-Y-Z (scipy's intrinsic 'XYZ')
     from scipy.spatial.transform import Rotation
 
-    from fccgrb_cli.opensim.osim import rotation_xyz
+    from fccgrb_cli.model.osim.document import rotation_xyz
 
     thigh = parse_osim(knee_model().encode(), "knee.osim").bodies[0]
     assert thigh.inertia == ((0.12, 0.002, -0.001), (0.002, 0.03, 0.004), (-0.001, 0.004, 0.11))

@@ -627,7 +627,7 @@ def parse_model(text: str, source: str = "<model>") -> Model:
     """Validate a model given as YAML text (or an OpenSim ``.osim`` document, which a run
     stores as its model text); ``source`` names it in error messages."""
     if text.lstrip().startswith("<"):
-        from fccgrb_cli.opensim.convert import parse_osim_model
+        from fccgrb_cli.model.osim.convert import parse_osim_model
 
         return parse_osim_model(text, source)
     doc = load_yaml(text, source, _UniqueKeyLoader)
@@ -676,9 +676,9 @@ def parse_model(text: str, source: str = "<model>") -> Model:
 
 def load_model(path: str | Path) -> Model:
     """Read and validate a model file (static checks; see ``system.structure`` for rank): a
-    fccgrb YAML model, or an OpenSim ``.osim`` model (``fccgrb_cli.opensim.convert``)."""
+    fccgrb YAML model, or an OpenSim ``.osim`` model (``fccgrb_cli.model.osim.convert``)."""
     if str(path).lower().endswith(".osim"):
-        from fccgrb_cli.opensim.convert import load_osim
+        from fccgrb_cli.model.osim.convert import load_osim
 
         return load_osim(path)
     return parse_model(read_text(path, "model file"), str(path))

@@ -27,7 +27,7 @@ Vec3 = tuple[float, float, float]
 
 
 class ScalarFunction(Protocol):
-    """f(x) with f′ and f″ (OpenSim's functions, ``fccgrb_cli.opensim.functions``)."""
+    """f(x) with f′ and f″ (OpenSim's functions, ``fccgrb_cli.model.osim.functions``)."""
 
     def terms(self, x: float) -> tuple[float, float, float]: ...
 

@@ -1,2 +1,3 @@
-"""OpenSim's files in and out: models (``.osim``), storage files (``.mot``/``.sto``), external
-loads and the IK/ID tools' setups, read as strangers' files (``opensim.xml``)."""
+"""OpenSim's data in and out: storage files (``.mot``/``.sto``), external loads and the plates'
+bodies, the IK and ID tools' setups and task sets. OpenSim's models are read in the model layer
+(``model.osim``); strangers' XML by ``core.xml``."""

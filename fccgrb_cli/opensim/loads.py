@@ -25,10 +25,10 @@ import numpy as np
 
 from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.core.inputs import check_name
+from fccgrb_cli.core.xml import element_path, parse
 from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.model import Model
 from fccgrb_cli.opensim.storage import Storage, read_storage
-from fccgrb_cli.opensim.xml import element_path, parse
 from fccgrb_cli.trial.record import Trial
 
 __all__ = ["BodyLoad", "ExternalForce", "LoadSet", "external_loads", "read_external_loads",

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from fccgrb_cli.core.errors import InputError
-from fccgrb_cli.opensim.xml import MAX_MAGNITUDE, element_path, number, numbers, parse
+from fccgrb_cli.core.xml import MAX_MAGNITUDE, element_path, number, numbers, parse
 
 __all__ = ["CoordinateTask", "IDSetup", "IKSetup", "MarkerTask", "TaskSet", "read_id_setup",
            "read_ik_setup", "read_task_set"]

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from fccgrb_cli.core.errors import InputError
-from fccgrb_cli.opensim.xml import element_path, number, parse
+from fccgrb_cli.core.xml import element_path, number, parse
 
 __all__ = ["MarkerTasks", "read_marker_tasks"]
 

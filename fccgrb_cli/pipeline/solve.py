@@ -76,7 +76,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
                          f"angles from segment frames, which an imported OpenSim model's "
                          f"coordinates are not; use a mixed-coordinate method (nrm-wls, cno-sqp …)")
     if model.moving_joints:  # an OpenSim model tracks the markers the trial has, as its IK does
-        from fccgrb_cli.opensim.convert import for_trial
+        from fccgrb_cli.model.osim.convert import for_trial
 
         model = for_trial(model, trial, dict(options.mapping))
     trial, mapping = resolved(model, trial, dict(options.mapping), set(model.marker_labels))

@@ -20,9 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from fccgrb_cli.core.errors import InputError
-from fccgrb_cli.model.spatial import SpatialAxis as TransformAxis
-from fccgrb_cli.model.spatial import axis_rotation
-from fccgrb_cli.opensim.functions import (
+from fccgrb_cli.core.xml import element_path, number, numbers, parse, parse_bytes
+from fccgrb_cli.model.osim.functions import (
     Constant,
     Function,
     LinearFunction,
@@ -32,7 +31,8 @@ from fccgrb_cli.opensim.functions import (
     Polynomial,
     SimmSpline,
 )
-from fccgrb_cli.opensim.xml import element_path, number, numbers, parse, parse_bytes
+from fccgrb_cli.model.spatial import SpatialAxis as TransformAxis
+from fccgrb_cli.model.spatial import axis_rotation
 
 __all__ = ["Coupler", "OsimBody", "OsimCoordinate", "OsimFrame", "OsimJoint", "OsimMarker",
            "OsimModel", "parse_osim", "read_osim", "rotation_xyz"]

@@ -31,14 +31,14 @@ from fccgrb_cli.model.elements import (
     _frozen,
 )
 from fccgrb_cli.model.observed import holding_unobserved
+from fccgrb_cli.model.osim.document import OsimFrame, OsimJoint, OsimModel, parse_osim, read_osim
+from fccgrb_cli.model.osim.functions import Constant
 from fccgrb_cli.model.spatial import (
     Coupling,
     JointCoordinate,
     MovingJoint,
     SpatialTransform,
 )
-from fccgrb_cli.opensim.functions import Constant
-from fccgrb_cli.opensim.osim import OsimFrame, OsimJoint, OsimModel, parse_osim, read_osim
 
 __all__ = ["body_poses", "for_trial", "load_osim", "model_from_osim", "parse_osim_model",
            "with_marker_tasks"]
@@ -101,7 +101,7 @@ def model_from_osim(osim: OsimModel, text: str = "") -> Model:
     Parameters
     ----------
     osim
-        The model read by :func:`fccgrb_cli.opensim.osim.read_osim`.
+        The model read by :func:`fccgrb_cli.model.osim.document.read_osim`.
     text
         The ``.osim`` document, kept so that worker processes rebuild the same model.
 
