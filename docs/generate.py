@@ -19,7 +19,8 @@ Parts and their blocks:
   docs/gait_qualisys.png and docs/gait_cycles.png; skipped when the trial is absent),
   ``table-subset`` (check only: the AD and NRM rows of docs/table1.md and docs/table2.md
   against a sweep of just those cells), ``cli-reference`` (docs/cli.md from every command's
-  ``--help``).
+  ``--help``), ``opensim-agreement`` (OpenSim's IK and ID regression cases, by
+  benchmarks/opensim_agreement.py; skipped without ../shared/data/opensim).
 * ``tables`` (minutes): ``sweeps`` (configs/sweeps/table1.yaml and table2.yaml → docs/table1.md,
   docs/table2.md and the README's sweep paragraph), ``gait-methods`` (CNO-SQP against NRM-WLS on
   the walking trial), ``whole-body`` (the whole body on the walking trial with the residual
@@ -165,9 +166,10 @@ class Workspace:
         if not self.keep:
             shutil.rmtree(self.top, ignore_errors=True)
 
-    def run(self, command: str, cwd: Path | None = None) -> str:
-        """stdout and stderr of ``command`` in order, without progress lines; exit status 0
-        required. ``fccgrb`` and ``python`` are this interpreter's."""
+    def run(self, command: str, cwd: Path | None = None, stderr: bool = True) -> str:
+        """stdout and stderr of ``command`` in order (stdout alone with ``stderr=False``),
+        without progress lines; exit status 0 required. ``fccgrb`` and ``python`` are this
+        interpreter's."""
         if command in self.outputs:
             return self.outputs[command]
         argv = shlex.split(command)
@@ -176,7 +178,7 @@ class Workspace:
         env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONHASHSEED="0", COLUMNS="80")
         started = time.perf_counter()
         done = subprocess.run(argv, cwd=cwd or self.dir, env=env, stdout=subprocess.PIPE,
-                              stderr=subprocess.STDOUT, check=False)
+                              stderr=subprocess.STDOUT if stderr else subprocess.DEVNULL, check=False)
         self.seconds[command] = time.perf_counter() - started
         # bytes, not text mode: universal newlines would turn progress's '\r' into new lines
         lines = [line.split("\r")[-1]
@@ -640,6 +642,15 @@ def plugin_gait(ws: Workspace) -> list[Artifact]:
     return [ReadmeBlock("plugin-gait", "\n".join(lines).strip())]
 
 
+def opensim_agreement(ws: Workspace) -> list[Artifact]:
+    """OpenSim's IK and ID regression cases beside OpenSim's own outputs (the tables alone, as
+    ``benchmarks/opensim_agreement.py`` prints them on stdout; timing columns ignored)."""
+    if not (SHARED / "data" / "opensim").is_dir():
+        raise Skip("../shared/data/opensim is absent")
+    out = ws.run(f"python {ROOT / 'benchmarks' / 'opensim_agreement.py'}", stderr=False)
+    return [ReadmeBlock("opensim-agreement", out)]
+
+
 def cli_reference(ws: Workspace) -> list[Artifact]:
     """docs/cli.md: every command's own ``--help``, as the installed ``fccgrb`` prints it."""
     top = ws.run("fccgrb --help")
@@ -668,6 +679,8 @@ BLOCKS = {b.name: b for b in (
     Block("gait-trial", "cheap", gait_trial, "docs/gait_qualisys.png"),
     Block("table-subset", "cheap", table_subset, "check only: docs tables' AD and NRM rows"),
     Block("cli-reference", "cheap", cli_reference, "docs/cli.md from every command's --help"),
+    Block("opensim-agreement", "cheap", opensim_agreement,
+          "docs/opensim.md: OpenSim's IK and ID regression cases beside OpenSim's outputs"),
     Block("sweeps", "tables", sweeps, "docs/table1.md, docs/table2.md, README sweep line"),
     Block("gait-methods", "tables", gait_methods, "docs: CNO-SQP against NRM-WLS on gait"),
     Block("clean-margins", "tables", clean_margins, "docs: each check on clean and broken "

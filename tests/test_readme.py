@@ -176,3 +176,10 @@ def test_a_block_in_a_guide_is_found_there_and_a_missing_one_is_named(tmp_path):
     gen.write(gen.ReadmeBlock("walk", "new"), tmp_path)
     assert "<!-- generated: walk -->\nnew\n<!-- /generated -->" in (
         tmp_path / "docs" / "guide.md").read_text()
+
+
+@pytest.mark.skipif(not (gen.SHARED / "data" / "opensim").is_dir(),
+                    reason="../shared/data/opensim is absent")
+def test_opensim_agreement_matches_a_fresh_run():
+    found = _agree(_made("opensim-agreement"))
+    assert not found, "\n".join(found) + REGENERATE.format(part="cheap")
