@@ -177,8 +177,9 @@ class Workspace:
                                                                                   argv[0])
         env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONHASHSEED="0", COLUMNS="80")
         started = time.perf_counter()
+        errors = subprocess.STDOUT if stderr else subprocess.DEVNULL
         done = subprocess.run(argv, cwd=cwd or self.dir, env=env, stdout=subprocess.PIPE,
-                              stderr=subprocess.STDOUT if stderr else subprocess.DEVNULL, check=False)
+                              stderr=errors, check=False)
         self.seconds[command] = time.perf_counter() - started
         # bytes, not text mode: universal newlines would turn progress's '\r' into new lines
         lines = [line.split("\r")[-1]
