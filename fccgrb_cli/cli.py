@@ -440,12 +440,12 @@ def _frame_range(text: str | None) -> tuple[int, int] | None:
               help="The ankle's width across the malleoli, mm; Plug-in Gait templates take "
                    "left,right.  [Helen Hayes default: 70]")
 @click.option("--marker-diameter", type=Widths(500, "mm"), default=None, metavar="MM",
-              help="The markers' diameter, mm.  [Helen Hayes default: 14]")
+              help="The markers' diameter, mm.  [default: 14, Plug-in Gait's]")
 @click.option("--subject", "subject_files", multiple=True, metavar="FILE",
-              help="Plug-in Gait templates: the subject's measurements from a Vicon .vsk, a "
-                   "C3D's PROCESSING group or a YAML subject: section (repeatable; later files "
-                   "and the width options win). The static TRIAL's own PROCESSING group and "
-                   "the template's subject: section are read first.")
+              help="The subject's measurements from a Vicon .vsk or .mp, a C3D's PROCESSING "
+                   "group or a YAML subject: section (repeatable; later files and the width "
+                   "options win). The static TRIAL's own PROCESSING group and the template's "
+                   "subject: section are read first.")
 @click.option("--foot-flat/--no-foot-flat", default=True, show_default=True,
               help="Plug-in Gait templates: the static's heel-to-toe line taken level (raised "
                    "at the heel by the sole delta) for the foot offsets, as Plug-in Gait's "
@@ -472,9 +472,10 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
     (configs/models/plugin_gait.yaml) is personalized as Plug-in Gait does (Davis hip centres,
     chord knee and ankle centres, thigh and shank rotation offsets, tibial torsion, the static's
     foot offsets) from the subject's measurements: the static C3D's PROCESSING group, the
-    template's subject: section, --subject files and the width options, in that order. Writes a
-    model ready for `fccgrb solve`."""
-    from fccgrb_cli.anatomy.calibrate import Measurements
+    template's subject: section, --subject files and the width options, in that order; every
+    other template reads its body mass (and a Helen Hayes one its widths and marker diameter)
+    from the same sources in the same order. Writes a model ready for `fccgrb solve`."""
+    from fccgrb_cli.anatomy.davis_inputs import template_inputs
     from fccgrb_cli.anatomy.full_body import personalize
     from fccgrb_cli.io.atomic import atomic_path, check_target
     from fccgrb_cli.io.trial import read_trial
@@ -486,8 +487,6 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
     check_target(output)
     template = load_model(model)
     data = read_trial(trial, accept_truncated)
-    for message in data.warnings:
-        click.echo(f"fccgrb: warning: {message}", err=True)
     data, labels = resolved(template, data, dict(from_cli({"mapping": mapping}).mapping),
                             {*template.marker_labels, *template.landmarks.values()})
     if template.calibration_method == "plugin-gait":
@@ -495,16 +494,14 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
                                (knee_width, ankle_width, marker_diameter), subject_files,
                                labels)
         return
-    if subject_files:
-        raise InputError(f"--subject: expected only with a Plug-in Gait template "
-                         f"(calibration.method: plugin-gait); {model} has none")
-    widths = tuple(None if w is None else _single_mm(w, flag) for w, flag in (
-        (knee_width, "--knee-width"), (ankle_width, "--ankle-width"),
-        (marker_diameter, "--marker-diameter")))
-    measured = None if all(w is None for w in widths) else Measurements.from_mm(*widths)
+    inputs = template_inputs(template, data.path, subject_files, {
+        "knee_width": knee_width, "ankle_width": ankle_width, "marker_diameter": marker_diameter,
+        "body_mass": None if mass is None else f"{mass:.17g}"})
     _template_labels(template, labels)
-    result = personalize(template, data, _frame_range(frames), mass, measured, labels,
-                         vertical)
+    result = personalize(template, data, _frame_range(frames), inputs.mass,
+                         inputs.measurements, labels, vertical)
+    for message in data.warnings:
+        click.echo(f"fccgrb: warning: {message}", err=True)
     if result.axes is not None:
         for message in result.axes.warnings:
             click.echo(f"fccgrb: warning: {message}", err=True)
@@ -521,25 +518,15 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
     if result.measurements is not None:
         click.echo(f"knee and ankle centres by Davis et al. (1991): "
                    f"{result.measurements.describe()}")
-        if measured is None:
-            click.echo("fccgrb: warning: no --knee-width, --ankle-width, --marker-diameter: "
-                       "an average adult's used; give the subject's, measured", err=True)
-    if mass is None:
-        click.echo("fccgrb: warning: no --mass: the model has no inertia (inverse dynamics "
-                   "skipped)", err=True)
+    for warning in inputs.warnings:
+        click.echo(f"fccgrb: warning: {warning}", err=True)
+    if inputs.mass is None:
+        click.echo("fccgrb: warning: no --mass (nor Bodymass in the static's PROCESSING or a "
+                   "subject file): the model has no inertia (inverse dynamics skipped)",
+                   err=True)
     for warning in result.warnings:
         click.echo(f"fccgrb: warning: {output}: implausible calibration: {warning}; every "
                    "frame solved with this model is flagged", err=True)
-
-
-def _single_mm(text: str, flag: str) -> float:
-    """One length in mm (the Helen Hayes templates take one width for both sides)."""
-    try:
-        return float(text)
-    except ValueError:
-        raise InputError(f"{flag}: expected one number in mm for a Helen Hayes template (one "
-                         f"width for both sides; Plug-in Gait templates take left,right), got "
-                         f"{text!r}") from None
 
 
 def _calibrate_plugin_gait(template, data, output: str, choices: tuple,
@@ -565,6 +552,8 @@ def _calibrate_plugin_gait(template, data, output: str, choices: tuple,
         tmp.write_text(result.text, encoding="utf-8")
     m = result.measurements
     start, stop = result.frames
+    for warning in (*data.warnings, *result.warnings):
+        click.echo(f"fccgrb: warning: {warning}", err=True)
     click.echo(f"wrote {output}: {personal.name} from frame indices {start}:{stop} of "
                f"{data.path}")
     click.echo(f"measurements from {m.source or 'nowhere'}")
