@@ -253,15 +253,19 @@ def _trial_paths(patterns: tuple[str, ...]) -> list[str]:
 @click.argument("trials", nargs=-1, required=True, metavar="TRIAL...")
 @click.option("-o", "--output", default="results.h5", show_default=True,
               type=click.Path(dir_okay=False),
-              help="HDF5 results file; an existing one gains (or replaces) this run.")
+              help="HDF5 results file; an existing one gains this run (a run of the same "
+                   "name is refused unless --replace).")
+@click.option("--replace", is_flag=True, default=False,
+              help="Replace a run of the same name in the results file (without it, a second "
+                   "solve under one name is refused and nothing is written).")
 @click.option("--write-model", type=click.Path(dir_okay=False), default=None, metavar="PATH",
               help="With --reduce-residuals: write the model with the adjusted segment masses "
                    "and centres of mass (YAML) to PATH.")
 @click_options
 @ACCEPT_TRUNCATED
 @reports_input_errors
-def solve(model: str, trials: tuple[str, ...], output: str, write_model: str | None,
-          accept_truncated: bool, **options: Any) -> None:
+def solve(model: str, trials: tuple[str, ...], output: str, replace: bool,
+          write_model: str | None, accept_truncated: bool, **options: Any) -> None:
     """Solve the kinematics of MODEL (YAML) over TRIAL (C3D or TRC markers) and write HDF5.
 
     Prints a one-row summary: ms/frame (positions), iterations/frame, mean ‖Φ‖ over the active
@@ -275,7 +279,7 @@ def solve(model: str, trials: tuple[str, ...], output: str, write_model: str | N
     """
     from fccgrb_cli.inputs import check_name
     from fccgrb_cli.io.atomic import check_target
-    from fccgrb_cli.io.results import check_output, write_runs
+    from fccgrb_cli.io.results import check_output, refuse_taken_names, write_runs
     from fccgrb_cli.io.truth import truth_path
 
     chosen = from_cli(options)
@@ -288,6 +292,8 @@ def solve(model: str, trials: tuple[str, ...], output: str, write_model: str | N
         _check_model_output(write_model, taken, chosen, paths)
         check_target(write_model)
     check_output(output)
+    if chosen.name is not None and not replace and len(paths) == 1 and Path(output).exists():
+        refuse_taken_names(Path(output), [chosen.name])  # before a long solve, when known
     loaded = load_checked(model, chosen.form)
     runs = []
     for path in paths:
@@ -295,10 +301,12 @@ def solve(model: str, trials: tuple[str, ...], output: str, write_model: str | N
         if np.isnan(run.result.theta).all():
             raise InputError(f"{path}: no frame could be solved (in every frame the markers "
                              "present cannot determine the model); nothing was written")
-        _report_kernels()
         if len(paths) > 1:
             name = check_name(f"{Path(path).stem}-{run.name}", f"{path}: run name")
             run = dataclasses.replace(run, name=name)
+        if not replace and Path(output).exists():
+            refuse_taken_names(Path(output), [run.name])  # before anything is written
+        _report_kernels()
         runs.append(run)
         if write_model is not None:
             from fccgrb_cli.io.atomic import atomic_path
@@ -313,7 +321,8 @@ def solve(model: str, trials: tuple[str, ...], output: str, write_model: str | N
 
         subject = ([r.name for r in with_gait], pooled([r.gait.cycles for r in with_gait]))
     write_runs(output, runs, " ".join(["fccgrb", *sys.argv[1:]]), subject=subject,
-               waiting=lambda line: click.echo(f"fccgrb: warning: {line}", err=True))
+               waiting=lambda line: click.echo(f"fccgrb: warning: {line}", err=True),
+               replace=replace)
     for run in runs:
         _show(run, output)
     if subject is not None:

@@ -150,7 +150,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
         return Run(
             name=options.name or run_name(result.method, options.ad_drivers,
                                           options.filter_cutoff, options.perturb_level_m,
-                                          options.perturb_markers),
+                                          options.perturb_markers, _smoothing(options)),
             options=options, result=result, labels=model.marker_labels, rate=trial.rate,
             reference=reference, markers_input=inputs, model_points=points, ed=ed,
             ed_input=ed_input, truth_theta=truth.theta if truth is not None else None,
@@ -465,15 +465,30 @@ def _quality_advice(result: KinematicResult) -> list[str]:
             "moments are meaningless there. For joint moments use cno-sqp or nrm-wls"]
 
 
+def _smoothing(options: SolveOptions) -> str:
+    """How the run was smoothed, as its name says it: '' (not), 'smooth' (the strength
+    estimated), 'smooth6Hz' (a cutoff given), 'smooth-n0.5mm' (a noise given)."""
+    if options.smooth == "none":
+        return ""
+    if options.smooth_cutoff is not None:
+        return f"smooth{options.smooth_cutoff:g}Hz"
+    if options.smooth_noise is not None:
+        return f"smooth-n{options.smooth_noise:g}mm"
+    return "smooth"
+
+
 def run_name(method: str, ad_drivers: str, cutoff: float | None, level_m: float,
-             subset: tuple[str, ...] = ()) -> str:
+             subset: tuple[str, ...] = (), smoothing: str = "") -> str:
     """The default run name: the method as the solver labels it (e.g. cno-sqp-ed-parallel), AD
-    drivers, filter, perturbation and the perturbed subset, e.g. ad-f6Hz-P30-P4+P9."""
+    drivers, filter, smoothing (:func:`_smoothing`), perturbation and the perturbed subset, e.g.
+    ad-f6Hz-P30-P4+P9 or nrm-wls-smooth."""
     parts = [method]
     if method == "ad" and ad_drivers == "truth":
         parts.append("truth")
     if cutoff is not None:
         parts.append(f"f{cutoff:g}Hz")
+    if smoothing:
+        parts.append(smoothing)
     if level_m > 0:
         parts.append(f"P{level_m * 1e3:g}")
         if subset:

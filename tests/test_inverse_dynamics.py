@@ -618,7 +618,8 @@ def test_results_file_holds_the_plate_loads(tmp_path: Path) -> None:
     fccgrb_ok("solve", model, QUALISYS, *PENDULUM_ON_QUALISYS, "--no-dynamics", "-o", out)
     with h5py.File(out, "r") as h5:
         assert "joint_moments" not in h5["runs/nrm-wls"]
-    fccgrb_ok("solve", model, QUALISYS, *PENDULUM_ON_QUALISYS, "--dynamics", "-o", out)
+    fccgrb_ok("solve", model, QUALISYS, *PENDULUM_ON_QUALISYS, "--dynamics", "-o", out,
+              "--replace")
     plate = read_force_plates(QUALISYS, 340)[0]
     with h5py.File(out, "r") as h5:
         g = h5["runs/nrm-wls"]
