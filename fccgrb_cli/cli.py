@@ -627,7 +627,8 @@ def perturb_command(source: str, target: str, level_mm: float, markers: str | No
         raise InputError(f"--markers: expected labels of {source}, got {', '.join(unknown)}")
     out = perturb(data.markers, data.labels, data.rate, level_mm * 1e-3, seed, only or None)
     with transaction():
-        write_trial(target, list(data.labels), out, data.rate, units)
+        write_trial(target, list(data.labels), out, data.rate, units,
+                    artefact_mm=level_mm + 1e3 * data.artefact_m)
         if copy_truth:
             with atomic_path(truth_path(target)) as tmp:
                 shutil.copyfile(sidecar, tmp)

@@ -69,6 +69,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
     _check_length(trial, options)
     model = prepared(model, options)
     trial, mapping = resolved(model, trial, dict(options.mapping), set(model.marker_labels))
+    artefact_m = trial.artefact_m  # `fccgrb perturb`'s level, judged as --perturb's
     labels = match_labels(model, trial, mapping)
     unknown = sorted(set(options.perturb_markers) - set(model.marker_labels))
     if unknown:
@@ -89,12 +90,17 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
         which = [(tp.body, tp.point) for tp in model.tracked_points]
         points = points_along(system, result.q, which)
         fit = distances(points, inputs)
-        found = kinematic_findings(model, result, fit, options, truth is not None)
+        found = kinematic_findings(model, result, fit, options, truth is not None,
+                                   artefact_m)
         found[NO_DATA] = no_data
         unassessed = result
         result = assessed(unassessed, points, inputs, found)
         warnings: list[str] = [*trial.warnings, *axes.warnings, *_quality_advice(result)]
         notes: list[str] = [axes.note()] if axes.chosen_by != "ground" else []
+        if artefact_m:
+            notes.append(f"{trial.path}: markers perturbed by fccgrb perturb at "
+                         f"{1e3 * artefact_m:g} mm (recorded in the file): the fit check allows "
+                         "for it as for --perturb")
         smoothing = smoothed_or_warned(model, result, inputs, options, warnings)
         bridged = result
         if smoothing is not None:  # checked again where the smoother put the model

@@ -84,3 +84,20 @@ def test_report_shows_every_run_as_its_own_row(tmp_path):
             ed = h5[f"runs/{name}/ed"][()]
             assert by_variant[variant] == pytest.approx(1e3 * np.mean(ed), rel=1e-5)
     assert by_variant["AD [filter_cutoff=6 Hz]"] > 100 * by_variant["AD [ad]"]
+
+
+def test_the_write_itself_refuses_a_taken_name(tmp_path):
+    """The check under the results file's lock (where two solves racing for one name meet)."""
+    import fccgrb_cli as fc
+    from fccgrb_cli.errors import InputError
+    from fccgrb_cli.io.results import write_runs
+
+    run = fc.solve(fc.load_model(MODEL), fc.read_trial(TRIAL), method="ad")
+    results = tmp_path / "r.h5"
+    write_runs(results, [run], "first")
+    before = results.read_bytes()
+    with pytest.raises(InputError, match="already holds the run 'ad' \\(made by: first\\)"):
+        write_runs(results, [run], "second", replace=False)
+    assert results.read_bytes() == before
+    write_runs(results, [run], "third", replace=True)
+    assert runs_in(results) == {"ad": "third"}
