@@ -331,6 +331,15 @@ def solve(model: str, trials: tuple[str, ...], output: str, replace: bool,
         click.echo(subject_report(*subject))
 
 
+def _start_times(results: str) -> dict[str, float]:
+    """Each run's first frame on its trial file's clock (s), by run name."""
+    import h5py
+
+    with h5py.File(results, "r") as h5:
+        runs = h5.get("runs", {})
+        return {name: float(runs[name].attrs.get("start_time_s", 0.0)) for name in runs}
+
+
 def _map_files(options: dict[str, Any]) -> list[str]:
     """The label-map files a --map names (inputs too)."""
     return [item.strip() for item in options.get("mapping") or ()
@@ -404,7 +413,7 @@ def _show(run: Run, output: str) -> None:
     if run.gait is not None:
         from fccgrb_cli.gait.report import gait_report
 
-        click.echo(gait_report(run.gait))
+        click.echo(gait_report(run.gait, run.start_time))
     click.echo(f"wrote run {run.name!r} ({run.result.n_frames} frames) to {output}")
 
 
@@ -849,8 +858,9 @@ def report(results: str, fmt: str, table: str | None, html_folder: str | None,
         from fccgrb_cli.gait.report import gait_report
         from fccgrb_cli.io.gait_results import read_all_gait
 
+        starts = _start_times(results)
         for name, gait in read_all_gait(results).items():
-            click.echo(f"\nrun {name}: {gait_report(gait)}")
+            click.echo(f"\nrun {name}: {gait_report(gait, starts.get(name, 0.0))}")
         from fccgrb_cli.io.residual_results import read_all_residuals
         from fccgrb_cli.residual_table import residual_table
 

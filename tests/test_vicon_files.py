@@ -82,7 +82,7 @@ def nexus_run(tmp_path_factory):
     out = run_cli("solve", personal, WALK, "-o", results)
     assert out.exit_code == 0, out.output + out.stderr
     (run,) = read_runs(results).values()
-    return model, stderr, run
+    return model, stderr, run, results, out.stdout
 
 
 @needs_nexus
@@ -91,7 +91,7 @@ def test_nexus_static_calibrates_with_nothing_typed(nexus_run):
     Gait's): one warning line each; the foot offsets the calibration computes equal the ones
     Nexus wrote into the same static's PROCESSING (foot flat) to 0.01°, so the pelvis, hips,
     knees and ankles it built are Vicon's."""
-    model, stderr, _ = nexus_run
+    model, stderr, _, _, _ = nexus_run
     warnings = stderr.splitlines()
     assert sum("no marker SACR: mid(LPSI,RPSI) stands for it" in w for w in warnings) == 1
     assert sum("no marker diameter" in w and "14 mm" in w for w in warnings) == 1
@@ -125,7 +125,7 @@ def test_nexus_walking_angles_match_vicons(nexus_run):
     """Every Plug-in Gait angle of the walking trial beside Vicon's (``LHipAnglesV`` ...):
     RMS over the trusted frames ≤ 1° in X and ≤ 2° in Y and Z (measured: ≤ 0.24° X, ≤ 1.3°
     Y/Z, the right ankle's rotation the largest)."""
-    _, _, run = nexus_run
+    _, _, run, _, _ = nexus_run
     theirs = points_of(WALK)
     pig = run.plugin_gait
     assert run.trusted.all() and len(pig.angles) == 10
@@ -133,6 +133,32 @@ def test_nexus_walking_angles_match_vicons(nexus_run):
         error = (ours - theirs[name + "V"] + 180.0) % 360.0 - 180.0
         rms = np.sqrt(np.mean(error[run.trusted] ** 2, axis=0))
         assert rms[0] <= 1.0 and rms[1] <= 2.0 and rms[2] <= 2.0, (name, rms)
+
+
+@needs_nexus
+def test_events_and_exports_on_the_trials_clock(nexus_run, tmp_path):
+    """The events `solve` prints are the C3D's EVENT:TIMES as written (60 min + s: the
+    capture's clock), and the .mot's time column counts on the same clock from the first
+    frame, (first frame − 1) / rate, which its header names."""
+    _, _, _, results, stdout = nexus_run
+    rows = [line.split() for line in stdout.splitlines()
+            if line.split()[:2] in (["left", "strike"], ["right", "strike"], ["left", "off"],
+                                    ["right", "off"])]
+    printed = np.array([float(r[2]) for r in rows])
+    c3d = ezc3d.c3d(str(WALK))
+    times = np.asarray(c3d["parameters"]["EVENT"]["TIMES"]["value"])
+    np.testing.assert_allclose(printed, np.sort(60.0 * times[0] + times[1]), atol=6e-4)
+    assert "trial file's clock, its first frame at 7.240 s" in stdout
+    target = tmp_path / "walk.mot"
+    out = run_cli("export", results, "--format", "mot", "-o", target)
+    assert out.exit_code == 0, out.stderr
+    lines = target.read_text(encoding="utf-8").splitlines()
+    end = lines.index("endheader")
+    assert "clock=the trial file's, first frame at 7.24 s" in lines[:end]
+    first = float(lines[end + 2].split("\t")[0])
+    start = ezc3d.c3d(str(WALK))["parameters"]["TRIAL"]["ACTUAL_START_FIELD"]["value"][0]
+    assert first == pytest.approx((start - 1) / 100.0)
+    assert first <= printed.min() and printed.max() <= first + 2.93
 
 
 # --- SACR or the PSIS midpoint ----------------------------------------------------------------

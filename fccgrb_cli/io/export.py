@@ -99,7 +99,9 @@ def _storage_text(run: Run, curves: Curves, title: str, in_degrees: bool,
     untrusted = int((~(run.trusted if trusted is None else trusted)).sum())
     lines = [title, "version=1", f"nRows={len(time)}", f"nColumns={1 + len(curves.names)}",
              f"inDegrees={'yes' if in_degrees else 'no'}", f"untrustedFrames={untrusted}",
-             f"units={' '.join(sorted(set(curves.units)))}", "endheader",
+             f"units={' '.join(sorted(set(curves.units)))}",
+             f"clock=the trial file's, first frame at {run.start_time:.10g} s",
+             "endheader",
              "\t".join(["time", *curves.names])]
     table = np.column_stack([time, curves.values])
     lines += ["\t".join(f"{v:.10g}" for v in row) for row in table]
