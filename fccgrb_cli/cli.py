@@ -674,12 +674,13 @@ def sweep(config: str, output: str | None, workers: int, scheduler: str | None, 
     from fccgrb_cli.io.atomic import check_target
     from fccgrb_cli.io.trial import read_trial
     from fccgrb_cli.report import collect, render
-    from fccgrb_cli.sweep import load_sweep, run_sweep
+    from fccgrb_cli.sweep import check_sweep_output, load_sweep, run_sweep
 
     spec = load_sweep(config)
     out = Path(output or f"{spec.name}.h5")
     refuse_inputs(out, [config, spec.model, spec.trial.get("file")])
     check_target(out)
+    check_sweep_output(out, spec.name)
     if cells_folder(out).exists() and not cells_folder(out).is_dir():
         raise InputError(f"{cells_folder(out)}: expected the folder of finished cells, got a "
                          "file")

@@ -68,6 +68,10 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
     options = options or SolveOptions()
     _check_length(trial, options)
     model = prepared(model, options)
+    if not model.tracked_points:
+        raise InputError(f"{model.source}: tracking.points: expected at least one tracked point "
+                         "(a marker on a body) to solve a trial from; the section is empty or "
+                         "absent")
     trial, mapping = resolved(model, trial, dict(options.mapping), set(model.marker_labels))
     artefact_m = trial.artefact_m  # `fccgrb perturb`'s level, judged as --perturb's
     labels = match_labels(model, trial, mapping)

@@ -227,6 +227,9 @@ def _source_c3d(run: Run, trial: str | Path | None):
     if n_frames != len(run.result.time):
         raise InputError(f"{source}: {n_frames} frames, but run {run.name!r} has "
                          f"{len(run.result.time)}: expected the trial it was solved from")
+    from fccgrb_cli.io.same_trial import check_same_trial
+
+    check_same_trial(run, source)
     return c3d, source
 
 

@@ -10,6 +10,7 @@ are read and the trial carries a warning saying so.
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,6 +28,7 @@ from fccgrb_cli.io.c3d_header import (
     read_parameters,
     read_points,
 )
+from fccgrb_cli.io.rates import POINT_RATE_MAX, rate_problem
 
 TRIAL_ENDINGS = (".c3d", ".trc")
 TRC_MAX = 4 << 30  # bytes: a TRC is read whole (a 10-minute trial of 55 markers is ~0.3 GB)
@@ -166,8 +168,9 @@ def _finite(xyz: np.ndarray, labels: tuple[str, ...], path: Path) -> None:
 
 
 def _rate(rate: float, path: Path, key: str = "POINT:RATE") -> float:
-    if not (np.isfinite(rate) and rate > 0):
-        raise InputError(f"{path}: {key}: expected a positive, finite rate (Hz), got {rate}")
+    problem = rate_problem(rate, POINT_RATE_MAX)
+    if problem is not None:
+        raise InputError(f"{path}: {key}: expected {problem}, got {rate:g}")
     return rate
 
 
@@ -227,6 +230,7 @@ def read_trc(path: Path, accept_truncated: bool = False) -> Trial:
         data = data[:-1]  # the cut last row: its values may be cut too
     rows = []
     start = None
+    clock: list[tuple[int, float]] = []  # (line, Time) of every row that states one
     for number, line in enumerate(data, start=6):
         if not line.strip():
             continue
@@ -236,6 +240,9 @@ def read_trc(path: Path, accept_truncated: bool = False) -> Trial:
                 start = float(fields[1])
             except ValueError:
                 start = 0.0  # no time column: the trial's clock starts at 0
+        if len(fields) > 1:
+            with contextlib.suppress(ValueError):  # a row without its Time: no clock check
+                clock.append((number, float(fields[1])))
         coords = fields[2:]
         while len(coords) > 3 * n_markers and not coords[-1].strip():
             coords.pop()
@@ -261,9 +268,25 @@ def read_trc(path: Path, accept_truncated: bool = False) -> Trial:
                          f"the file holds {len(rows)} rows of data")
     if not rows:
         raise InputError(f"{path}: expected at least one frame of data after the header")
+    if len(clock) == len(rows):
+        _uniform_clock(clock, rate, path)
     xyz = np.array(rows).reshape(len(rows), n_markers, 3) * scale
     artefact = _artefact(header.get(ARTEFACT_TRC_KEY), path, f"line 3: {ARTEFACT_TRC_KEY}")
     return Trial(str(path), labels, xyz, rate, warnings, start or 0.0, artefact)
+
+
+def _uniform_clock(clock: list[tuple[int, float]], rate: float, path: Path) -> None:
+    """Each row's Time on the first one's clock at DataRate, to a quarter frame: a file with
+    rows removed (and NumFrames made to agree) is refused, naming the first line off it,
+    rather than read as frames 1/rate apart."""
+    first = clock[0][1]
+    for k, (number, time) in enumerate(clock):
+        expected = first + k / rate
+        if not abs(time - expected) <= 0.25 / rate:  # NaN fails too
+            raise InputError(f"{path}: line {number}: Time: expected {expected:.6g} s (row "
+                             f"{k + 1} at DataRate {rate:g} Hz from {first:.6g} s: a uniform "
+                             f"clock), got {time:.6g} s: rows missing, times edited, or a "
+                             "DataRate other than the rows' rate")
 
 
 def _header_number(header: dict[str, str], key: str, kind: type, path: Path):
