@@ -230,7 +230,7 @@ def read_trc(path: Path, accept_truncated: bool = False) -> Trial:
         data = data[:-1]  # the cut last row: its values may be cut too
     rows = []
     start = None
-    clock: list[tuple[int, float]] = []  # (line, Time) of every row that states one
+    clock: list[tuple[int, float, float]] = []  # (line, Time, its rounding) per row
     for number, line in enumerate(data, start=6):
         if not line.strip():
             continue
@@ -242,7 +242,7 @@ def read_trc(path: Path, accept_truncated: bool = False) -> Trial:
                 start = 0.0  # no time column: the trial's clock starts at 0
         if len(fields) > 1:
             with contextlib.suppress(ValueError):  # a row without its Time: no clock check
-                clock.append((number, float(fields[1])))
+                clock.append((number, float(fields[1]), _rounding(fields[1])))
         coords = fields[2:]
         while len(coords) > 3 * n_markers and not coords[-1].strip():
             coords.pop()
@@ -275,14 +275,21 @@ def read_trc(path: Path, accept_truncated: bool = False) -> Trial:
     return Trial(str(path), labels, xyz, rate, warnings, start or 0.0, artefact)
 
 
-def _uniform_clock(clock: list[tuple[int, float]], rate: float, path: Path) -> None:
-    """Each row's Time on the first one's clock at DataRate, to a quarter frame: a file with
-    rows removed (and NumFrames made to agree) is refused, naming the first line off it,
-    rather than read as frames 1/rate apart."""
-    first = clock[0][1]
-    for k, (number, time) in enumerate(clock):
+def _rounding(text: str) -> float:
+    """Half a unit of the last decimal a number is written with (0.0005 for '0.417')."""
+    mantissa = text.strip().lower().split("e")[0]
+    decimals = len(mantissa.split(".")[1]) if "." in mantissa else 0
+    return 0.5 * 10.0 ** -decimals if "e" not in text.lower() else 0.0
+
+
+def _uniform_clock(clock: list[tuple[int, float, float]], rate: float, path: Path) -> None:
+    """Each row's Time on the first one's clock at DataRate, to a quarter frame beside the
+    rounding of the Times as written: a file with rows removed (and NumFrames made to agree)
+    is refused, naming the first line off it, rather than read as frames 1/rate apart."""
+    first, first_rounding = clock[0][1], clock[0][2]
+    for k, (number, time, rounding) in enumerate(clock):
         expected = first + k / rate
-        if not abs(time - expected) <= 0.25 / rate:  # NaN fails too
+        if not abs(time - expected) <= 0.25 / rate + rounding + first_rounding:  # NaN fails
             raise InputError(f"{path}: line {number}: Time: expected {expected:.6g} s (row "
                              f"{k + 1} at DataRate {rate:g} Hz from {first:.6g} s: a uniform "
                              f"clock), got {time:.6g} s: rows missing, times edited, or a "
