@@ -160,6 +160,10 @@ def test_export_onto_another_trials_c3d(lab, tmp_path):
     out = run_cli("export", lab / "r.h5", "--format", "c3d", "--trial", moved, "-o",
                   tmp_path / "x.c3d")
     assert out.exit_code == 0, out.stderr
+    out = run_cli("solve", MODEL, moved, "--perturb", "30", "-o", tmp_path / "p.h5")
+    assert out.exit_code == 0, out.stderr  # its markers up to √3 × 30 mm from the file's:
+    out = run_cli("export", tmp_path / "p.h5", "--format", "c3d", "-o", tmp_path / "y.c3d")
+    assert out.exit_code == 0, out.stderr  # still its own trial
 
 
 def test_sweep_output_that_is_not_this_sweeps(lab, tmp_path):

@@ -22,8 +22,9 @@ below 0.49 of that value; on the parallelogram it is ~0.019 per degree from a ch
 Every solved frame is looked at: a singular position is a point of the motion, and a trial
 may hold it exactly (a parallelogram sampled at θ = 360.000°) with its neighbours a sampling
 step away and well conditioned, so no sampling of the frames, however refined around low
-values, can be sure to meet it. σ_min and σ_max (the eigenvalues of Φ̃_qᵀΦ̃_q) cost about a
-frame's solve (1.3 ms a frame on the 84 coordinates of the Plug-in Gait model, one thread).
+values, can be sure to meet it. σ_min and σ_max (the eigenvalues of Φ̃_qᵀΦ̃_q) cost 0.45 ms
+a frame on the 84 coordinates of the Plug-in Gait model (one thread), about half of that
+frame's solve.
 """
 
 from __future__ import annotations
