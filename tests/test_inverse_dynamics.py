@@ -245,8 +245,8 @@ def test_figure8_mc_beats_filtered_ad_at_the_chain_end(figure8: Path, seed: int)
             assert g.attrs["perturb_seed"] == seed
             assert list(g.attrs["perturb_markers"]) == ["P4", "P9"]
             assert g.attrs["perturb_level_m"] == pytest.approx(0.03)
-            assert g["converged"][()].all()
-            mean_ed[key] = float(np.mean(g["ed"][:, p6]))
+            assert g["solver_converged"][()].all()  # AD's frames far from its markers
+            mean_ed[key] = float(np.mean(g["ed"][:, p6]))  # are flagged, not unsolved
         inputs = h5[f"runs/{FIGURE8_RUNS[seed][0]}/markers_input"][()]
         reference = h5["reference/markers"][()]
     moved = np.abs(inputs - reference).max(axis=(0, 2))
