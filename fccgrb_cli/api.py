@@ -19,11 +19,11 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.io.trial import Trial
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model import Model
-from fccgrb_cli.options import SolveOptions, describe
-from fccgrb_cli.run import Run
+from fccgrb_cli.pipeline.options import SolveOptions, describe
+from fccgrb_cli.pipeline.run import Run
+from fccgrb_cli.trial.record import Trial
 
 
 def load_model(source: str | Path | Mapping[str, Any]) -> Model:
@@ -49,7 +49,7 @@ def read_trial(path: str | Path, *, accept_truncated: bool = False) -> Trial:
     """A marker trial from a C3D or TRC file (lengths converted to metres from its units).
     A file whose data end before its header's last frame is an error unless
     ``accept_truncated`` (then the trial carries a warning)."""
-    from fccgrb_cli.io.trial import read_trial as read
+    from fccgrb_cli.trial.record import read_trial as read
 
     return read(str(path), accept_truncated)
 
@@ -65,7 +65,7 @@ def solve(model: Model, trial: Trial, options: SolveOptions | None = None,
 
     {options}
     """
-    from fccgrb_cli.pipeline import solve_trial
+    from fccgrb_cli.pipeline.solve import solve_trial
 
     chosen = options or SolveOptions()
     if changes:
@@ -94,16 +94,16 @@ def calibrate(template: Model, trial: Trial, *, mass: float | None = None,
     ``mid(A,B)`` allowed). A Plug-in Gait template (``configs/models/plugin_gait.yaml``) takes
     the subject's measurements from the trial's PROCESSING group and the template's subject
     section, the keywords (mm, kg) over both, with Plug-in Gait's foot-flat option
-    (``anatomy.pig_calibration.calibrate_plugin_gait`` takes the other choices); any other
+    (``plugin_gait.calibration.calibrate_plugin_gait`` takes the other choices); any other
     template reads its mass (and a Helen Hayes one its widths) from the same sources in the
     same order (``anatomy.davis_inputs``). The personal
     model's gravity points down the trial's vertical, found from its plates and markers
-    (``fccgrb_cli.io.lab_axes``); where nothing in the trial tells, the template's own gravity
+    (``fccgrb_cli.anatomy.lab_axes``); where nothing in the trial tells, the template's own gravity
     stays, so a template loaded with the lab's gravity states it."""
     from fccgrb_cli.anatomy.calibrate import calibrate as personalize
     from fccgrb_cli.anatomy.davis_inputs import template_inputs
-    from fccgrb_cli.io.virtual import resolved
     from fccgrb_cli.model import parse_model
+    from fccgrb_cli.trial.virtual import resolved
 
     trial, mapping = resolved(template, trial, dict(mapping or {}),
                               {*template.marker_labels, *template.landmarks.values()})
@@ -112,8 +112,8 @@ def calibrate(template: Model, trial: Trial, *, mass: float | None = None,
         ("knee_width", knee_width), ("ankle_width", ankle_width),
         ("marker_diameter", marker_diameter), ("body_mass", mass))}
     if template.calibration_method == "plugin-gait":
-        from fccgrb_cli.anatomy.pig_calibration import Options, calibrate_plugin_gait
-        from fccgrb_cli.io.subject_files import gathered
+        from fccgrb_cli.plugin_gait.calibration import Options, calibrate_plugin_gait
+        from fccgrb_cli.trial.subject_files import gathered
 
         measured = gathered(template.measurements, trial.path, (), typed)
         result = calibrate_plugin_gait(template, trial, measured, Options(frames), mapping)
@@ -126,7 +126,7 @@ def calibrate(template: Model, trial: Trial, *, mass: float | None = None,
 def read_results(path: str | Path) -> dict[str, Run]:
     """Every run of a results file written by ``fccgrb solve`` or :meth:`Run.to_hdf5`, by
     name, as the same Run objects :func:`solve` returns (arrays, options, warnings, dynamics)."""
-    from fccgrb_cli.io.runs import read_runs
+    from fccgrb_cli.results.runs import read_runs
 
     return read_runs(path)
 

@@ -19,13 +19,13 @@ from itertools import pairwise
 
 import numpy as np
 
-from fccgrb_cli.clinical import distal_contact
+from fccgrb_cli.anatomy.clinical import distal_contact
 from fccgrb_cli.dynamics.convert import Dynamics
-from fccgrb_cli.filtering import NOISE_BAND_HZ, noise_share
 from fccgrb_cli.gait.analysis import FoundEvents
 from fccgrb_cli.gait.events import Events, side_of
 from fccgrb_cli.model import Model
-from fccgrb_cli.options import SolveOptions
+from fccgrb_cli.pipeline.options import SolveOptions
+from fccgrb_cli.signals.butterworth import NOISE_BAND_HZ, noise_share
 from fccgrb_cli.solvers.conditioning import conditioning
 from fccgrb_cli.solvers.quality import (
     ANGLE_RANGE,

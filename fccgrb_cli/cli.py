@@ -15,16 +15,23 @@ import click
 import numpy as np
 
 from fccgrb_cli import __version__, scratch
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.inputs import refuse_inputs
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.core.inputs import refuse_inputs
+from fccgrb_cli.core.params import Bounded, Widths
+from fccgrb_cli.core.progress import Progress
 from fccgrb_cli.model import Model, load_model
-from fccgrb_cli.options import AXES, SEED_MAX, WORKERS_MAX, SolveOptions, click_options, from_cli
-from fccgrb_cli.params import Bounded, Widths
-from fccgrb_cli.progress import Progress
+from fccgrb_cli.pipeline.options import (
+    AXES,
+    SEED_MAX,
+    WORKERS_MAX,
+    SolveOptions,
+    click_options,
+    from_cli,
+)
 from fccgrb_cli.system.structure import analyse, check_tracking
 
 if TYPE_CHECKING:
-    from fccgrb_cli.run import Run
+    from fccgrb_cli.pipeline.run import Run
 
 FORM = click.Choice(["model", "full", "reduced"])
 VERTICALS = ("auto", *AXES)
@@ -80,7 +87,7 @@ def _one_line(error: click.ClickException) -> str:
 
 class Main(click.Group):
     """The command group. While a command runs, SIGINT, SIGTERM and SIGHUP remove the files
-    being written and end the process (``fccgrb_cli.scratch``); every error a user can cause,
+    being written and end the process (``fccgrb_cli.core.scratch``); every error a user can cause,
     click's own included, is one line ``fccgrb: error: …`` and exit status 2 (130 for an
     interrupt)."""
 
@@ -160,10 +167,10 @@ def synth(model: str, output: str, duration: float, rate: float, units: str, for
     """Synthesize a trial: drive MODEL with its prescribed angles (kinematic analysis with
     angular drivers) and write its tracked points to a C3D or TRC file, with the exact angles,
     rates and points in a truth file beside it (both files, or neither)."""
-    from fccgrb_cli.io.atomic import check_target, transaction
-    from fccgrb_cli.io.trial import TRIAL_ENDINGS, write_trial
-    from fccgrb_cli.io.truth import Truth, truth_path, write_truth
-    from fccgrb_cli.synth import frame_count, synthesize
+    from fccgrb_cli.core.atomic import check_target, transaction
+    from fccgrb_cli.pipeline.synth import frame_count, synthesize
+    from fccgrb_cli.trial.record import TRIAL_ENDINGS, write_trial
+    from fccgrb_cli.trial.truth import Truth, truth_path, write_truth
 
     frame_count(duration, rate, "--duration × --rate")
     sidecar = truth_path(output)
@@ -277,10 +284,10 @@ def solve(model: str, trials: tuple[str, ...], output: str, replace: bool,
     <trial file stem>-<run name>, and, for a lower-limb model, the subject's cycles over every
     trial's strides in /subject of the results file.
     """
-    from fccgrb_cli.inputs import check_name
-    from fccgrb_cli.io.atomic import check_target
-    from fccgrb_cli.io.results import check_output, refuse_taken_names, write_runs
-    from fccgrb_cli.io.truth import truth_path
+    from fccgrb_cli.core.atomic import check_target
+    from fccgrb_cli.core.inputs import check_name
+    from fccgrb_cli.results.storage import check_output, refuse_taken_names, write_runs
+    from fccgrb_cli.trial.truth import truth_path
 
     chosen = from_cli(options)
     paths = _trial_paths(trials)
@@ -309,7 +316,7 @@ def solve(model: str, trials: tuple[str, ...], output: str, replace: bool,
         _report_kernels()
         runs.append(run)
         if write_model is not None:
-            from fccgrb_cli.io.atomic import atomic_path
+            from fccgrb_cli.core.atomic import atomic_path
 
             with atomic_path(write_model) as tmp:
                 tmp.write_text(run.reduction.text, encoding="utf-8")
@@ -326,7 +333,7 @@ def solve(model: str, trials: tuple[str, ...], output: str, replace: bool,
     for run in runs:
         _show(run, output)
     if subject is not None:
-        from fccgrb_cli.gait.report import subject_report
+        from fccgrb_cli.presentation.gait_report import subject_report
 
         click.echo(subject_report(*subject))
 
@@ -363,8 +370,8 @@ def _check_model_output(path: str, taken: set[Path], options: SolveOptions,
 def _solve_one(model: Model, path: str, options: SolveOptions, accept_truncated: bool,
                output: str) -> Run:
     """One trial solved, its largest arrays held on disk beside ``output`` until written."""
-    from fccgrb_cli.io.trial import read_trial
-    from fccgrb_cli.pipeline import solve_trial
+    from fccgrb_cli.pipeline.solve import solve_trial
+    from fccgrb_cli.trial.record import read_trial
 
     return solve_trial(model, read_trial(path, accept_truncated), options,
                        progress=Progress(f"solve {options.method} {Path(path).name}"),
@@ -389,15 +396,15 @@ def compile_command() -> None:
     """Compile the numba kernels now (once per install, about a minute; otherwise the first
     solve that runs in them does it), by solving a few frames of a built-in model with every
     compiled method."""
-    from fccgrb_cli.precompile import precompile
+    from fccgrb_cli.pipeline.precompile import precompile
 
     total = precompile(lambda method, seconds: click.echo(f"{method}: {seconds:.1f} s"))
     click.echo(f"compiled kernels ready ({total:.1f} s)")
 
 
 def _show(run: Run, output: str) -> None:
-    from fccgrb_cli.clinical import clinical_table
-    from fccgrb_cli.run import summary
+    from fccgrb_cli.anatomy.clinical import clinical_table
+    from fccgrb_cli.pipeline.run import summary
 
     for message in (*run.result.messages, *run.warnings):
         click.echo(f"fccgrb: warning: {message}", err=True)
@@ -407,11 +414,11 @@ def _show(run: Run, output: str) -> None:
     if run.clinical is not None:
         click.echo(clinical_table(run.clinical, run.trusted))
     if run.residuals is not None:
-        from fccgrb_cli.residual_table import residual_table
+        from fccgrb_cli.presentation.residual_table import residual_table
 
         click.echo(residual_table(run.residuals, run.reduction))
     if run.gait is not None:
-        from fccgrb_cli.gait.report import gait_report
+        from fccgrb_cli.presentation.gait_report import gait_report
 
         click.echo(gait_report(run.gait, run.start_time))
     click.echo(f"wrote run {run.name!r} ({run.result.n_frames} frames) to {output}")
@@ -420,7 +427,7 @@ def _show(run: Run, output: str) -> None:
 def _template_labels(template: Model, mapping: dict[str, str]) -> None:
     """``calibrate --map``: every name is a label the template uses (a marker or a landmark),
     and no two of its labels end on one trial label."""
-    from fccgrb_cli.options import one_label_each
+    from fccgrb_cli.pipeline.options import one_label_each
 
     known = dict.fromkeys([*template.marker_labels, *template.landmarks.values()])
     unknown = [name for name in mapping if name not in known]
@@ -495,11 +502,11 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
     from the same sources in the same order. Writes a model ready for `fccgrb solve`."""
     from fccgrb_cli.anatomy.davis_inputs import template_inputs
     from fccgrb_cli.anatomy.full_body import personalize
-    from fccgrb_cli.io.atomic import atomic_path, check_target
-    from fccgrb_cli.io.trial import read_trial
-    from fccgrb_cli.io.virtual import resolved
+    from fccgrb_cli.core.atomic import atomic_path, check_target
     from fccgrb_cli.model import parse_model
-    from fccgrb_cli.options import from_cli
+    from fccgrb_cli.pipeline.options import from_cli
+    from fccgrb_cli.trial.record import read_trial
+    from fccgrb_cli.trial.virtual import resolved
 
     refuse_inputs(output, [model, trial, *_map_files({"mapping": mapping})])
     check_target(output)
@@ -553,10 +560,10 @@ def _calibrate_plugin_gait(template, data, output: str, choices: tuple,
     """`calibrate` for a Plug-in Gait template: measurements merged from every source (the
     static's PROCESSING group, the template's subject section, --subject files, options; later
     wins), the model written with what was used."""
-    from fccgrb_cli.anatomy.pig_calibration import Options, calibrate_plugin_gait
-    from fccgrb_cli.io.atomic import atomic_path
-    from fccgrb_cli.io.subject_files import gathered
+    from fccgrb_cli.core.atomic import atomic_path
     from fccgrb_cli.model import parse_model
+    from fccgrb_cli.plugin_gait.calibration import Options, calibrate_plugin_gait
+    from fccgrb_cli.trial.subject_files import gathered
 
     frames, mass, foot_flat = choices
     typed = dict(zip(("knee_width", "ankle_width", "marker_diameter"), widths, strict=True))
@@ -613,10 +620,10 @@ def perturb_command(source: str, target: str, level_mm: float, markers: str | No
     """
     import shutil
 
-    from fccgrb_cli.io.atomic import atomic_path, check_target, transaction
-    from fccgrb_cli.io.trial import TRIAL_ENDINGS, read_trial, write_trial
-    from fccgrb_cli.io.truth import truth_path
-    from fccgrb_cli.perturb import perturb
+    from fccgrb_cli.core.atomic import atomic_path, check_target, transaction
+    from fccgrb_cli.signals.artefact import perturb
+    from fccgrb_cli.trial.record import TRIAL_ENDINGS, read_trial, write_trial
+    from fccgrb_cli.trial.truth import truth_path
 
     sidecar = truth_path(source)
     copy_truth = sidecar.exists() and sidecar.resolve() != truth_path(target).resolve()
@@ -670,11 +677,11 @@ def sweep(config: str, output: str | None, workers: int, scheduler: str | None, 
     print tables laid out like the paper's Tables 1 and 2 with the paper's figures beside ours."""
     import time
 
-    from fccgrb_cli.cells import cells_folder, remove_cells
-    from fccgrb_cli.io.atomic import check_target
-    from fccgrb_cli.io.trial import read_trial
-    from fccgrb_cli.report import collect, render
-    from fccgrb_cli.sweep import check_sweep_output, load_sweep, run_sweep
+    from fccgrb_cli.batch.cells import cells_folder, remove_cells
+    from fccgrb_cli.batch.sweep import check_sweep_output, load_sweep, run_sweep
+    from fccgrb_cli.core.atomic import check_target
+    from fccgrb_cli.presentation.tables import collect, render
+    from fccgrb_cli.trial.record import read_trial
 
     spec = load_sweep(config)
     out = Path(output or f"{spec.name}.h5")
@@ -749,12 +756,12 @@ def batch(study: str, output: str | None, workers: int, scheduler: str | None, f
     bad input (the study file, a path or option in it, the output): nothing written."""
     import time
 
-    from fccgrb_cli.cells import remove_cells
-    from fccgrb_cli.io.atomic import check_target
-    from fccgrb_cli.study.batch import Executors, run_study
-    from fccgrb_cli.study.spec import load_study
-    from fccgrb_cli.study.store import check_study_output, read_study
-    from fccgrb_cli.study.tables import study_tables
+    from fccgrb_cli.batch.cells import remove_cells
+    from fccgrb_cli.batch.study.batch import Executors, run_study
+    from fccgrb_cli.batch.study.spec import load_study
+    from fccgrb_cli.batch.study.store import check_study_output, read_study
+    from fccgrb_cli.batch.study.tables import study_tables
+    from fccgrb_cli.core.atomic import check_target
 
     spec = load_study(study)
     out = Path(output or f"{spec.name}.h5")
@@ -783,7 +790,7 @@ def _cycle_bands(results: str, names: tuple[str, ...]
     """Each run's frame times and its clinical curves' standard deviations (``--smooth
     auto``), for the cycles' bands."""
     from fccgrb_cli.gait.analysis import curve_sd
-    from fccgrb_cli.io.runs import read_runs
+    from fccgrb_cli.results.runs import read_runs
 
     out = {}
     for name, run in read_runs(results).items():
@@ -830,8 +837,8 @@ def report(results: str, fmt: str, table: str | None, html_folder: str | None,
     failed frames at P0, P7.5 and P30, the paper's figures in brackets where they match. For a
     study file (text), its trials, each subject's and group's spatiotemporal table and the
     failures; with --html, the clinical report."""
-    from fccgrb_cli.report import collect, render
-    from fccgrb_cli.study.store import is_study
+    from fccgrb_cli.batch.study.store import is_study
+    from fccgrb_cli.presentation.tables import collect, render
 
     study = is_study(results)
     if normative is not None and html_folder is None:
@@ -841,29 +848,29 @@ def report(results: str, fmt: str, table: str | None, html_folder: str | None,
         if not study:
             raise InputError(f"{results}: --html: expected a study file (written by "
                              "'fccgrb batch')")
-        from fccgrb_cli.clinical_report import write_report
+        from fccgrb_cli.presentation.clinical_report import write_report
 
         pages = write_report(results, html_folder, normative)
         click.echo(f"wrote {html_folder}: {len(pages)} pages ({pages[0].name} for the study, "
                    f"one per subject)")
         return
     if fmt == "text" and study:
-        from fccgrb_cli.study.store import read_study
-        from fccgrb_cli.study.tables import study_tables
+        from fccgrb_cli.batch.study.store import read_study
+        from fccgrb_cli.batch.study.tables import study_tables
 
         click.echo(study_tables(read_study(results)))
         return
     own, rows = collect(results)
     click.echo(render(table if table is not None else own, rows, fmt=fmt), nl=False)
     if fmt == "text":
-        from fccgrb_cli.gait.report import gait_report
-        from fccgrb_cli.io.gait_results import read_all_gait
+        from fccgrb_cli.presentation.gait_report import gait_report
+        from fccgrb_cli.results.gait import read_all_gait
 
         starts = _start_times(results)
         for name, gait in read_all_gait(results).items():
             click.echo(f"\nrun {name}: {gait_report(gait, starts.get(name, 0.0))}")
-        from fccgrb_cli.io.residual_results import read_all_residuals
-        from fccgrb_cli.residual_table import residual_table
+        from fccgrb_cli.presentation.residual_table import residual_table
+        from fccgrb_cli.results.residuals import read_all_residuals
 
         for name, (residuals, reduction) in read_all_residuals(results).items():
             click.echo(f"\nrun {name}: {residual_table(residuals, reduction)}")
@@ -909,15 +916,15 @@ def plot(results: str, kind: str, marker: str | None, angle: str | None,
     except ImportError:
         raise InputError("plot: expected matplotlib; install the 'plots' extra "
                          "(pip install 'fccgrb-cli[plots]')") from None
-    from fccgrb_cli.io.atomic import check_target
-    from fccgrb_cli.plot import draw, load_series, save
+    from fccgrb_cli.core.atomic import check_target
+    from fccgrb_cli.presentation.plot import draw, load_series, save
 
     refuse_inputs(output, [results, normative])
     check_target(output)
     if kind == "cycles":
         from fccgrb_cli.gait.normative import read_norms
-        from fccgrb_cli.gait.plot import draw_cycles
-        from fccgrb_cli.io.gait_results import read_all_gait
+        from fccgrb_cli.presentation.gait_plot import draw_cycles
+        from fccgrb_cli.results.gait import read_all_gait
 
         wanted = _split(runs)
         gaits = {k: g for k, g in read_all_gait(results).items()
@@ -928,8 +935,8 @@ def plot(results: str, kind: str, marker: str | None, angle: str | None,
         click.echo(f"wrote {output}: cycles for {len(gaits)} runs")
         return
     if kind == "residuals":
-        from fccgrb_cli.io.residual_results import read_all_residuals
-        from fccgrb_cli.residual_plot import draw_residuals
+        from fccgrb_cli.presentation.residual_plot import draw_residuals
+        from fccgrb_cli.results.residuals import read_all_residuals
 
         wanted = _split(runs)
         found = {k: r for k, r in read_all_residuals(results).items()
@@ -975,10 +982,10 @@ def export(results: str, fmt: str, convention: str, run_name: str | None, trial:
     Visual3D, times on the trial's own clock (its first frame's time). Frames the quality
     checks do not trust keep their values and are counted (the CSV's trusted column, the
     header's untrustedFrames, the C3D's FCCGRB:UNTRUSTED)."""
-    from fccgrb_cli.io.atomic import check_target
-    from fccgrb_cli.io.export import choose_run, default_output
-    from fccgrb_cli.io.export import export as write
-    from fccgrb_cli.io.runs import read_runs
+    from fccgrb_cli.core.atomic import check_target
+    from fccgrb_cli.results.export import choose_run, default_output
+    from fccgrb_cli.results.export import export as write
+    from fccgrb_cli.results.runs import read_runs
 
     runs = read_runs(results)
     run = choose_run(runs, run_name, results)

@@ -22,7 +22,7 @@ import stat
 from pathlib import Path
 from typing import Any
 
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.errors import InputError
 
 MAX_TEXT = 16 << 20      # bytes: a model, sweep config, label map or normative CSV
 MAX_DEPTH = 64           # nested YAML collections

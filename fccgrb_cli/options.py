@@ -15,9 +15,9 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any
 
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.inputs import check_name, load_yaml, read_text, shown
-from fccgrb_cli.ranges import describe_range, in_range
+from fccgrb_cli.core.bounds import describe_range, in_range
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.core.inputs import check_name, load_yaml, read_text, shown
 
 if TYPE_CHECKING:
     from fccgrb_cli.model import Model
@@ -323,7 +323,7 @@ def click_options(command: Callable) -> Callable:
     :func:`from_cli` turns into a SolveOptions."""
     import click
 
-    from fccgrb_cli.params import Bounded
+    from fccgrb_cli.core.params import Bounded
 
     for f in reversed(fields(SolveOptions)):
         meta = f.metadata

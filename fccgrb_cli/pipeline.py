@@ -3,7 +3,7 @@ assessment → angular drivers (filtered) → inverse dynamics → a Run, whatev
 CLI, a sweep cell or the Python API), every option coming in one ``SolveOptions``.
 
 What the stages use lives in their layers: the trial's labels each marker follows
-(``io.labels``), the force plates as loads (``io.plate_loads``), the result (``run.Run``)."""
+(``trial.labels``), the force plates as loads (``dynamics.plate_loads``), the result (``run.Run``)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,15 @@ from pathlib import Path
 
 import numpy as np
 
-from fccgrb_cli.assessment import (
+from fccgrb_cli.anatomy.clinical import clinical_results
+from fccgrb_cli.anatomy.lab_axes import lab_axes
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.core.stretches import merged, runs, shifted, shortest, spans, take
+from fccgrb_cli.dynamics.convert import Dynamics, classical_dynamics, smoothed_dynamics
+from fccgrb_cli.dynamics.plate_loads import plate_loads
+from fccgrb_cli.gait.analysis import analyse_gait, find_events, landmark_labels
+from fccgrb_cli.model import Model
+from fccgrb_cli.pipeline.assessment import (
     contact_events,
     curve_trust,
     describe_moments,
@@ -21,24 +29,13 @@ from fccgrb_cli.assessment import (
     kinematic_findings,
     moment_flags,
 )
-from fccgrb_cli.clinical import clinical_results
-from fccgrb_cli.dynamics.convert import Dynamics, classical_dynamics, smoothed_dynamics
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.filtering import frames_needed
-from fccgrb_cli.gait.analysis import analyse_gait, find_events, landmark_labels
-from fccgrb_cli.gait.plugin_gait_outputs import plugin_gait_results
-from fccgrb_cli.io.lab_axes import lab_axes
-from fccgrb_cli.io.labels import match_labels, vector_targets
-from fccgrb_cli.io.plate_loads import plate_loads
-from fccgrb_cli.io.trial import Trial
-from fccgrb_cli.io.truth import Truth, read_truth, truth_path
-from fccgrb_cli.io.virtual import resolved
-from fccgrb_cli.model import Model
-from fccgrb_cli.options import SolveOptions, prepared
-from fccgrb_cli.perturb import perturb
-from fccgrb_cli.residual_stage import residual_stage
-from fccgrb_cli.run import Run
-from fccgrb_cli.smoothing import Smoothing, smoothed_or_warned
+from fccgrb_cli.pipeline.options import SolveOptions, prepared
+from fccgrb_cli.pipeline.residuals import residual_stage
+from fccgrb_cli.pipeline.run import Run
+from fccgrb_cli.pipeline.smoothing import Smoothing, smoothed_or_warned
+from fccgrb_cli.plugin_gait.outputs import plugin_gait_results
+from fccgrb_cli.signals.artefact import perturb
+from fccgrb_cli.signals.butterworth import frames_needed
 from fccgrb_cli.solvers import KinematicResult, solve_ad
 from fccgrb_cli.solvers.ad.baseline import solve_baseline
 from fccgrb_cli.solvers.ad.solve import stacked_drives
@@ -47,8 +44,11 @@ from fccgrb_cli.solvers.mixed import recounted
 from fccgrb_cli.solvers.nrm.problem import unsolvable_text
 from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
 from fccgrb_cli.solvers.quality import JUMP, NO_DATA, Finding, assessed, with_findings
-from fccgrb_cli.stretches import merged, runs, shifted, shortest, spans, take
 from fccgrb_cli.system import System, compile_system
+from fccgrb_cli.trial.labels import match_labels, vector_targets
+from fccgrb_cli.trial.record import Trial
+from fccgrb_cli.trial.truth import Truth, read_truth, truth_path
+from fccgrb_cli.trial.virtual import resolved
 
 __all__ = ["solve_trial"]
 
@@ -62,7 +62,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
     inverse dynamics on the classical model driven by the solved angles; ``truth``: the exact
     motion of a synthesized trial (read from its sidecar when None). ``spill``: a folder (the
     results' own, as ``fccgrb solve`` gives it) where the largest per-frame arrays wait on disk
-    from the moment the later stages no longer need them (``io.spill``: the Run holds a
+    from the moment the later stages no longer need them (``core.spill``: the Run holds a
     StoredArray in their place, which ``write_run`` copies into the results as stored), so that
     a long trial's memory stays at the markers, q and the dynamics stage's working arrays."""
     options = options or SolveOptions()
@@ -174,11 +174,11 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
 
 class _Store:
     """Where ``solve_trial`` puts each large per-frame array once the later stages are done
-    with it: in memory as it is (no spill folder), or in a Spill in that folder (``io.spill``),
+    with it: in memory as it is (no spill folder), or in a Spill in that folder (``core.spill``),
     keyed by its dataset's path in the run's group of the results file."""
 
     def __init__(self, folder: str | Path | None) -> None:
-        from fccgrb_cli.io.spill import Spill
+        from fccgrb_cli.core.spill import Spill
 
         self.spill = None if folder is None else Spill(folder)
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.errors import InputError
 
 PAPER_TABLES = Path(__file__).resolve().parent / "data" / "paper_tables.csv"
 LEVELS = ("P0", "P7.5", "P30")
@@ -81,7 +81,7 @@ RUN_DISTINGUISHING = ("filter_cutoff", "smooth", "smooth_cutoff", "smooth_noise"
 
 def _run_extra(options: dict) -> str:
     """The variant's suffix for a run's stored options (:data:`RUN_DISTINGUISHING`)."""
-    from fccgrb_cli.options import SolveOptions
+    from fccgrb_cli.pipeline.options import SolveOptions
 
     defaults = SolveOptions()
     chosen = {key: options[key] for key in RUN_DISTINGUISHING if key in options}
@@ -117,7 +117,7 @@ def _row(run, points: str, extra: str = "") -> Row:
     n = len(time_s)
     attrs = run.attrs
     wall = float(attrs.get("wall_s", np.nan))
-    from fccgrb_cli.run import mean_jump
+    from fccgrb_cli.pipeline.run import mean_jump
 
     values = {
         "ms/frame": 1e3 * (wall / n if np.isfinite(wall) else float(np.nanmean(time_s))),
@@ -138,8 +138,8 @@ def _row(run, points: str, extra: str = "") -> Row:
 def collect(path: str | Path) -> tuple[str, list[Row]]:
     """The table name (a sweep's 'table', else '') and one Row per run in a results or sweep
     file."""
-    from fccgrb_cli.io.datasets import open_results
-    from fccgrb_cli.io.results_format import cells_group, check_run, reading, runs_group
+    from fccgrb_cli.core.datasets import open_results
+    from fccgrb_cli.results.format import cells_group, check_run, reading, runs_group
 
     h5 = open_results(path)
     rows: list[Row] = []

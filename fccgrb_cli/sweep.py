@@ -21,14 +21,14 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-from fccgrb_cli.cells import Job, cells_folder, pending, run_jobs
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.inputs import check_name, load_yaml, read_text, shown
-from fccgrb_cli.io.atomic import atomic_path, remove_stale
-from fccgrb_cli.io.hdf5_writer import writing
-from fccgrb_cli.io.lock import exclusive
-from fccgrb_cli.options import SEED_MAX, SWEEP_KEYS, SolveOptions
-from fccgrb_cli.ranges import describe_range, in_range
+from fccgrb_cli.batch.cells import Job, cells_folder, pending, run_jobs
+from fccgrb_cli.core.atomic import atomic_path, remove_stale
+from fccgrb_cli.core.bounds import describe_range, in_range
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.core.hdf5_writer import writing
+from fccgrb_cli.core.inputs import check_name, load_yaml, read_text, shown
+from fccgrb_cli.core.lock import exclusive
+from fccgrb_cli.pipeline.options import SEED_MAX, SWEEP_KEYS, SolveOptions
 
 TABLES = ("table1", "table2")  # the paper's tables (fccgrb_cli/data/paper_tables.csv)
 
@@ -108,7 +108,7 @@ def _expand(grid: dict) -> Iterator[dict]:
 
 def load_sweep(path: str | Path) -> Sweep:
     """Read and validate a sweep config; paths inside it are relative to the config."""
-    from fccgrb_cli.options import METHODS
+    from fccgrb_cli.pipeline.options import METHODS
 
     path = Path(path)
     doc = load_yaml(read_text(path, "sweep config"), str(path))
@@ -190,7 +190,7 @@ def load_sweep(path: str | Path) -> Sweep:
 
 def _check_synth(path: Path, spec: Any) -> None:
     """trial.synth: {duration: s, rate: Hz}, finite and of a bounded number of frames."""
-    from fccgrb_cli.synth import frame_count
+    from fccgrb_cli.pipeline.synth import frame_count
 
     if not isinstance(spec, dict) or set(spec) - {"duration", "rate"}:
         _fail(path, "trial.synth", "{duration: SECONDS, rate: HZ}", spec)
@@ -204,10 +204,10 @@ def _check_synth(path: Path, spec: Any) -> None:
 @lru_cache(maxsize=4)
 def _synthesized(model_path: str, duration: float, rate: float, tol: float):
     """The synthesized trial of a model, once per process (cells reuse it)."""
-    from fccgrb_cli.io.trial import Trial
-    from fccgrb_cli.io.truth import Truth
     from fccgrb_cli.model import load_model
-    from fccgrb_cli.synth import synthesize
+    from fccgrb_cli.pipeline.synth import synthesize
+    from fccgrb_cli.trial.record import Trial
+    from fccgrb_cli.trial.truth import Truth
 
     model = load_model(model_path)
     s = synthesize(model, duration, rate, tol)
@@ -219,10 +219,10 @@ def _synthesized(model_path: str, duration: float, rate: float, tol: float):
 
 def run_cell(sweep: Sweep, cell: Cell, store: Path) -> Path:
     """Solve one cell and write it atomically to the store; returns the cell's file."""
-    from fccgrb_cli.io.results import write_run
-    from fccgrb_cli.io.trial import read_trial
     from fccgrb_cli.model import load_model
-    from fccgrb_cli.pipeline import solve_trial
+    from fccgrb_cli.pipeline.solve import solve_trial
+    from fccgrb_cli.results.storage import write_run
+    from fccgrb_cli.trial.record import read_trial
 
     target = store / f"{cell.key}.h5"
     truth = None

@@ -13,8 +13,7 @@ from pathlib import Path
 
 import pytest
 from cli_helpers import one_error_line, run_cli
-
-from fccgrb_cli.options import METHODS
+from fccgrb_cli.pipeline.options import METHODS
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "configs" / "models" / "five_bar.yaml"
@@ -65,7 +64,7 @@ def test_every_trc_rate(lab, tmp_path, rate):
 def test_the_largest_rate_is_read_and_a_coarse_clock_is_not_refused(lab, tmp_path):
     """100 kHz, its Times written as write_trc writes them; 2 kHz with Times rounded to 3
     decimals (half a millisecond: twice the quarter frame) is still one uniform clock."""
-    from fccgrb_cli.io.trial import read_trial, write_trc
+    from fccgrb_cli.trial.record import read_trial, write_trc
 
     trial = read_trial(lab / "t.c3d")
     write_trc(tmp_path / "fast.trc", list(trial.labels), trial.markers, 1e5)

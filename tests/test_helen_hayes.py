@@ -22,10 +22,10 @@ import numpy as np
 import pytest
 import yaml
 from cli_helpers import one_error_line, run_cli
+from fccgrb_cli.trial.forceplates import plausibility, unloaded_under_a_foot
+from fccgrb_cli.trial.record import write_trial
 
 import fccgrb_cli as fc
-from fccgrb_cli.io.forceplates import plausibility, unloaded_under_a_foot
-from fccgrb_cli.io.trial import write_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 TEMPLATE = ROOT / "configs" / "models" / "helen_hayes.yaml"

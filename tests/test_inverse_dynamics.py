@@ -32,22 +32,22 @@ import numpy as np
 import pytest
 import yaml
 from cli_helpers import runner
+from fccgrb_cli.cli.main import main
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.dynamics.plate_loads import plate_loads
+from fccgrb_cli.pipeline.synth import synthesize
+from fccgrb_cli.signals.butterworth import lowpass
+from fccgrb_cli.trial.forceplates import read_force_plates
+from fccgrb_cli.trial.record import read_trial
 
-from fccgrb_cli.cli import main
 from fccgrb_cli.dynamics import ExternalLoad, inverse_dynamics
 from fccgrb_cli.dynamics.convert import classical_dynamics
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.filtering import lowpass
-from fccgrb_cli.io.forceplates import read_force_plates
-from fccgrb_cli.io.plate_loads import plate_loads
-from fccgrb_cli.io.trial import read_trial
 from fccgrb_cli.model import load_model
 from fccgrb_cli.solvers import solve_ad
 from fccgrb_cli.solvers.ad.baseline import solve_baseline
 from fccgrb_cli.solvers.ad.solve import stacked_drives
 from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
 from fccgrb_cli.solvers.rates import central_derivatives
-from fccgrb_cli.synth import synthesize
 from fccgrb_cli.system import compile_system
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -333,8 +333,7 @@ def test_force_plates_are_read_once_per_file_and_again_when_it_changes(tmp_path)
     doubled, by ezc3d); the plates read are read-only, and what read_force_plates returns
     equals what a fresh read gives."""
     import ezc3d
-
-    from fccgrb_cli.io import forceplates
+    from fccgrb_cli.trial import forceplates
 
     forceplates._read_plate_file.cache_clear()
     fresh = read_force_plates(QUALISYS, 340)

@@ -16,10 +16,9 @@ import ezc3d
 import numpy as np
 import pytest
 from cli_helpers import run_cli
-
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.io.runs import read_runs
-from fccgrb_cli.io.trial import read_trial
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.results.runs import read_runs
+from fccgrb_cli.trial.record import read_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "configs" / "models" / "five_bar.yaml"

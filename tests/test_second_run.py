@@ -18,9 +18,8 @@ import h5py
 import numpy as np
 import pytest
 from cli_helpers import one_error_line, run_cli
-
-from fccgrb_cli.options import SolveOptions
-from fccgrb_cli.pipeline import _smoothing, run_name
+from fccgrb_cli.pipeline.options import SolveOptions
+from fccgrb_cli.pipeline.solve import _smoothing, run_name
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "configs" / "models" / "five_bar.yaml"
@@ -88,9 +87,10 @@ def test_report_shows_every_run_as_its_own_row(tmp_path):
 
 def test_the_write_itself_refuses_a_taken_name(tmp_path):
     """The check under the results file's lock (where two solves racing for one name meet)."""
+    from fccgrb_cli.core.errors import InputError
+    from fccgrb_cli.results.storage import write_runs
+
     import fccgrb_cli as fc
-    from fccgrb_cli.errors import InputError
-    from fccgrb_cli.io.results import write_runs
 
     run = fc.solve(fc.load_model(MODEL), fc.read_trial(TRIAL), method="ad")
     results = tmp_path / "r.h5"

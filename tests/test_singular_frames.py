@@ -20,9 +20,9 @@ import h5py
 import numpy as np
 import pytest
 from cli_helpers import one_error_line, run_cli
+from fccgrb_cli.pipeline.options import METHODS
 
 import fccgrb_cli as fc
-from fccgrb_cli.options import METHODS
 from fccgrb_cli.solvers.quality import SINGULAR
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -12,9 +12,8 @@ from pathlib import Path
 import ezc3d
 import numpy as np
 import pytest
-
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.io.processing import processing_measurements
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.trial.processing import processing_measurements
 
 ROOT = Path(__file__).resolve().parents[1]
 STATIC = ROOT / ".." / "shared" / "data" / "c3d" / "plugin_gait" / "HC030A01.c3d"
@@ -138,7 +137,7 @@ def write_vsk(path: Path, values: dict[str, float]) -> None:
 
 
 def test_vsk_spells_the_sides_left_and_right(tmp_path):
-    from fccgrb_cli.io.vsk import vsk_measurements
+    from fccgrb_cli.trial.vsk import vsk_measurements
 
     path = tmp_path / "child.vsk"
     write_vsk(path, {"Bodymass": 31.5, "LeftLegLength": 702.0, "RightLegLength": 698.0,
@@ -161,7 +160,7 @@ def test_vsk_spells_the_sides_left_and_right(tmp_path):
 
 
 def test_yaml_subject_file_in_model_units(tmp_path):
-    from fccgrb_cli.io.subject_files import read_measurements
+    from fccgrb_cli.trial.subject_files import read_measurements
 
     path = tmp_path / "subject.yaml"
     path.write_text("subject:\n  mass: 40\n  knee_width: {left: 0.095, right: 0.097}\n"

@@ -19,9 +19,8 @@ import numpy as np
 import pytest
 import yaml
 from cli_helpers import one_error_line, run_cli
-
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.io.runs import read_runs
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.results.runs import read_runs
 
 ROOT = Path(__file__).resolve().parents[1]
 TEMPLATES = ROOT / "configs" / "models"
@@ -164,7 +163,7 @@ def test_events_and_exports_on_the_trials_clock(nexus_run, tmp_path):
 # --- SACR or the PSIS midpoint ----------------------------------------------------------------
 
 def _trial(labels: tuple[str, ...], gaps: dict[str, slice]):
-    from fccgrb_cli.io.trial import Trial
+    from fccgrb_cli.trial.record import Trial
 
     markers = np.random.default_rng(0).normal(size=(10, len(labels), 3))
     for label, frames in gaps.items():
@@ -190,7 +189,8 @@ def test_sacrum_or_the_psis_midpoint_by_what_the_trial_holds(labels, gaps, expec
 def test_the_stand_in_is_the_psis_midpoint_frame_by_frame():
     """The pelvis marker a model reads is (LPSI + RPSI) / 2 in every frame, gaps where either
     PSIS has one; a map's own SACR wins over the stand-in."""
-    from fccgrb_cli.io.virtual import resolved
+    from fccgrb_cli.trial.virtual import resolved
+
     from fccgrb_cli.model import load_model
 
     model = load_model(PIG)
@@ -211,8 +211,9 @@ def test_event_times_as_2n_values_read_as_the_2_by_n_array(tmp_path):
     """Nexus 1.4 writes EVENT:TIMES as 2N values (minutes, seconds pairs); the events read
     from that copy equal the ones from the 2 × N original, and equal 60 min + s less the
     first frame's time, as written."""
+    from fccgrb_cli.trial.record import read_trial
+
     from fccgrb_cli.gait.events import c3d_events
-    from fccgrb_cli.io.trial import read_trial
 
     c3d = ezc3d.c3d(str(WALK))
     times = np.asarray(c3d["parameters"]["EVENT"]["TIMES"]["value"])
@@ -319,7 +320,7 @@ $InterAsisDistance = 0
 
 
 def test_mp_file_read_in_si(tmp_path):
-    from fccgrb_cli.io.subject_files import read_measurements
+    from fccgrb_cli.trial.subject_files import read_measurements
 
     path = tmp_path / "subject.mp"
     path.write_text(MP, encoding="utf-8")

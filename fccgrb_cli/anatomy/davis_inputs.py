@@ -1,6 +1,6 @@
 """What a template without Plug-in Gait's own calibration (the lower-limb, Helen Hayes and
 full-body templates) takes from the subject's measurements, read from the same sources and
-in the same order as a Plug-in Gait template's (``io.subject_files.gathered``: the static's
+in the same order as a Plug-in Gait template's (``trial.subject_files.gathered``: the static's
 ``PROCESSING`` group, the template's ``subject:`` section, ``--subject`` files, the typed
 values): the body mass for every template, and for the Helen Hayes/Davis set the knee width,
 the ankle width and the markers' diameter.
@@ -15,10 +15,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from fccgrb_cli.anatomy.calibrate import DAVIS_LANDMARKS, LANDMARKS, Measurements
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.io.subject_files import gathered
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model import Model
 from fccgrb_cli.model.subject import Sided, SubjectMeasurements
+from fccgrb_cli.trial.subject_files import gathered
 
 SIDE_TOLERANCE = 0.0005  # m: sides further apart than this are said to differ
 

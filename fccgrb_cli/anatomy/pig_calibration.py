@@ -18,13 +18,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 import yaml
 
-from fccgrb_cli.anatomy import plugin_gait as pg
 from fccgrb_cli.anatomy.anthropometry import SEGMENTS, segment_inertia
 from fccgrb_cli.anatomy.frames import Frames
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.io.trial import Trial
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model import Model
 from fccgrb_cli.model.subject import PIG_KEYS, Sided, SubjectMeasurements
+from fccgrb_cli.plugin_gait import segments as pg
+from fccgrb_cli.trial.record import Trial
 
 SIDES = {"r": "right", "l": "left"}
 LANDMARKS = ("right_asis", "left_asis", "sacrum", *(

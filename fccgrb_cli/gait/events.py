@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.io.c3d_header import read_layout, read_parameters
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.trial.c3d_header import read_layout, read_parameters
 
 SOURCES = ("c3d", "plates", "kinematic")
 KINDS = ("strike", "off")
@@ -127,7 +127,7 @@ class NormalForce:
 def _plate_normal_forces(path: str | Path, n_frames: int) -> list[NormalForce | None]:
     """Each plate's force normal to it (None for a plate whose corners do not give a normal,
     or with fewer samples than frames)."""
-    from fccgrb_cli.io.forceplates import plate_file
+    from fccgrb_cli.trial.forceplates import plate_file
 
     out: list[NormalForce | None] = []
     for raw in plate_file(path).plates:
@@ -244,7 +244,7 @@ def kinematic_events(markers: dict[str, np.ndarray], rate: float, vertical: np.n
     """Zeni et al. (2008) from marker trajectories (frames × 3, m): ``markers`` holds
     ``pelvis`` (e.g. the mean of the ASIS and PSIS or sacrum markers), ``left_heel``,
     ``right_heel``, ``left_toe`` and ``right_toe``; ``vertical`` is the unit vector up."""
-    from fccgrb_cli.filtering import lowpass
+    from fccgrb_cli.signals.butterworth import lowpass
 
     absent = [k for k in ("pelvis", "left_heel", "right_heel", "left_toe", "right_toe")
               if k not in markers]

@@ -5,7 +5,7 @@ as a 16-bit word (-1, i.e. 65535, once the count overflows it) and the header's 
 65535, so the true count goes where readers look for it (C3D User Guide; Vicon Nexus and
 C3Dserver write both): TRIAL:ACTUAL_START_FIELD and TRIAL:ACTUAL_END_FIELD, the first and last
 frame as two 16-bit words each (low word first), and POINT:LONG_FRAMES, the count as a float.
-ezc3d itself reads no more than 65,535 frames; ``io.c3d_header`` reads the rest.
+ezc3d itself reads no more than 65,535 frames; ``trial.c3d_header`` reads the rest.
 """
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from fccgrb_cli import scratch
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.io.atomic import atomic_path, cannot_write
+from fccgrb_cli.core import scratch
+from fccgrb_cli.core.atomic import atomic_path, cannot_write
+from fccgrb_cli.core.errors import InputError
 
 UNIT_SCALE = {"m": 1.0, "mm": 1e-3, "cm": 1e-2}
 # where `fccgrb perturb` records the soft-tissue-artefact level it added (mm): C3D, TRC header
@@ -65,7 +65,7 @@ def save(c3d, path: str | Path) -> None:
     """Write an ezc3d object to ``path`` atomically. ezc3d does not report a failed write (a
     full disk leaves a short file behind a normal return): the file written is measured against
     the layout its own header announces before it is renamed into place."""
-    from fccgrb_cli.io.c3d_header import read_layout
+    from fccgrb_cli.trial.c3d_header import read_layout
 
     with atomic_path(path) as tmp:
         # ezc3d picks the format from the name: give the temporary file a .c3d ending

@@ -30,8 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.inputs import regular_file
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.core.inputs import regular_file
 from fccgrb_cli.io.rates import ANALOG_RATE_MAX, POINT_RATE_MAX, rate_problem
 
 BLOCK = 512

@@ -24,9 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.io.atomic import atomic_path
-from fccgrb_cli.run import Run
+from fccgrb_cli.core.atomic import atomic_path
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.pipeline.run import Run
 
 FORMATS = ("mot", "sto", "csv", "c3d")
 CONVENTIONS = ("fccgrb", "plugin-gait", "opensim")
@@ -210,7 +210,7 @@ def _source_c3d(run: Run, trial: str | Path | None):
     checked to have the run's frames."""
     import ezc3d
 
-    from fccgrb_cli.io.c3d_header import read_layout
+    from fccgrb_cli.trial.c3d_header import read_layout
 
     source = Path(trial if trial is not None else run.trial_path)
     if source.suffix.lower() != ".c3d" or not source.is_file():
@@ -271,7 +271,7 @@ def write_c3d(run: Run, path: str | Path, trial: str | Path | None = None) -> No
     point per variable, the value in X (Y, Z zero), listed in ``POINT:ANGLES`` / ``POINT:MOMENTS``
     with ``POINT:ANGLE_UNITS`` (deg) and ``POINT:MOMENT_UNITS`` (N.m), as Vicon Nexus and
     Visual3D store model outputs."""
-    from fccgrb_cli.io.c3d import save
+    from fccgrb_cli.trial.c3d import save
 
     c3d, source = _source_c3d(run, trial)
     n_frames = c3d["data"]["points"].shape[2]
@@ -311,7 +311,7 @@ def write_c3d_plugin_gait(run: Run, path: str | Path, trial: str | Path | None =
     Nmm, W); an untrusted or unsolved frame has residual −1 (Vicon's invalid frame). Points
     of the same names already in the file (Vicon's own outputs) are replaced; returns how many
     were."""
-    from fccgrb_cli.io.c3d import save
+    from fccgrb_cli.trial.c3d import save
 
     pig = run.plugin_gait
     if pig is None:

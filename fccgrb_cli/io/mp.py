@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model.subject import SubjectMeasurements, from_vicon
 
 MAX_BYTES = 1 << 20  # a subject file is a few hundred bytes; anything past 1 MiB is not one

@@ -1,4 +1,4 @@
-"""HDF5 results, written atomically (a temporary copy, then a rename); ``io.runs`` reads them
+"""HDF5 results, written atomically (a temporary copy, then a rename); ``results.runs`` reads them
 back.
 
 Contract (SI units: m, rad, s):
@@ -16,7 +16,7 @@ Contract (SI units: m, rad, s):
                        AD baseline's drivers, and the angles converted for the dynamics),
                        ``warnings`` (every warning the run printed: frames flagged or not
                        converged and why, a truncated trial accepted, …; empty when none),
-                       the lab's axes (``fccgrb_cli.io.lab_axes``): ``vertical`` (the axis up,
+                       the lab's axes (``fccgrb_cli.anatomy.lab_axes``): ``vertical`` (the axis up,
                        '+z'), ``gravity`` (m/s², what the dynamics used), ``vertical_chosen_by``
                        ('ground', 'model', 'option' or 'file'), ``vertical_why`` (the cues),
                        ``up`` and ``walking`` (unit vectors; NaN when not walking),
@@ -61,7 +61,7 @@ Contract (SI units: m, rad, s):
                                  base drivers apply (N; N·m about the base origin); attribute
                                  ``bases``
       loads/<name>/force, point, moment, body          external loads used (N, m, N·m)
-    with angles declaring a clinical sign (see fccgrb_cli.clinical):
+    with angles declaring a clinical sign (see fccgrb_cli.anatomy.clinical):
       clinical/angles            frames × clinical angles, deg; attributes ``names``,
                                  ``contact`` (the contact body beyond each joint, or "")
       clinical/moments           frames × clinical angles, N·m, conjugate to them (with the
@@ -70,17 +70,17 @@ Contract (SI units: m, rad, s):
                                  its own checks, as ``moment_flags``)
       clinical/stance/<body>     per frame, True while a force plate loads that body
     with a model calibrated as Plug-in Gait, its outputs in Plug-in Gait's names and units
-    (fccgrb_cli.io.pig_results): plugin_gait/angles, moments, powers;
+    (fccgrb_cli.results.plugin_gait): plugin_gait/angles, moments, powers;
     with one floating base and the dynamics: residuals/ (the residual over the frames where
     every ground contact is measured) and, with --reduce-residuals, the first model's residual
-    and the reduction (layout in fccgrb_cli.io.residual_results)
-Arrays of 64 KiB or more are stored chunked and gzip-compressed (``fccgrb_cli.io.datasets``):
+    and the reduction (layout in fccgrb_cli.results.residuals)
+Arrays of 64 KiB or more are stored chunked and gzip-compressed (``fccgrb_cli.core.datasets``):
 a long trial is written and read a chunk at a time; any HDF5 reader decodes them.
 
 Writing: the runs of one command go into the file together, under the file's lock
-(``io.lock``: two solves into one file never drop a run), into a copy renamed into place
-(``io.atomic``: all of them or none, the old file intact on any error), through
-``io.hdf5_writer`` (a full disk is an error, not HDF5's crash).
+(``core.lock``: two solves into one file never drop a run), into a copy renamed into place
+(``core.atomic``: all of them or none, the old file intact on any error), through
+``core.hdf5_writer`` (a full disk is an error, not HDF5's crash).
 """
 
 from __future__ import annotations
@@ -93,23 +93,23 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fccgrb_cli.clinical import ClinicalResults
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.inputs import check_name, regular_file
-from fccgrb_cli.io.atomic import atomic_path, check_target
-from fccgrb_cli.io.datasets import put as put_array
-from fccgrb_cli.io.gait_results import write_gait, write_subject
-from fccgrb_cli.io.hdf5_writer import writing
-from fccgrb_cli.io.lab_axes import LabAxes
-from fccgrb_cli.io.lock import exclusive
-from fccgrb_cli.io.pig_results import write_plugin_gait
-from fccgrb_cli.io.residual_results import write_residuals
-from fccgrb_cli.io.results_format import FORMAT_VERSION, check_run, reading, runs_group
-from fccgrb_cli.io.spill import StoredArray
+from fccgrb_cli.anatomy.clinical import ClinicalResults
+from fccgrb_cli.anatomy.lab_axes import LabAxes
+from fccgrb_cli.core.atomic import atomic_path, check_target
+from fccgrb_cli.core.datasets import put as put_array
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.core.hdf5_writer import writing
+from fccgrb_cli.core.inputs import check_name, regular_file
+from fccgrb_cli.core.lock import exclusive
+from fccgrb_cli.core.spill import StoredArray
+from fccgrb_cli.results.format import FORMAT_VERSION, check_run, reading, runs_group
+from fccgrb_cli.results.gait import write_gait, write_subject
+from fccgrb_cli.results.plugin_gait import write_plugin_gait
+from fccgrb_cli.results.residuals import write_residuals
 from fccgrb_cli.solvers.quality import BITS, FLAG_DTYPE, FRAME_BITS, MOMENT_BITS, bit_summary
 
 if TYPE_CHECKING:
-    from fccgrb_cli.run import Run  # the Run writes itself here (Run.to_hdf5)
+    from fccgrb_cli.pipeline.run import Run  # the Run writes itself here (Run.to_hdf5)
 
 PACKAGES = {"fccgrb-cli": "fccgrb_cli", "numpy": "numpy", "scipy": "scipy", "h5py": "h5py",
             "ezc3d": "ezc3d", "click": "click", "pyyaml": "yaml"}
@@ -118,7 +118,7 @@ PACKAGES = {"fccgrb-cli": "fccgrb_cli", "numpy": "numpy", "scipy": "scipy", "h5p
 def versions() -> dict[str, str]:
     """The versions of the packages a results file was made with: a loaded module's own
     ``__version__``; for one this run did not import (scipy, whose LAPACK is loaded by file:
-    fccgrb_cli.blas), the version in its installed dist-info folder's name. importlib.metadata
+    fccgrb_cli.core.blas), the version in its installed dist-info folder's name. importlib.metadata
     gives the same, but importing it takes ~30 ms, a twentieth of the sample's whole solve."""
     import sys
 
@@ -180,7 +180,7 @@ def check_output(path: str | Path) -> None:
 def write_run(path: str | Path, run: Run, command: str, cell: dict | None = None) -> None:
     """Add (or replace) one run in the results file, creating it when absent; ``cell`` (a sweep
     cell's parameters) is kept as the root attribute ``cell`` (JSON). Arrays the run holds in a
-    Spill (``io.spill``) are copied from it as stored, and read from the results file after."""
+    Spill (``core.spill``) are copied from it as stored, and read from the results file after."""
     write_runs(path, [run], command, cell=cell)
 
 
@@ -314,7 +314,7 @@ def _write_axes(g, axes: LabAxes) -> None:
 
 
 def put(group, key: str, values) -> None:
-    """``io.datasets.put``, or for an array held in a Spill its stored dataset as it is."""
+    """``core.datasets.put``, or for an array held in a Spill its stored dataset as it is."""
     if isinstance(values, StoredArray):
         values.copy_to(group, key)
     else:

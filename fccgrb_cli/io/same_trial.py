@@ -9,11 +9,11 @@ from pathlib import Path
 
 import numpy as np
 
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.io.labels import match_labels
-from fccgrb_cli.io.trial import read_trial
-from fccgrb_cli.io.virtual import resolved
-from fccgrb_cli.run import Run
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.pipeline.run import Run
+from fccgrb_cli.trial.labels import match_labels
+from fccgrb_cli.trial.record import read_trial
+from fccgrb_cli.trial.virtual import resolved
 
 READ_TOLERANCE_M = 1e-6  # a C3D's float32 millimetres, or a TRC's 9 digits, read back
 

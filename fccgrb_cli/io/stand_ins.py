@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fccgrb_cli.io.trial import Trial
+from fccgrb_cli.trial.record import Trial
 
 STAND_INS: dict[str, str] = {"SACR": "mid(LPSI,RPSI)"}
 ARGUMENTS: dict[str, tuple[str, ...]] = {"SACR": ("LPSI", "RPSI")}

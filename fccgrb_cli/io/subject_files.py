@@ -11,11 +11,11 @@ from typing import Any
 
 import yaml
 
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.io.mp import mp_measurements
-from fccgrb_cli.io.processing import processing_measurements
-from fccgrb_cli.io.vsk import vsk_measurements
 from fccgrb_cli.model.subject import SubjectMeasurements, from_flags, from_yaml, yaml_keys
+from fccgrb_cli.trial.processing import processing_measurements
+from fccgrb_cli.trial.vsk import vsk_measurements
 
 ENDINGS = (".vsk", ".mp", ".c3d", ".yaml", ".yml")
 

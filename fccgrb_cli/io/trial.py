@@ -16,11 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
-from fccgrb_cli.errors import InputError
-from fccgrb_cli.inputs import decode, read_bytes, regular_file
-from fccgrb_cli.io.atomic import atomic_path
-from fccgrb_cli.io.c3d import ARTEFACT_PARAMETER, ARTEFACT_TRC_KEY, UNIT_SCALE, write_markers
-from fccgrb_cli.io.c3d_header import (
+from fccgrb_cli.core.atomic import atomic_path
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.core.inputs import decode, read_bytes, regular_file
+from fccgrb_cli.io.rates import POINT_RATE_MAX, rate_problem
+from fccgrb_cli.trial.c3d import ARTEFACT_PARAMETER, ARTEFACT_TRC_KEY, UNIT_SCALE, write_markers
+from fccgrb_cli.trial.c3d_header import (
     TRUNCATED,
     WORD_LIMIT,
     C3DLayout,
@@ -28,7 +29,6 @@ from fccgrb_cli.io.c3d_header import (
     read_parameters,
     read_points,
 )
-from fccgrb_cli.io.rates import POINT_RATE_MAX, rate_problem
 
 TRIAL_ENDINGS = (".c3d", ".trc")
 TRC_MAX = 4 << 30  # bytes: a TRC is read whole (a 10-minute trial of 55 markers is ~0.3 GB)

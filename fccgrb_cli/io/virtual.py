@@ -12,11 +12,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.io.stand_ins import stand_in_warning, stand_ins
-from fccgrb_cli.io.trial import Trial
 from fccgrb_cli.model import Model
 from fccgrb_cli.model.virtual import canonical, is_expression, parse
+from fccgrb_cli.trial.record import Trial
 
 
 def with_virtual(trial: Trial, expressions: dict[str, str]) -> Trial:

@@ -26,7 +26,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.errors import InputError
 
 SIDE_NAMES = {"l": "left", "r": "right"}
 

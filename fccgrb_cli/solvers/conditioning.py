@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fccgrb_cli.blas import single_threaded
+from fccgrb_cli.core.blas import single_threaded
 from fccgrb_cli.model import Model
 from fccgrb_cli.solvers.batched import Stacked, blocks
 from fccgrb_cli.system import System, compile_system

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fccgrb_cli.errors import InputError
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model import GROUND, Model
 from fccgrb_cli.system.compiled import compile_system
 from fccgrb_cli.system.constraints import floating_bases, joint_neighbours, reachable
