@@ -162,7 +162,9 @@ def calibrate(template: Model, trial: Trial, *, mass: float | None = None,
     ``mid(A,B)`` allowed). A Plug-in Gait template (``configs/models/plugin_gait.yaml``) takes
     the subject's measurements from the trial's PROCESSING group and the template's subject
     section, the keywords (mm, kg) over both, with Plug-in Gait's foot-flat option
-    (``plugin_gait.calibration.calibrate_plugin_gait`` takes the other choices). The personal
+    (``plugin_gait.calibration.calibrate_plugin_gait`` takes the other choices); any other
+    template reads its mass (and a Helen Hayes one its widths) from the same sources in the
+    same order (``anatomy.davis_inputs``). The personal
     model's gravity points down the trial's vertical, found from its plates and markers
     (``fccgrb_cli.anatomy.lab_axes``); where nothing in the trial tells, the template's own gravity
     stays, so a template loaded with the lab's gravity states it.
@@ -196,28 +198,27 @@ def calibrate(template: Model, trial: Trial, *, mass: float | None = None,
         A landmark missing from the trial, implausible measurements, or a template without a
         calibration section (one line naming it).
     """
-    from fccgrb_cli.anatomy.calibrate import Measurements
     from fccgrb_cli.anatomy.calibrate import calibrate as personalize
+    from fccgrb_cli.anatomy.davis_inputs import template_inputs
     from fccgrb_cli.model import parse_model
     from fccgrb_cli.trial.virtual import resolved
 
     trial, mapping = resolved(template, trial, dict(mapping or {}),
                               {*template.marker_labels, *template.landmarks.values()})
     source = f"{template.source} calibrated on {trial.path}"
+    typed = {k: None if v is None else f"{v:.17g}" for k, v in (
+        ("knee_width", knee_width), ("ankle_width", ankle_width),
+        ("marker_diameter", marker_diameter), ("body_mass", mass))}
     if template.calibration_method == "plugin-gait":
         from fccgrb_cli.plugin_gait.calibration import Options, calibrate_plugin_gait
         from fccgrb_cli.trial.subject_files import gathered
 
-        typed = {"knee_width": knee_width, "ankle_width": ankle_width,
-                 "marker_diameter": marker_diameter, "body_mass": mass}
-        measured = gathered(template.measurements, trial.path, (), {
-            k: None if v is None else f"{v:.17g}" for k, v in typed.items()})
+        measured = gathered(template.measurements, trial.path, (), typed)
         result = calibrate_plugin_gait(template, trial, measured, Options(frames), mapping)
         return parse_model(result.text, source)
-    widths = (knee_width, ankle_width, marker_diameter)
-    measured = None if all(w is None for w in widths) else Measurements.from_mm(*widths)
-    return parse_model(personalize(template, trial, frames, mass, measured, mapping).text,
-                       source)
+    inputs = template_inputs(template, trial.path, (), typed)
+    return parse_model(personalize(template, trial, frames, inputs.mass, inputs.measurements,
+                                   mapping).text, source)
 
 
 def write_results(run: Run, path: str | Path) -> None:

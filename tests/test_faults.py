@@ -301,3 +301,16 @@ def test_a_killed_sweep_leaves_nothing_a_rerun_does_not_clean(lab: Path, tmp_pat
     assert scratch_files(folder) == []
     with h5py.File(folder / "s.h5", "r") as h5:
         assert len(h5["cells"]) == 8
+
+
+def test_a_sweep_on_a_full_disk_is_one_line_and_leaves_nothing(lab: Path, tmp_path: Path) -> None:
+    """``ulimit -f`` too small for one cell's file: exit 2, one error line, and no output and
+    no ``.cells`` folder left (the folder the run made held no finished cell)."""
+    folder = copy_lab(lab, tmp_path / "s")
+    (folder / "s.yaml").write_text(SWEEP.replace("level: [0, 1, 2, 3, 4, 5, 6, 7]", "level: 0"),
+                                   encoding="utf-8")
+    files = sorted(p.name for p in folder.iterdir())
+    done = run(["sweep", "s.yaml", "-o", "s.h5"], folder, limit=16 * 1024)
+    assert done.returncode == 2, done.stderr
+    assert "file size limit" in one_error(done.stderr)
+    assert sorted(p.name for p in folder.iterdir()) == files

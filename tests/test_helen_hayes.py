@@ -423,7 +423,7 @@ def test_a_missing_landmark_names_the_landmark_and_the_label(trial, tmp_path) ->
 def test_measurements_are_checked_and_refused_where_unused(tmp_path) -> None:
     result = run_cli("calibrate", TEMPLATE, FP_TYPE1, "--knee-width", "10", "-o",
                      tmp_path / "p.yaml")
-    one_error_line(result, "--knee-width: expected 40–250 mm, got 10")
+    one_error_line(result, "--knee-width: expected 20–250 mm, got 10")  # as Plug-in Gait reads it
     lower_limb = ROOT / "configs" / "models" / "lower_limb.yaml"
     result = run_cli("calibrate", lower_limb, FP_TYPE1, "--ankle-width", "70", "-o",
                      tmp_path / "p.yaml")

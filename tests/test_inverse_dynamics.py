@@ -245,8 +245,8 @@ def test_figure8_mc_beats_filtered_ad_at_the_chain_end(figure8: Path, seed: int)
             assert g.attrs["perturb_seed"] == seed
             assert list(g.attrs["perturb_markers"]) == ["P4", "P9"]
             assert g.attrs["perturb_level_m"] == pytest.approx(0.03)
-            assert g["converged"][()].all()
-            mean_ed[key] = float(np.mean(g["ed"][:, p6]))
+            assert g["solver_converged"][()].all()  # AD's frames far from its markers
+            mean_ed[key] = float(np.mean(g["ed"][:, p6]))  # are flagged, not unsolved
         inputs = h5[f"runs/{FIGURE8_RUNS[seed][0]}/markers_input"][()]
         reference = h5["reference/markers"][()]
     moved = np.abs(inputs - reference).max(axis=(0, 2))
@@ -624,7 +624,8 @@ def test_results_file_holds_the_plate_loads(tmp_path: Path) -> None:
     fccgrb_ok("solve", model, QUALISYS, *PENDULUM_ON_QUALISYS, "--no-dynamics", "-o", out)
     with h5py.File(out, "r") as h5:
         assert "joint_moments" not in h5["runs/nrm-wls"]
-    fccgrb_ok("solve", model, QUALISYS, *PENDULUM_ON_QUALISYS, "--dynamics", "-o", out)
+    fccgrb_ok("solve", model, QUALISYS, *PENDULUM_ON_QUALISYS, "--dynamics", "-o", out,
+              "--replace")
     plate = read_force_plates(QUALISYS, 340)[0]
     with h5py.File(out, "r") as h5:
         g = h5["runs/nrm-wls"]

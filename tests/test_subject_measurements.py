@@ -96,9 +96,10 @@ def test_zero_means_not_measured_where_vicon_writes_it_so(tmp_path):
 
 
 @pytest.mark.parametrize("key,value", [("LKneeWidth", 10.2), ("Bodymass", -3.0),
-                                       ("RTibialTorsion", 20.0), ("Height", float("nan"))])
+                                       ("RTibialTorsion", 120.0), ("Height", float("nan"))])
 def test_implausible_values_are_refused_naming_file_and_key(tmp_path, key, value):
-    """A knee width in cm, a negative mass, a torsion in degrees: one error naming both."""
+    """A knee width in cm, a negative mass, a torsion no unit makes plausible: one error
+    naming both."""
     path = tmp_path / "bad.c3d"
     write_c3d(path, {key: value})
     with pytest.raises(InputError, match=rf"bad\.c3d: PROCESSING:{key}: expected"):

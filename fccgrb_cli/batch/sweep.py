@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
+import shutil
 import time as clock
 from collections.abc import Callable, Iterator
 from concurrent.futures import Executor
@@ -77,10 +78,25 @@ def _axis(key: str, value: Any) -> list:
     """The values a grid key takes. ``perturb_markers`` names one subset (a list of names) or
     several (a list of lists); every other key is one value or a list of values."""
     if key == "perturb_markers":
+        def names(v: list) -> tuple:  # a mapping or a list stays one, for _scalars to name
+            return tuple(str(m) if isinstance(m, (str, int, float)) else m for m in v)
+
         if isinstance(value, list) and value and all(isinstance(v, list) for v in value):
-            return [tuple(str(m) for m in v) for v in value]
-        return [tuple(str(m) for m in (value if isinstance(value, list) else [value]))]
+            return [names(v) for v in value]
+        return [names(value if isinstance(value, list) else [value])]
     return value if isinstance(value, list) else [value]
+
+
+def _scalars(source: Path, where: str, combo: dict) -> None:
+    """Every value of an expanded cell one scalar (``perturb_markers``: names), so that a
+    mapping or a list of lists where one value is expected is named with its key."""
+    for key, value in combo.items():
+        if key == "perturb_markers":
+            value = next((m for m in value if not isinstance(m, str)), None)
+            if value is not None:
+                _fail(source, f"{where}.{key}", "marker names, or lists of them", value)
+        elif value is not None and not isinstance(value, (str, int, float, bool)):
+            _fail(source, f"{where}.{key}", "one value or a list of values", value)
 
 
 def _expand(grid: dict) -> Iterator[dict]:
@@ -143,6 +159,7 @@ def load_sweep(path: str | Path) -> Sweep:
             if isinstance(value, list) and not value:
                 _fail(path, f"{where}.{key}", "a value or a non-empty list", value)
         for combo in _expand(grid):
+            _scalars(path, where, combo)
             combo.setdefault("seed", doc.get("seed", 0))
             combo.setdefault("tol", 1e-10)
             combo.setdefault("level", 0.0)
@@ -158,6 +175,11 @@ def load_sweep(path: str | Path) -> Sweep:
                 if isinstance(combo[key], bool) or not isinstance(combo[key], (int, float)):
                     _fail(path, f"{where}.{key}", "a number", combo[key])
                 combo[key] = float(combo[key])
+            if not 0.0 <= combo["level"] <= 1000.0:  # NaN fails too
+                _fail(path, f"{where}.level", "a perturbation level from 0 to 1000 (mm)",
+                      combo["level"])
+            if not 0.0 < combo["tol"] <= 1.0:
+                _fail(path, f"{where}.tol", "a tolerance in (0, 1]", combo["tol"])
             cells.append(Cell(tuple(sorted(combo.items()))))
     unique = list(dict.fromkeys(cells))
     sweep = Sweep(str(name), str(table or ""), path, model, trial, variants, tuple(unique))
@@ -228,13 +250,38 @@ def cell_options(sweep: Sweep, cell: Cell) -> SolveOptions:
     return SolveOptions.from_mapping(values | {"name": "run"}, where=f"{sweep.source}: cell")
 
 
+def check_sweep_output(output: Path, name: str) -> None:
+    """An InputError unless ``output`` is absent or this sweep's own results (a sweep file of
+    the sweep ``name``, which a rerun merges again): a text file, another command's results or
+    another sweep's are never replaced."""
+    import h5py
+
+    if not output.exists() and not output.is_symlink():
+        return
+    try:
+        with h5py.File(output, "r") as h5:
+            written_by = h5.attrs.get("sweep")
+            merged = "cells" in h5
+    except OSError:
+        raise InputError(f"{output}: exists and is not a sweep's results file; choose another "
+                         "output") from None
+    if written_by is None or not merged:
+        raise InputError(f"{output}: exists and holds no sweep's cells (another command's "
+                         "results?); choose another output")
+    if str(written_by) != name:
+        raise InputError(f"{output}: holds the results of the sweep {str(written_by)!r}, not "
+                         f"{name!r}; choose another output")
+
+
 def run_sweep(sweep: Sweep, output: Path, *, workers: int = 1, executor: Executor | None = None,
               progress: Callable[[str], None] | None = None) -> tuple[int, int]:
     """Run the missing cells (sequential-mode cells over the executor or a local process pool,
     then the parallel-mode ones alone, one at a time, so that their timing is not shared), and
     merge every cell into ``output``. Returns (cells run now, cells already done). The sweep
     holds ``output``'s lock throughout (another sweep into it is refused at once), removes the
-    scratch files of cells a killed run left, and its local workers end with it."""
+    scratch files of cells a killed run left, and its local workers end with it. A run that
+    fails before any cell is finished (a full disk, a cell refused) takes away the cells'
+    folder it made: a folder is left only with finished cells in it, to resume from."""
     store = cells_folder(output)
     jobs = [Job(cell.key, store / f"{cell.key}.h5", run_cell, (sweep, cell, store),
                 alone=bool(cell.get("parallel"))) for cell in sweep.cells]
@@ -256,11 +303,17 @@ def run_sweep(sweep: Sweep, output: Path, *, workers: int = 1, executor: Executo
                      f"{job.name}")
 
     with exclusive(output, wait=0):
+        made = not store.exists()
         store.mkdir(exist_ok=True)
-        remove_stale(store)
-        todo = pending(jobs, _readable, forget)
-        run_jobs(todo, done, workers=workers, executor=executor)
-        merge(sweep, store, output)
+        try:
+            remove_stale(store)
+            todo = pending(jobs, _readable, forget)
+            run_jobs(todo, done, workers=workers, executor=executor)
+            merge(sweep, store, output)
+        except BaseException:
+            if made and not any(store.glob("*.h5")):  # nothing finished to resume from
+                shutil.rmtree(store, ignore_errors=True)
+            raise
     return len(todo), len(jobs) - len(todo)
 
 

@@ -262,15 +262,19 @@ def _trial_paths(patterns: tuple[str, ...]) -> list[str]:
 @click.argument("trials", nargs=-1, required=True, metavar="TRIAL...")
 @click.option("-o", "--output", default="results.h5", show_default=True,
               type=click.Path(dir_okay=False),
-              help="HDF5 results file; an existing one gains (or replaces) this run.")
+              help="HDF5 results file; an existing one gains this run (a run of the same "
+                   "name is refused unless --replace).")
+@click.option("--replace", is_flag=True, default=False,
+              help="Replace a run of the same name in the results file (without it, a second "
+                   "solve under one name is refused and nothing is written).")
 @click.option("--write-model", type=click.Path(dir_okay=False), default=None, metavar="PATH",
               help="With --reduce-residuals: write the model with the adjusted segment masses "
                    "and centres of mass (YAML) to PATH.")
 @click_options
 @ACCEPT_TRUNCATED
 @reports_input_errors
-def solve(model: str, trials: tuple[str, ...], output: str, write_model: str | None,
-          accept_truncated: bool, **options: Any) -> None:
+def solve(model: str, trials: tuple[str, ...], output: str, replace: bool,
+          write_model: str | None, accept_truncated: bool, **options: Any) -> None:
     """Solve the kinematics of MODEL (YAML) over TRIAL (C3D or TRC markers) and write HDF5.
 
     Prints a one-row summary: ms/frame (positions), iterations/frame, mean ‖Φ‖ over the active
@@ -284,7 +288,7 @@ def solve(model: str, trials: tuple[str, ...], output: str, write_model: str | N
     """
     from fccgrb_cli.core.atomic import check_target
     from fccgrb_cli.core.inputs import check_name
-    from fccgrb_cli.results.storage import check_output, write_runs
+    from fccgrb_cli.results.storage import check_output, refuse_taken_names, write_runs
     from fccgrb_cli.trial.truth import truth_path
 
     chosen = from_cli(options)
@@ -297,6 +301,8 @@ def solve(model: str, trials: tuple[str, ...], output: str, write_model: str | N
         _check_model_output(write_model, taken, chosen, paths)
         check_target(write_model)
     check_output(output)
+    if chosen.name is not None and not replace and len(paths) == 1 and Path(output).exists():
+        refuse_taken_names(Path(output), [chosen.name])  # before a long solve, when known
     loaded = load_checked(model, chosen.form)
     runs = []
     for path in paths:
@@ -304,10 +310,12 @@ def solve(model: str, trials: tuple[str, ...], output: str, write_model: str | N
         if np.isnan(run.result.theta).all():
             raise InputError(f"{path}: no frame could be solved (in every frame the markers "
                              "present cannot determine the model); nothing was written")
-        _report_kernels()
         if len(paths) > 1:
             name = check_name(f"{Path(path).stem}-{run.name}", f"{path}: run name")
             run = dataclasses.replace(run, name=name)
+        if not replace and Path(output).exists():
+            refuse_taken_names(Path(output), [run.name])  # before anything is written
+        _report_kernels()
         runs.append(run)
         if write_model is not None:
             from fccgrb_cli.core.atomic import atomic_path
@@ -322,13 +330,23 @@ def solve(model: str, trials: tuple[str, ...], output: str, write_model: str | N
 
         subject = ([r.name for r in with_gait], pooled([r.gait.cycles for r in with_gait]))
     write_runs(output, runs, " ".join(["fccgrb", *sys.argv[1:]]), subject=subject,
-               waiting=lambda line: click.echo(f"fccgrb: warning: {line}", err=True))
+               waiting=lambda line: click.echo(f"fccgrb: warning: {line}", err=True),
+               replace=replace)
     for run in runs:
         _show(run, output)
     if subject is not None:
         from fccgrb_cli.presentation.gait_report import subject_report
 
         click.echo(subject_report(*subject))
+
+
+def _start_times(results: str) -> dict[str, float]:
+    """Each run's first frame on its trial file's clock (s), by run name."""
+    import h5py
+
+    with h5py.File(results, "r") as h5:
+        runs = h5.get("runs", {})
+        return {name: float(runs[name].attrs.get("start_time_s", 0.0)) for name in runs}
 
 
 def _map_files(options: dict[str, Any]) -> list[str]:
@@ -404,7 +422,7 @@ def _show(run: Run, output: str) -> None:
     if run.gait is not None:
         from fccgrb_cli.presentation.gait_report import gait_report
 
-        click.echo(gait_report(run.gait))
+        click.echo(gait_report(run.gait, run.start_time))
     click.echo(f"wrote run {run.name!r} ({run.result.n_frames} frames) to {output}")
 
 
@@ -449,12 +467,12 @@ def _frame_range(text: str | None) -> tuple[int, int] | None:
               help="The ankle's width across the malleoli, mm; Plug-in Gait templates take "
                    "left,right.  [Helen Hayes default: 70]")
 @click.option("--marker-diameter", type=Widths(500, "mm"), default=None, metavar="MM",
-              help="The markers' diameter, mm.  [Helen Hayes default: 14]")
+              help="The markers' diameter, mm.  [default: 14, Plug-in Gait's]")
 @click.option("--subject", "subject_files", multiple=True, metavar="FILE",
-              help="Plug-in Gait templates: the subject's measurements from a Vicon .vsk, a "
-                   "C3D's PROCESSING group or a YAML subject: section (repeatable; later files "
-                   "and the width options win). The static TRIAL's own PROCESSING group and "
-                   "the template's subject: section are read first.")
+              help="The subject's measurements from a Vicon .vsk or .mp, a C3D's PROCESSING "
+                   "group or a YAML subject: section (repeatable; later files and the width "
+                   "options win). The static TRIAL's own PROCESSING group and the template's "
+                   "subject: section are read first.")
 @click.option("--foot-flat/--no-foot-flat", default=True, show_default=True,
               help="Plug-in Gait templates: the static's heel-to-toe line taken level (raised "
                    "at the heel by the sole delta) for the foot offsets, as Plug-in Gait's "
@@ -481,9 +499,10 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
     (configs/models/plugin_gait.yaml) is personalized as Plug-in Gait does (Davis hip centres,
     chord knee and ankle centres, thigh and shank rotation offsets, tibial torsion, the static's
     foot offsets) from the subject's measurements: the static C3D's PROCESSING group, the
-    template's subject: section, --subject files and the width options, in that order. Writes a
-    model ready for `fccgrb solve`."""
-    from fccgrb_cli.anatomy.calibrate import Measurements
+    template's subject: section, --subject files and the width options, in that order; every
+    other template reads its body mass (and a Helen Hayes one its widths and marker diameter)
+    from the same sources in the same order. Writes a model ready for `fccgrb solve`."""
+    from fccgrb_cli.anatomy.davis_inputs import template_inputs
     from fccgrb_cli.anatomy.full_body import personalize
     from fccgrb_cli.core.atomic import atomic_path, check_target
     from fccgrb_cli.model import parse_model
@@ -495,8 +514,6 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
     check_target(output)
     template = load_model(model)
     data = read_trial(trial, accept_truncated)
-    for message in data.warnings:
-        click.echo(f"fccgrb: warning: {message}", err=True)
     data, labels = resolved(template, data, dict(from_cli({"mapping": mapping}).mapping),
                             {*template.marker_labels, *template.landmarks.values()})
     if template.calibration_method == "plugin-gait":
@@ -504,16 +521,14 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
                                (knee_width, ankle_width, marker_diameter), subject_files,
                                labels)
         return
-    if subject_files:
-        raise InputError(f"--subject: expected only with a Plug-in Gait template "
-                         f"(calibration.method: plugin-gait); {model} has none")
-    widths = tuple(None if w is None else _single_mm(w, flag) for w, flag in (
-        (knee_width, "--knee-width"), (ankle_width, "--ankle-width"),
-        (marker_diameter, "--marker-diameter")))
-    measured = None if all(w is None for w in widths) else Measurements.from_mm(*widths)
+    inputs = template_inputs(template, data.path, subject_files, {
+        "knee_width": knee_width, "ankle_width": ankle_width, "marker_diameter": marker_diameter,
+        "body_mass": None if mass is None else f"{mass:.17g}"})
     _template_labels(template, labels)
-    result = personalize(template, data, _frame_range(frames), mass, measured, labels,
-                         vertical)
+    result = personalize(template, data, _frame_range(frames), inputs.mass,
+                         inputs.measurements, labels, vertical)
+    for message in data.warnings:
+        click.echo(f"fccgrb: warning: {message}", err=True)
     if result.axes is not None:
         for message in result.axes.warnings:
             click.echo(f"fccgrb: warning: {message}", err=True)
@@ -530,25 +545,15 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
     if result.measurements is not None:
         click.echo(f"knee and ankle centres by Davis et al. (1991): "
                    f"{result.measurements.describe()}")
-        if measured is None:
-            click.echo("fccgrb: warning: no --knee-width, --ankle-width, --marker-diameter: "
-                       "an average adult's used; give the subject's, measured", err=True)
-    if mass is None:
-        click.echo("fccgrb: warning: no --mass: the model has no inertia (inverse dynamics "
-                   "skipped)", err=True)
+    for warning in inputs.warnings:
+        click.echo(f"fccgrb: warning: {warning}", err=True)
+    if inputs.mass is None:
+        click.echo("fccgrb: warning: no --mass (nor Bodymass in the static's PROCESSING or a "
+                   "subject file): the model has no inertia (inverse dynamics skipped)",
+                   err=True)
     for warning in result.warnings:
         click.echo(f"fccgrb: warning: {output}: implausible calibration: {warning}; every "
                    "frame solved with this model is flagged", err=True)
-
-
-def _single_mm(text: str, flag: str) -> float:
-    """One length in mm (the Helen Hayes templates take one width for both sides)."""
-    try:
-        return float(text)
-    except ValueError:
-        raise InputError(f"{flag}: expected one number in mm for a Helen Hayes template (one "
-                         f"width for both sides; Plug-in Gait templates take left,right), got "
-                         f"{text!r}") from None
 
 
 def _calibrate_plugin_gait(template, data, output: str, choices: tuple,
@@ -574,6 +579,8 @@ def _calibrate_plugin_gait(template, data, output: str, choices: tuple,
         tmp.write_text(result.text, encoding="utf-8")
     m = result.measurements
     start, stop = result.frames
+    for warning in (*data.warnings, *result.warnings):
+        click.echo(f"fccgrb: warning: {warning}", err=True)
     click.echo(f"wrote {output}: {personal.name} from frame indices {start}:{stop} of "
                f"{data.path}")
     click.echo(f"measurements from {m.source or 'nowhere'}")
@@ -638,7 +645,8 @@ def perturb_command(source: str, target: str, level_mm: float, markers: str | No
         raise InputError(f"--markers: expected labels of {source}, got {', '.join(unknown)}")
     out = perturb(data.markers, data.labels, data.rate, level_mm * 1e-3, seed, only or None)
     with transaction():
-        write_trial(target, list(data.labels), out, data.rate, units)
+        write_trial(target, list(data.labels), out, data.rate, units,
+                    artefact_mm=level_mm + 1e3 * data.artefact_m)
         if copy_truth:
             with atomic_path(truth_path(target)) as tmp:
                 shutil.copyfile(sidecar, tmp)
@@ -672,7 +680,7 @@ def sweep(config: str, output: str | None, workers: int, scheduler: str | None, 
     import time
 
     from fccgrb_cli.batch.cells import cells_folder, remove_cells
-    from fccgrb_cli.batch.sweep import load_sweep, run_sweep
+    from fccgrb_cli.batch.sweep import check_sweep_output, load_sweep, run_sweep
     from fccgrb_cli.core.atomic import check_target
     from fccgrb_cli.presentation.tables import collect, render
     from fccgrb_cli.trial.record import read_trial
@@ -681,6 +689,7 @@ def sweep(config: str, output: str | None, workers: int, scheduler: str | None, 
     out = Path(output or f"{spec.name}.h5")
     refuse_inputs(out, [config, spec.model, spec.trial.get("file")])
     check_target(out)
+    check_sweep_output(out, spec.name)
     if cells_folder(out).exists() and not cells_folder(out).is_dir():
         raise InputError(f"{cells_folder(out)}: expected the folder of finished cells, got a "
                          "file")
@@ -859,8 +868,9 @@ def report(results: str, fmt: str, table: str | None, html_folder: str | None,
         from fccgrb_cli.presentation.gait_report import gait_report
         from fccgrb_cli.results.gait import read_all_gait
 
+        starts = _start_times(results)
         for name, gait in read_all_gait(results).items():
-            click.echo(f"\nrun {name}: {gait_report(gait)}")
+            click.echo(f"\nrun {name}: {gait_report(gait, starts.get(name, 0.0))}")
         from fccgrb_cli.presentation.residual_table import residual_table
         from fccgrb_cli.results.residuals import read_all_residuals
 

@@ -106,21 +106,28 @@ def load_yaml(text: str, source: str, loader: type | None = None) -> Any:
 def _check_bounds(text: str, source: str, loader: type) -> None:
     """Walk the parser's events: the nesting depth, and the number of values the document
     holds once every alias is replaced by what its anchor names (each anchor's expanded size
-    is counted once, when its collection closes, so that the walk is linear in the text)."""
+    is counted once, when its collection closes, so that the walk is linear in the text). An
+    error names the line and the key path where the bound is passed (``name``,
+    ``bodies.crank.points.A``, ``cells[0]``)."""
     import yaml
 
     sizes: dict[str, int] = {}
     open_: list[tuple[str | None, int]] = []
+    keys = _KeyPath()
     total = 0
     for event in yaml.parse(text, Loader=loader):
+        if isinstance(event, (yaml.ScalarEvent, yaml.AliasEvent, yaml.CollectionStartEvent)):
+            keys.node(event)
         if isinstance(event, yaml.CollectionStartEvent):
             total += 1
             open_.append((event.anchor, total))
+            keys.open(isinstance(event, yaml.MappingStartEvent))
             if len(open_) > MAX_DEPTH:
-                raise InputError(f"{source}: line {event.start_mark.line + 1}: expected YAML "
-                                 f"nested at most {MAX_DEPTH} levels deep")
+                raise InputError(f"{source}: line {event.start_mark.line + 1}: {keys}expected "
+                                 f"YAML nested at most {MAX_DEPTH} levels deep")
         elif isinstance(event, yaml.CollectionEndEvent):
             anchor, start = open_.pop()
+            keys.close()
             if anchor is not None:
                 sizes[anchor] = total - start + 1
         elif isinstance(event, yaml.ScalarEvent):
@@ -130,9 +137,47 @@ def _check_bounds(text: str, source: str, loader: type) -> None:
         elif isinstance(event, yaml.AliasEvent):
             total += sizes.get(event.anchor, 1)
         if total > MAX_VALUES:
-            raise InputError(f"{source}: line {event.start_mark.line + 1}: expected a YAML "
-                             f"document of at most {MAX_VALUES:,} values once its aliases are "
-                             "expanded (aliases of aliases?)")
+            raise InputError(f"{source}: line {event.start_mark.line + 1}: {keys}expected a "
+                             f"YAML document of at most {MAX_VALUES:,} values once its aliases "
+                             "are expanded (aliases of aliases?)")
+
+
+class _KeyPath:
+    """Where the parser is in the document: the keys and list positions from the top."""
+
+    def __init__(self) -> None:
+        self.frames: list[list] = []  # [is_mapping, key or index, expecting a key]
+        self.started = False
+
+    def node(self, event) -> None:
+        """A node begins (a key or a value of the innermost collection)."""
+        import yaml
+
+        if not self.frames:
+            return
+        frame = self.frames[-1]
+        if not frame[0]:
+            frame[1] += 1
+        elif frame[2]:
+            frame[1] = event.value if isinstance(event, yaml.ScalarEvent) else "?"
+            frame[2] = False
+        else:
+            frame[2] = True
+
+    def open(self, mapping: bool) -> None:
+        self.frames.append([True, None, True] if mapping else [False, -1, False])
+
+    def close(self) -> None:
+        self.frames.pop()
+
+    def __str__(self) -> str:
+        text = ""
+        for mapping, key, _ in self.frames:
+            if mapping and key is not None:
+                text += f".{key}" if text else str(key)
+            elif not mapping and key >= 0:
+                text += f"[{key}]"
+        return f"{text}: " if text else ""
 
 
 def shown(value: Any) -> str:

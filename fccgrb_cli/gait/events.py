@@ -82,6 +82,16 @@ def _parse(label: str, context: str) -> tuple[str, str] | None:
     return None
 
 
+def _minutes_seconds(path: str | Path, values: np.ndarray, n: int) -> np.ndarray:
+    """EVENT:TIMES as 2 × n (minutes; seconds), from either layout Vicon writes: a 2 × n array
+    (Nexus 2) or 2n values in one dimension (Nexus 1.4), both stored as (minutes, seconds)
+    pairs one after the other, the first dimension varying fastest."""
+    if values.size != 2 * n:
+        raise InputError(f"{path}: EVENT:TIMES: expected 2 × {n} values ((minutes, seconds) "
+                         f"for each of EVENT:LABELS's {n}), got {values.size}")
+    return np.asarray(values, dtype=float).reshape(n, 2).T
+
+
 def c3d_events(path: str | Path, n_frames: int, rate: float) -> Events | None:
     """The foot events of a C3D's EVENT section within the trial (None when it has none), read
     from its parameter section alone (``c3d_header.read_parameters``: ezc3d would load every
@@ -90,11 +100,7 @@ def c3d_events(path: str | Path, n_frames: int, rate: float) -> Events | None:
     if "EVENT:LABELS" not in params or "EVENT:TIMES" not in params:
         return None
     labels = [str(v) for v in params["EVENT:LABELS"].values]
-    raw = params["EVENT:TIMES"]
-    times = raw.values.reshape(raw.dims[::-1]).T if raw.dims else raw.values
-    if times.ndim != 2 or times.shape[1] != len(labels):
-        raise InputError(f"{path}: EVENT:TIMES: expected 2 × {len(labels)} (minutes, seconds) "
-                         f"for EVENT:LABELS, got shape {times.shape}")
+    times = _minutes_seconds(path, params["EVENT:TIMES"].values, len(labels))
     contexts = [str(v) for v in params["EVENT:CONTEXTS"].values] \
         if "EVENT:CONTEXTS" in params else []
     contexts += [""] * (len(labels) - len(contexts))

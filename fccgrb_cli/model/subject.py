@@ -10,6 +10,13 @@ name in a ``.vsk``.
 
 ``present`` lists the source's keys that were found and used (its own spelling), so that a
 personalized model can say what it was built from; a quantity the source lacks is None.
+
+Keys are read by what they mean, not by their spelling: case, spaces, underscores and hyphens
+are ignored (``Marker Diameter``, ``MARKER_DIAMETER`` and ``MarkerDiameter`` are one key). An
+angle Vicon stores in radians whose size only degrees explain (|value| > π/2, a Workstation
+export's ``StaticPlantFlex`` of 12.7, say) is read as degrees and said in ``notes``; a static
+foot offset a calibration computes itself (``StaticPlantFlex``, ``StaticRotOff``) is never
+required, and one no unit makes plausible is left out with a note rather than refused.
 """
 
 from __future__ import annotations
@@ -40,8 +47,10 @@ class Sided:
 class Quantity:
     """How one measurement reads: its Vicon name (without the side prefix), its kind ('length',
     'angle' or 'mass'), whether it has a value per side, the plausible range in Vicon's units (a
-    value outside it is refused: a typo, or a value in another unit), and whether Vicon writes 0
-    for 'not measured' (then 0 reads as absent and the model computes it)."""
+    value outside it is refused: a typo, or a value in another unit), whether Vicon writes 0
+    for 'not measured' (then 0 reads as absent and the model computes it), and whether it is
+    a result a calibration computes again (``derived``: never refused, left out when
+    implausible)."""
 
     vicon: str
     kind: str
@@ -49,6 +58,7 @@ class Quantity:
     low: float
     high: float
     zero_is_absent: bool = False
+    derived: bool = False
 
 
 # Field name → how Vicon spells and scales it. Ranges cover children to tall adults (mm, rad, kg).
@@ -67,8 +77,9 @@ PIG_KEYS: dict[str, Quantity] = {
     "shank_rotation": Quantity("ShankRotation", "angle", True, -math.pi / 2, math.pi / 2),
     "tibial_torsion": Quantity("TibialTorsion", "angle", True, -math.pi / 2, math.pi / 2),
     "static_plantar_flexion": Quantity("StaticPlantFlex", "angle", True, -math.pi / 2,
-                                       math.pi / 2),
-    "static_rotation_offset": Quantity("StaticRotOff", "angle", True, -math.pi / 2, math.pi / 2),
+                                       math.pi / 2, derived=True),
+    "static_rotation_offset": Quantity("StaticRotOff", "angle", True, -math.pi / 2, math.pi / 2,
+                                       derived=True),
 }
 VICON_SCALE = {"length": 1e-3, "angle": 1.0, "mass": 1.0}  # Vicon's unit → SI
 
@@ -83,7 +94,8 @@ class SubjectMeasurements:
     tibial torsion, rad. ``static_plantar_flexion`` and ``static_rotation_offset`` are the foot
     offsets a static trial gave Vicon's Plug-in Gait (its results, stored for comparison:
     calibration computes its own). ``source`` names where the values came from, ``present`` the
-    keys found there."""
+    keys found there, ``notes`` what was read otherwise than written (an angle in degrees, a
+    derived value left out)."""
 
     body_mass: float | None = None
     height: float | None = None
@@ -101,6 +113,7 @@ class SubjectMeasurements:
     static_rotation_offset: Sided = field(default_factory=Sided)
     source: str = ""
     present: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
 
     def merged_over(self, base: SubjectMeasurements) -> SubjectMeasurements:
         """These measurements where given (per side), ``base``'s elsewhere; sources joined."""
@@ -114,7 +127,8 @@ class SubjectMeasurements:
                 values[name] = theirs if mine is None else mine
         source = "; ".join(s for s in (self.source, base.source) if s)
         return replace(self, **values, source=source,
-                       present=tuple(dict.fromkeys(self.present + base.present)))
+                       present=tuple(dict.fromkeys(self.present + base.present)),
+                       notes=tuple(dict.fromkeys(base.notes + self.notes)))
 
     def missing(self, names: tuple[str, ...]) -> list[str]:
         """The Vicon keys of the named quantities not given (per side for sided ones)."""
@@ -142,33 +156,55 @@ def vicon_key_names(prefixes: tuple[str, str] = ("L", "R")) -> dict[str, tuple[s
     return out
 
 
+def spelling(key: str) -> str:
+    """A key as its meaning reads it: upper case, without spaces, underscores or hyphens."""
+    return "".join(c for c in key.upper() if c not in " _-")
+
+
+def _as_degrees(value: float, q: Quantity) -> bool:
+    """Whether an angle outside its range in radians lies inside it read as degrees."""
+    return q.kind == "angle" and q.low <= math.radians(value) <= q.high
+
+
 def from_vicon(values: dict[str, float], source: str, fail: Callable[[str, str, float], None],
                prefixes: tuple[str, str] = ("L", "R")) -> SubjectMeasurements:
-    """Measurements from Vicon's keys and units (``values``: key → number, keys matched without
-    regard to case; others ignored). A value that is not finite or lies outside its plausible
-    range calls ``fail(key, expected, got)``, which raises; 0 where Vicon writes it for 'not
-    measured' reads as absent. ``present`` holds the keys in Vicon's spelling."""
-    by_upper = {k.upper(): v for k, v in values.items()}
+    """Measurements from Vicon's keys and units (``values``: key → number, keys matched by
+    :func:`spelling`; others ignored). A value that is not finite or lies outside its plausible
+    range calls ``fail(key, expected, got)``, which raises, except an angle that reads plausibly
+    in degrees (converted, and said in ``notes``) and a ``derived`` value (left out, said);
+    0 where Vicon writes it for 'not measured' reads as absent. ``present`` holds the keys in
+    Vicon's spelling."""
+    by_meaning = {spelling(k): v for k, v in values.items()}
     collected: dict[str, Any] = {}
-    present = []
+    present, notes = [], []
     for key, (name, side) in vicon_key_names(prefixes).items():
-        if key.upper() not in by_upper:
+        if spelling(key) not in by_meaning:
             continue
-        value = by_upper[key.upper()]
+        value = by_meaning[spelling(key)]
         q = PIG_KEYS[name]
         unit = {"length": "mm", "angle": "rad", "mass": "kg"}[q.kind]
         if value == 0 and q.zero_is_absent:
             continue
-        if not (math.isfinite(value) and q.low <= value <= q.high):
-            fail(key, f"{q.low:g}–{q.high:g} {unit}", value)
-        present.append(key)
         si = value * VICON_SCALE[q.kind]
+        if not (math.isfinite(value) and q.low <= value <= q.high):
+            if math.isfinite(value) and _as_degrees(value, q):
+                si = math.radians(value)
+                notes.append(f"{source}: {key} {value:g} read as degrees ({si:.4f} rad): "
+                             f"beyond ±{q.high:.4g} rad, only degrees make it plausible")
+            elif q.derived:
+                notes.append(f"{source}: {key} {value:g} left out (expected "
+                             f"{q.low:g}–{q.high:g} {unit}); the calibration computes it")
+                continue
+            else:
+                fail(key, f"{q.low:g}–{q.high:g} {unit}", value)
+        present.append(key)
         if side:
             old = collected.get(name, Sided())
             collected[name] = replace(old, **{SIDE_NAMES[side]: si})
         else:
             collected[name] = si
-    return SubjectMeasurements(**collected, source=source, present=tuple(present))
+    return SubjectMeasurements(**collected, source=source, present=tuple(present),
+                               notes=tuple(notes))
 
 
 YAML_UNITS = {"length": "m", "angle": "the file's angle unit", "mass": "kg"}

@@ -80,15 +80,21 @@ def calibration_finding(model: Model, n: int, synthesized: bool) -> Finding:
 
 
 def kinematic_findings(model: Model, result: KinematicResult, fit: np.ndarray,
-                       options: SolveOptions, synthesized: bool) -> dict[int, Finding]:
+                       options: SolveOptions, synthesized: bool, recorded_m: float = 0.0
+                       ) -> dict[int, Finding]:
     """The frame checks that need the kinematics only, by bit: the markers' fit (``fit``:
-    frames × markers, m; methods that fit the markers), the clinical ranges, paper-style angles
-    flat (singular) or mirrored (another branch), and the calibration."""
+    frames × markers, m; every method whose answer comes from the markers, the angular-driver
+    analysis with angles from the markers included: driven through a change point it may
+    continue on the other assembly branch, its points then far from their markers; allowed
+    the artefact the run adds and the one its trial file records, ``recorded_m``), the clinical
+    ranges, paper-style angles flat (singular) or mirrored (another branch), and the
+    calibration."""
     n = result.n_frames
     found: dict[int, Finding] = {}
-    if result.method != "ad":
+    if result.method != "ad" or options.ad_drivers == "markers":
         record = model.calibrated
-        found[POOR_FIT] = poor_fit(fit, model.marker_labels, options.perturb_level_m,
+        found[POOR_FIT] = poor_fit(fit, model.marker_labels,
+                                   options.perturb_level_m + recorded_m,
                                    record.fit_mm if record is not None else None)
     clinical = [k for k, a in enumerate(model.angles) if a.clinical_sign is not None]
     if clinical:

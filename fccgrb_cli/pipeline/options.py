@@ -24,6 +24,7 @@ if TYPE_CHECKING:
     from fccgrb_cli.model import Model
 
 METHODS = ("ad", "nrm-ls", "nrm-wls", "cno-sqp", "cno-ip", "mo-tc", "mo-ed")
+PARALLEL_METHODS = ("cno-sqp", "cno-ip", "mo-tc", "mo-ed")  # the methods --parallel changes
 # Processes beyond the CPUs gain nothing; a pool of 100,000 forks until the machine stops.
 WORKERS_MAX = max(8, 4 * (os.cpu_count() or 1))
 SEED_MAX = 2**32 - 1  # numpy's seeds
@@ -229,6 +230,10 @@ class SolveOptions:
         if self.loads is not None and self.plates:
             raise InputError("plates: expected the trial's plates assigned or an OpenSim load "
                              "set (--loads) in their place, got both")
+        if self.parallel and self.method not in PARALLEL_METHODS:
+            raise InputError(f"parallel: expected only with a method that solves its frames in "
+                             f"parallel ({', '.join(PARALLEL_METHODS)}); {self.method} solves "
+                             "them in sequence and would ignore it")
 
     @property
     def perturb_level_m(self) -> float:
@@ -450,9 +455,12 @@ def _outside_parentheses(text: str) -> list[str]:
     return [*parts, text[start:]]
 
 
+MAP_MAX = 1 << 20  # bytes: a label map is a line per marker, a few hundred at most
+
+
 def label_map_file(path: str) -> list[tuple[str, str]]:
     """A lab's naming written once: a YAML mapping ``model marker name: trial label``."""
-    data = load_yaml(read_text(path, "label map"), path)
+    data = load_yaml(read_text(path, "label map", limit=MAP_MAX), path)
     if not isinstance(data, dict) or not data or not all(
             isinstance(k, str) and isinstance(v, str) and k and v for k, v in data.items()):
         raise InputError(f"{path}: expected a mapping of model marker names to trial labels "

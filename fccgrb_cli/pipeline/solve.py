@@ -70,6 +70,10 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
     options = options or SolveOptions()
     _check_length(trial, options)
     model = prepared(model, options)
+    if not model.tracked_points:
+        raise InputError(f"{model.source}: tracking.points: expected at least one tracked point "
+                         "(a marker on a body) to solve a trial from; the section is empty or "
+                         "absent")
     given = None if options.loads is None else trial_loads(options.loads, model, trial)
     if model.moving_joints and Method(options.method).drives_angles:
         raise InputError(f"--method ad: {model.source}: the angular-driver baseline computes "
@@ -80,6 +84,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
 
         model = for_trial(model, trial, dict(options.mapping))
     trial, mapping = resolved(model, trial, dict(options.mapping), set(model.marker_labels))
+    artefact_m = trial.artefact_m  # `fccgrb perturb`'s level, judged as --perturb's
     labels = match_labels(model, trial, mapping)
     unknown = sorted(set(options.perturb_markers) - set(model.marker_labels))
     if unknown:
@@ -100,7 +105,8 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
         which = [(tp.body, tp.point) for tp in model.tracked_points]
         points = points_along(system, result.q, which)
         fit = distances(points, inputs)
-        found = kinematic_findings(model, result, fit, options, truth is not None)
+        found = kinematic_findings(model, result, fit, options, truth is not None,
+                                   artefact_m)
         found[NO_DATA] = no_data
         unassessed = result
         result = assessed(unassessed, points, inputs, found)
@@ -109,6 +115,10 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
         if model.moving_joints:  # recorded with the run: which engine solved it
             notes.append("engine: numpy reference (the compiled kernels do not take moving "
                          "joints)")
+        if artefact_m:
+            notes.append(f"{trial.path}: markers perturbed by fccgrb perturb at "
+                         f"{1e3 * artefact_m:g} mm (recorded in the file): the fit check allows "
+                         "for it as for --perturb")
         smoothing = smoothed_or_warned(model, result, inputs, options, warnings)
         bridged = result
         if smoothing is not None:  # checked again where the smoother put the model
@@ -164,7 +174,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
         return Run(
             name=options.name or run_name(result.method, options.ad_drivers,
                                           options.filter_cutoff, options.perturb_level_m,
-                                          options.perturb_markers),
+                                          options.perturb_markers, _smoothing(options)),
             options=options, result=result, labels=model.marker_labels, rate=trial.rate,
             reference=reference, markers_input=inputs, model_points=points, ed=ed,
             ed_input=ed_input, truth_theta=truth.theta if truth is not None else None,
@@ -474,15 +484,30 @@ def _quality_advice(result: KinematicResult) -> list[str]:
             "moments are meaningless there. For joint moments use cno-sqp or nrm-wls"]
 
 
+def _smoothing(options: SolveOptions) -> str:
+    """How the run was smoothed, as its name says it: '' (not), 'smooth' (the strength
+    estimated), 'smooth6Hz' (a cutoff given), 'smooth-n0.5mm' (a noise given)."""
+    if options.smooth == "none":
+        return ""
+    if options.smooth_cutoff is not None:
+        return f"smooth{options.smooth_cutoff:g}Hz"
+    if options.smooth_noise is not None:
+        return f"smooth-n{options.smooth_noise:g}mm"
+    return "smooth"
+
+
 def run_name(method: str, ad_drivers: str, cutoff: float | None, level_m: float,
-             subset: tuple[str, ...] = ()) -> str:
+             subset: tuple[str, ...] = (), smoothing: str = "") -> str:
     """The default run name: the method as the solver labels it (e.g. cno-sqp-ed-parallel), AD
-    drivers, filter, perturbation and the perturbed subset, e.g. ad-f6Hz-P30-P4+P9."""
+    drivers, filter, smoothing (:func:`_smoothing`), perturbation and the perturbed subset, e.g.
+    ad-f6Hz-P30-P4+P9 or nrm-wls-smooth."""
     parts = [method]
     if method == Method.AD and ad_drivers == "truth":  # the solver's label: "ad" alone
         parts.append("truth")
     if cutoff is not None:
         parts.append(f"f{cutoff:g}Hz")
+    if smoothing:
+        parts.append(smoothing)
     if level_m > 0:
         parts.append(f"P{level_m * 1e3:g}")
         if subset:

@@ -31,7 +31,8 @@ LANDMARKS = ("right_asis", "left_asis", "sacrum", *(
     f"{side}_{name}" for side in SIDES.values() for name in (
         "thigh_wand", "lateral_epicondyle", "shank_wand", "lateral_malleolus", "heel", "toe")))
 BODIES = ("pelvis", *(f"{seg}_{s}" for s in SIDES for seg in ("thigh", "shank", "foot")))
-REQUIRED = ("leg_length", "knee_width", "ankle_width", "marker_diameter")
+REQUIRED = ("leg_length", "knee_width", "ankle_width")
+MARKER_DIAMETER = 0.014  # Plug-in Gait's default where the subject's parameters give none (m)
 PELVIS_LENGTH_PER_WIDTH = 0.6  # as anatomy/calibrate.py: de Leva's lower trunk over ASIS width
 
 
@@ -48,13 +49,15 @@ class Options:
 class PigCalibration:
     """The personalized model text, the frames used, the measurements used (given, computed and
     defaulted, SI; the static foot offsets included), what was computed or defaulted (notes),
-    and segment lengths (m)."""
+    segment lengths (m), and what the user should know (``warnings``: a default standing for
+    a measurement, a value read in another unit than written)."""
 
     text: str
     frames: tuple[int, int]
     measurements: SubjectMeasurements
     notes: tuple[str, ...]
     lengths: dict[str, float]
+    warnings: tuple[str, ...] = ()
 
 
 def _marker(trial: Trial, label: str, window: slice, used_by: str,
@@ -77,17 +80,22 @@ def _marker(trial: Trial, label: str, window: slice, used_by: str,
 def resolve(measured: SubjectMeasurements, lm: dict[str, np.ndarray]
             ) -> tuple[SubjectMeasurements, tuple[str, ...]]:
     """The measurements Plug-in Gait uses: the required ones must be given (an error lists the
-    missing Vicon keys); the inter-ASIS distance defaults to the markers' mean distance, the
-    ASIS–trochanter distance to 0.1288 leg length − 48.56 mm, rotations, torsion and sole delta
-    to 0. Returns them with a note per value computed or defaulted."""
+    missing Vicon keys); the marker diameter defaults to Plug-in Gait's 14 mm; the inter-ASIS
+    distance to the markers' mean distance, the ASIS–trochanter distance to 0.1288 leg length
+    − 48.56 mm, rotations, torsion and sole delta to 0. Returns them with a note per value
+    computed or defaulted."""
     missing = measured.missing(REQUIRED)
     if missing:
         raise InputError(f"Plug-in Gait calibration: expected the subject measurements "
                          f"{', '.join(missing)} (from the static C3D's PROCESSING group, "
-                         "--subject FILE.vsk|FILE.yaml, or --knee-width/--ankle-width/"
-                         f"--marker-diameter); sources read: {measured.source or 'none'}")
+                         "--subject FILE.vsk|FILE.mp|FILE.yaml, or --knee-width/--ankle-width"
+                         f"); sources read: {measured.source or 'none'}")
     notes = []
     values: dict = {}
+    if measured.marker_diameter is None:
+        values["marker_diameter"] = MARKER_DIAMETER
+        notes.append(f"MarkerDiameter {1e3 * MARKER_DIAMETER:g} mm, Plug-in Gait's default "
+                     "(no source gives it)")
     if measured.inter_asis_distance is None:
         distance = float(np.mean(np.linalg.norm(lm["right_asis"] - lm["left_asis"], axis=1)))
         values["inter_asis_distance"] = distance
@@ -174,6 +182,11 @@ def calibrate_plugin_gait(model: Model, trial: Trial, measured: SubjectMeasureme
                         f"{model.source} calibration.landmarks.{name}", mapping)
           for name in LANDMARKS}
     m, notes = resolve(measured, lm)
+    warnings = list(measured.notes)
+    if measured.marker_diameter is None:
+        warnings.append(f"no marker diameter in {measured.source or 'any source'}: Plug-in "
+                        f"Gait's default {1e3 * MARKER_DIAMETER:g} mm used (--marker-diameter "
+                        "MM if the markers differ)")
     markers: dict = {"pelvis": (lm["right_asis"], lm["left_asis"], lm["sacrum"])}
     for s, side in SIDES.items():
         markers[f"thigh_{s}"] = (lm[f"{side}_thigh_wand"], lm[f"{side}_lateral_epicondyle"])
@@ -234,7 +247,7 @@ def calibrate_plugin_gait(model: Model, trial: Trial, measured: SubjectMeasureme
               f"(1996){'' if m.body_mass is not None else ' (not computed: no body mass)'}.\n"
               + "".join(f"# {note}\n" for note in notes))
     text = header + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=100)
-    return PigCalibration(text, (start, stop), m, notes, lengths)
+    return PigCalibration(text, (start, stop), m, notes, lengths, tuple(warnings))
 
 
 def _inertia(mass: float | None, points: dict[str, dict], lengths: dict[str, float],

@@ -10,8 +10,10 @@ from fccgrb_cli.gait.cycles import PARAMETERS, SideCycles
 from fccgrb_cli.gait.events import agreement
 
 
-def events_table(gait: GaitResults) -> str:
-    """One row per event of the source used, with the other sources' difference (ms)."""
+def events_table(gait: GaitResults, start: float = 0.0) -> str:
+    """One row per event of the source used, with the other sources' difference (ms); times
+    on the trial file's clock (``start``: its first frame's time, s, as the exports count it
+    and a C3D's EVENT:TIMES does)."""
     others = [s for s in gait.found if s != gait.events.source]
     head = f"{'event':<14}{'t s (' + gait.events.source + ')':>14}" + "".join(
         f"{s + ' Δms':>15}" for s in others)
@@ -19,7 +21,7 @@ def events_table(gait: GaitResults) -> str:
     deltas = {s: agreement(gait.events, gait.found[s]) for s in others}
     for k, (t, side, kind) in enumerate(zip(gait.events.time, gait.events.side,
                                             gait.events.kind, strict=True)):
-        cells = [f"{side + ' ' + kind:<14}", f"{t:14.3f}"]
+        cells = [f"{side + ' ' + kind:<14}", f"{t + start:14.3f}"]
         for s in others:
             d = deltas[s][k][3]
             cells.append(f"{'–' if d is None else f'{1e3 * d:+.1f}':>15}")
@@ -60,10 +62,14 @@ def cycles_table(cycles: dict[str, SideCycles]) -> str:
     return "\n".join(rows)
 
 
-def gait_report(gait: GaitResults) -> str:
+def gait_report(gait: GaitResults, start: float = 0.0) -> str:
+    """The gait analysis as text; event times on the trial file's clock (``start``: its first
+    frame's time, s), which the report names."""
     notes = "".join(f"\n  ({note})" for note in gait.notes)
     return (f"gait events (used: {gait.events.source}; others: difference to the nearest of "
-            f"the same foot and kind){notes}\n{events_table(gait)}\n\n"
+            f"the same foot and kind; times on the trial file's clock, its first frame at "
+            f"{start:.3f} s, as the exports' time column){notes}\n"
+            f"{events_table(gait, start)}\n\n"
             f"spatiotemporal parameters (mean over strides)\n{parameters_table(gait.cycles)}\n\n"
             f"{cycles_table(gait.cycles)}")
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import csv
 import io
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -71,6 +71,30 @@ def level_name(level_m: float) -> str:
 DISTINGUISHING = {"seed": 0, "hessian": "auto", "tracking_weight": 1e-3,
                   "warm_start": "extrapolate", "filter_cutoff": None, "perturb_markers": None,
                   "form": None, "dynamics": None, "workers": None}
+# A solve's options that change its answer without changing its table row: named in the
+# variant where a run's differ from the defaults (the AD run and the AD run at 6 Hz; the
+# smoothed run and the other).
+RUN_DISTINGUISHING = ("filter_cutoff", "smooth", "smooth_cutoff", "smooth_noise", "ad_drivers",
+                      "perturb_markers", "seed", "hessian", "tracking_weight", "warm_start",
+                      "optimizer", "form", "track")
+
+
+def _run_extra(options: dict) -> str:
+    """The variant's suffix for a run's stored options (:data:`RUN_DISTINGUISHING`)."""
+    from fccgrb_cli.pipeline.options import SolveOptions
+
+    defaults = SolveOptions()
+    chosen = {key: options[key] for key in RUN_DISTINGUISHING if key in options}
+    parts = []
+    for key, value in chosen.items():
+        default = getattr(defaults, key)
+        if value == default or (isinstance(default, tuple) and tuple(value) == default):
+            continue
+        if isinstance(value, (list, tuple)):
+            parts.append(f"{key}={'+'.join(map(str, value))}")
+        else:
+            parts.append(f"{key}={value:g} Hz" if key.endswith("cutoff") else f"{key}={value}")
+    return f" [{', '.join(parts)}]" if parts else ""
 
 
 def _extra(params: dict) -> str:
@@ -130,13 +154,24 @@ def collect(path: str | Path) -> tuple[str, list[Row]]:
                         check_run(run, path, f"/cells/{key}/runs/{name}")
                         rows.append(_row(run, points, _extra(params)))
         elif "runs" in h5:
+            named = []
             for name, run in runs_group(h5, path).items():
                 with reading(path, f"/runs/{name}"):
                     check_run(run, path, f"/runs/{name}")
-                    rows.append(_row(run, ""))
+                    options = json.loads(run.attrs.get("options", "{}"))
+                    named.append((name, _row(run, "", _run_extra(options))))
+            rows = _apart(named)
         else:
             raise InputError(f"{path}: expected /runs or /cells in a results file")
     return table, rows
+
+
+def _apart(named: list[tuple[str, Row]]) -> list[Row]:
+    """Each run its own row: runs whose options leave them on one row and level (two runs of
+    one method under --name, on other models or trials) are told apart by their names."""
+    keys = [(r.family, r.variant, r.points, r.tol, r.level) for _, r in named]
+    return [r if keys.count(key) == 1 else replace(r, variant=f"{r.variant} [{name}]")
+            for (name, r), key in zip(named, keys, strict=True)]
 
 
 def paper_figures(table: str, csv_path: Path = PAPER_TABLES) -> dict[tuple, dict[str, float]]:

@@ -101,7 +101,8 @@ def _storage_text(run: Run, curves: Curves, title: str, in_degrees: bool,
     untrusted = int((~(run.trusted if trusted is None else trusted)).sum())
     return storage_text(curves.names, time, curves.values, in_degrees, title,
                         {"untrustedFrames": str(untrusted),
-                         "units": " ".join(sorted(set(curves.units)))})
+                         "units": " ".join(sorted(set(curves.units))),
+                         "clock": f"the trial file's, first frame at {run.start_time:.10g} s"})
 
 
 def write_mot(run: Run, path: str | Path) -> None:
@@ -223,6 +224,9 @@ def _source_c3d(run: Run, trial: str | Path | None):
     if n_frames != len(run.result.time):
         raise InputError(f"{source}: {n_frames} frames, but run {run.name!r} has "
                          f"{len(run.result.time)}: expected the trial it was solved from")
+    from fccgrb_cli.results.same_trial import check_same_trial
+
+    check_same_trial(run, source)
     return c3d, source
 
 

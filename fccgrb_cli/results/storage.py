@@ -186,10 +186,12 @@ def write_run(path: str | Path, run: Run, command: str, cell: dict | None = None
 
 def write_runs(path: str | Path, runs: list[Run], command: str, *, cell: dict | None = None,
                subject: tuple[list[str], dict] | None = None,
-               waiting: Callable[[str], None] | None = None) -> None:
-    """Add (or replace) ``runs`` in the results file, and ``subject`` (the run names and their
-    pooled cycles: ``/subject``), all in one write: every run lands or none does. Waits for
-    another writer of the same file (``waiting`` is told)."""
+               waiting: Callable[[str], None] | None = None, replace: bool = True) -> None:
+    """Add ``runs`` to the results file (replacing runs of the same names only with
+    ``replace``: otherwise such a run is an InputError naming it and the command that made it,
+    and nothing is written), and ``subject`` (the run names and their pooled cycles:
+    ``/subject``), all in one write: every run lands or none does. Waits for another writer of
+    the same file (``waiting`` is told); the names are checked under its lock."""
     path = check_target(path)
     for run in runs:
         check_name(run.name, "run name")
@@ -197,6 +199,8 @@ def write_runs(path: str | Path, runs: list[Run], command: str, *, cell: dict | 
         mode = "w"
         if path.exists():
             check_output(path)
+            if not replace:
+                refuse_taken_names(path, [run.name for run in runs])
             shutil.copyfile(path, tmp)
             mode = "r+"
         with writing(tmp, mode) as h5:
@@ -207,6 +211,21 @@ def write_runs(path: str | Path, runs: list[Run], command: str, *, cell: dict | 
     for run in runs:
         for spill in {stored.spill for stored in _stored(run)}:
             spill.settled(path, f"/runs/{run.name}")
+
+
+def refuse_taken_names(path: Path, names: list[str]) -> None:
+    """An InputError when the results file at ``path`` already holds a run of one of
+    ``names``, naming it and the command that made it (a second solve never replaces the
+    first unless asked to)."""
+    import h5py
+
+    with h5py.File(path, "r") as h5:
+        runs = h5.get("runs", {})
+        taken = [name for name in names if name in runs]
+        if taken:
+            made = str(runs[taken[0]].attrs.get("command", "?"))
+            raise InputError(f"{path}: already holds the run {taken[0]!r} (made by: {made}); "
+                             "--name NAME for another run beside it, or --replace to replace it")
 
 
 def _write_run(h5, run: Run, command: str, cell: dict | None) -> None:

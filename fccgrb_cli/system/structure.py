@@ -88,6 +88,22 @@ def check_tracking(model: Model, report: StructureReport) -> None:
                      f"{rank} of {nq}")
 
 
+def _refuse_a_singular_pose(model: Model, system, top_rank: int, expected_dof: int) -> None:
+    """An InputError when the model's pose is a singular position of its joints (a change
+    point): the joints leave more degrees of freedom at the pose than near it, and near it as
+    many as the model's coordinates and floating bases take."""
+    from fccgrb_cli.system.mobility import generic_topology_rank
+
+    generic = generic_topology_rank(system, system.pose())
+    if generic > top_rank and system.nq - generic == expected_dof:
+        raise InputError(
+            f"{model.source}: bodies' poses: expected a pose off the joints' singular positions; "
+            f"the pose given is one (a change point, as a four-bar with its links in line): the "
+            f"joints leave {system.nq - top_rank} degrees of freedom there and "
+            f"{system.nq - generic} near it, so its coordinates cannot be counted or solved "
+            "from it; move the bodies a little along the mechanism's motion")
+
+
 def analyse(model: Model) -> StructureReport:
     """Rank analysis; raises InputError when the constraints cannot determine the coordinates."""
     if model.moving_joints:
@@ -104,6 +120,7 @@ def analyse(model: Model) -> StructureReport:
     bases = floating_bases(model)
     joint_dof = dof - 6 * len(bases)
     if n_angles != joint_dof:
+        _refuse_a_singular_pose(model, ad, top_rank, n_angles + 6 * len(bases))
         slides = n_distances or any(j.type in ("cylindrical", "prismatic", "parallel", "line")
                                     for j in model.joints)
         what = "coordinates (angles and distances)" if slides else "angular coordinates"

@@ -19,13 +19,17 @@ from fccgrb_cli.core.atomic import atomic_path, cannot_write
 from fccgrb_cli.core.errors import InputError
 
 UNIT_SCALE = {"m": 1.0, "mm": 1e-3, "cm": 1e-2}
+# where `fccgrb perturb` records the soft-tissue-artefact level it added (mm): C3D, TRC header
+ARTEFACT_PARAMETER = "FCCGRB:ARTEFACT_MM"
+ARTEFACT_TRC_KEY = "FccgrbArtefactMM"
 WORD = 0xFFFF
 
 
 def write_markers(path: str | Path, labels: list[str], markers_m: np.ndarray, rate: float,
-                  units: str = "mm", description: str = "") -> None:
+                  units: str = "mm", description: str = "", artefact_mm: float = 0.0) -> None:
     """Write markers (frames × markers × 3, metres; NaN: a gap) as C3D points in ``units`` at
-    ``rate`` Hz."""
+    ``rate`` Hz; ``artefact_mm`` (the artefact level added to them, when not 0) is recorded as
+    the parameter ``ARTEFACT_PARAMETER``."""
     import ezc3d
 
     if units not in UNIT_SCALE:
@@ -40,6 +44,8 @@ def write_markers(path: str | Path, labels: list[str], markers_m: np.ndarray, ra
     c3d["data"]["points"] = points
     if description:
         c3d.add_parameter("FCCGRB", "SOURCE", [description])
+    if artefact_mm:
+        c3d.add_parameter(*ARTEFACT_PARAMETER.split(":"), [float(artefact_mm)])
     long_frames(c3d, n_frames)
     save(c3d, path)
 

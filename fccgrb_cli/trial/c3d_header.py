@@ -32,6 +32,7 @@ import numpy as np
 
 from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.core.inputs import regular_file
+from fccgrb_cli.trial.rates import ANALOG_RATE_MAX, POINT_RATE_MAX, rate_problem
 
 BLOCK = 512
 KEY = 0x50
@@ -252,15 +253,17 @@ def _check_values(path: Path, points: int, point_scale: float, rate: float,
         fail("POINT:USED", "a number of points ≥ 0", points)
     if not (math.isfinite(point_scale) and point_scale != 0):
         fail("POINT:SCALE", "a finite, non-zero scale (negative: float data)", point_scale)
-    if not math.isfinite(rate) or rate < 0 or (points > 0 and rate == 0):
-        fail("POINT:RATE", "a positive, finite frame rate (Hz)", rate)
+    problem = rate_problem(rate, POINT_RATE_MAX, zero_ok=points == 0)
+    if problem is not None:
+        fail("POINT:RATE", problem, rate)
     analog = params.get("ANALOG:RATE")
     used = params.get("ANALOG:USED")
     if analog is not None and analog.values.size:
         value = float(analog.values[0])
-        in_use = used is not None and used.values.size and used.values[0] > 0
-        if not math.isfinite(value) or value < 0 or (in_use and value == 0):
-            fail("ANALOG:RATE", "a positive, finite sampling rate (Hz)", value)
+        in_use = bool(used is not None and used.values.size and used.values[0] > 0)
+        problem = rate_problem(value, ANALOG_RATE_MAX, zero_ok=not in_use)
+        if problem is not None:
+            fail("ANALOG:RATE", problem, value)
 
 
 def _frame_count(params: dict[str, Parameter], first: int,

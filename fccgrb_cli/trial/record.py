@@ -10,6 +10,7 @@ are read and the trial carries a warning saying so.
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,7 +19,7 @@ import numpy as np
 from fccgrb_cli.core.atomic import atomic_path
 from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.core.inputs import decode, read_bytes, regular_file
-from fccgrb_cli.trial.c3d import UNIT_SCALE, write_markers
+from fccgrb_cli.trial.c3d import ARTEFACT_PARAMETER, ARTEFACT_TRC_KEY, UNIT_SCALE, write_markers
 from fccgrb_cli.trial.c3d_header import (
     TRUNCATED,
     WORD_LIMIT,
@@ -27,6 +28,7 @@ from fccgrb_cli.trial.c3d_header import (
     read_parameters,
     read_points,
 )
+from fccgrb_cli.trial.rates import POINT_RATE_MAX, rate_problem
 
 TRIAL_ENDINGS = (".c3d", ".trc")
 TRC_MAX = 4 << 30  # bytes: a TRC is read whole (a 10-minute trial of 55 markers is ~0.3 GB)
@@ -37,7 +39,8 @@ class Trial:
     """Marker positions (frames × markers × 3, metres, NaN in gaps) sampled at ``rate`` Hz;
     ``warnings`` says what the reader let through (a truncated file accepted); ``start`` the
     first frame's time on the file's clock (s: a C3D's first frame F counts from the capture's
-    frame 1, so (F − 1) / rate; a TRC's first Time)."""
+    frame 1, so (F − 1) / rate; a TRC's first Time); ``artefact_m`` the soft-tissue-artefact
+    level ``fccgrb perturb`` recorded in the file (m; 0 for a file it did not perturb)."""
 
     path: str
     labels: tuple[str, ...]
@@ -45,6 +48,7 @@ class Trial:
     rate: float
     warnings: tuple[str, ...] = ()
     start: float = 0.0
+    artefact_m: float = 0.0
 
     @property
     def n_frames(self) -> int:
@@ -117,7 +121,28 @@ def read_c3d(path: Path, accept_truncated: bool = False) -> Trial:
                          f"{frames} ({layout.announced()})")
     labels = labels[: xyz.shape[1]]
     _finite(xyz, labels, path)
-    return Trial(str(path), labels, xyz, rate, warnings, (layout.first_frame - 1) / rate)
+    group, name = ARTEFACT_PARAMETER.split(":")
+    recorded = c3d["parameters"].get(group, {}).get(name, {}).get("value")
+    artefact = _artefact(None if recorded is None or not len(recorded) else recorded[0], path,
+                         ARTEFACT_PARAMETER)
+    return Trial(str(path), labels, xyz, rate, warnings, (layout.first_frame - 1) / rate,
+                 artefact)
+
+
+def _artefact(value: object, path: Path, where: str) -> float:
+    """The artefact level a file records (mm in the file, m returned; 0 when not recorded);
+    anything but a number in [0, 1000] mm is an InputError naming the file and ``where``."""
+    if value is None:
+        return 0.0
+    try:
+        level = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise InputError(f"{path}: {where}: expected the artefact level in mm, got "
+                         f"{value!r}") from None
+    if not (np.isfinite(level) and 0.0 <= level <= 1000.0):
+        raise InputError(f"{path}: {where}: expected an artefact level of 0–1000 mm, got "
+                         f"{level:g}")
+    return 1e-3 * level
 
 
 def point_labels(point: dict) -> list[str]:
@@ -143,8 +168,9 @@ def _finite(xyz: np.ndarray, labels: tuple[str, ...], path: Path) -> None:
 
 
 def _rate(rate: float, path: Path, key: str = "POINT:RATE") -> float:
-    if not (np.isfinite(rate) and rate > 0):
-        raise InputError(f"{path}: {key}: expected a positive, finite rate (Hz), got {rate}")
+    problem = rate_problem(rate, POINT_RATE_MAX)
+    if problem is not None:
+        raise InputError(f"{path}: {key}: expected {problem}, got {rate:g}")
     return rate
 
 
@@ -167,7 +193,11 @@ def _read_long_c3d(path: Path, layout: C3DLayout, frames: int,
         for label in params[key].values)
     labels = labels[: xyz.shape[1]]
     _finite(xyz, labels, path)
-    return Trial(str(path), labels, xyz, rate, warnings, (layout.first_frame - 1) / rate)
+    recorded = params.get(ARTEFACT_PARAMETER)
+    artefact = _artefact(None if recorded is None or not recorded.values.size
+                         else recorded.values.ravel()[0], path, ARTEFACT_PARAMETER)
+    return Trial(str(path), labels, xyz, rate, warnings, (layout.first_frame - 1) / rate,
+                 artefact)
 
 
 def read_trc(path: Path, accept_truncated: bool = False) -> Trial:
@@ -200,6 +230,7 @@ def read_trc(path: Path, accept_truncated: bool = False) -> Trial:
         data = data[:-1]  # the cut last row: its values may be cut too
     rows = []
     start = None
+    clock: list[tuple[int, float, float]] = []  # (line, Time, its rounding) per row
     for number, line in enumerate(data, start=6):
         if not line.strip():
             continue
@@ -209,6 +240,9 @@ def read_trc(path: Path, accept_truncated: bool = False) -> Trial:
                 start = float(fields[1])
             except ValueError:
                 start = 0.0  # no time column: the trial's clock starts at 0
+        if len(fields) > 1:
+            with contextlib.suppress(ValueError):  # a row without its Time: no clock check
+                clock.append((number, float(fields[1]), _rounding(fields[1])))
         coords = fields[2:]
         while len(coords) > 3 * n_markers and not coords[-1].strip():
             coords.pop()
@@ -234,8 +268,32 @@ def read_trc(path: Path, accept_truncated: bool = False) -> Trial:
                          f"the file holds {len(rows)} rows of data")
     if not rows:
         raise InputError(f"{path}: expected at least one frame of data after the header")
+    if len(clock) == len(rows):
+        _uniform_clock(clock, rate, path)
     xyz = np.array(rows).reshape(len(rows), n_markers, 3) * scale
-    return Trial(str(path), labels, xyz, rate, warnings, start or 0.0)
+    artefact = _artefact(header.get(ARTEFACT_TRC_KEY), path, f"line 3: {ARTEFACT_TRC_KEY}")
+    return Trial(str(path), labels, xyz, rate, warnings, start or 0.0, artefact)
+
+
+def _rounding(text: str) -> float:
+    """Half a unit of the last decimal a number is written with (0.0005 for '0.417')."""
+    mantissa = text.strip().lower().split("e")[0]
+    decimals = len(mantissa.split(".")[1]) if "." in mantissa else 0
+    return 0.5 * 10.0 ** -decimals if "e" not in text.lower() else 0.0
+
+
+def _uniform_clock(clock: list[tuple[int, float, float]], rate: float, path: Path) -> None:
+    """Each row's Time on the first one's clock at DataRate, to a quarter frame beside the
+    rounding of the Times as written: a file with rows removed (and NumFrames made to agree)
+    is refused, naming the first line off it, rather than read as frames 1/rate apart."""
+    first, first_rounding = clock[0][1], clock[0][2]
+    for k, (number, time, rounding) in enumerate(clock):
+        expected = first + k / rate
+        if not abs(time - expected) <= 0.25 / rate + rounding + first_rounding:  # NaN fails
+            raise InputError(f"{path}: line {number}: Time: expected {expected:.6g} s (row "
+                             f"{k + 1} at DataRate {rate:g} Hz from {first:.6g} s: a uniform "
+                             f"clock), got {time:.6g} s: rows missing, times edited, or a "
+                             "DataRate other than the rows' rate")
 
 
 def _header_number(header: dict[str, str], key: str, kind: type, path: Path):
@@ -265,17 +323,21 @@ def read_trial(path: str | Path, accept_truncated: bool = False) -> Trial:
 
 
 def write_trc(path: str | Path, trial_labels: list[str], markers_m: np.ndarray, rate: float,
-              units: str = "mm") -> None:
-    """Write markers (frames × markers × 3, metres) as an OpenSim TRC file in ``units``."""
+              units: str = "mm", artefact_mm: float = 0.0) -> None:
+    """Write markers (frames × markers × 3, metres) as an OpenSim TRC file in ``units``; an
+    ``artefact_mm`` other than 0 (the level ``fccgrb perturb`` added) is one more header key,
+    ``ARTEFACT_TRC_KEY``."""
     n_frames, n_markers, _ = markers_m.shape
     data = markers_m / UNIT_SCALE[units]
     name = Path(path).name
+    extra_key, extra_value = (f"\t{ARTEFACT_TRC_KEY}", f"\t{artefact_mm:.12g}") if artefact_mm \
+        else ("", "")
     out = [
         f"PathFileType\t4\t(X/Y/Z)\t{name}",
         "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame"
-        "\tOrigNumFrames",
+        f"\tOrigNumFrames{extra_key}",
         f"{rate:.12g}\t{rate:.12g}\t{n_frames}\t{n_markers}\t{units}\t{rate:.12g}\t1"
-        f"\t{n_frames}",
+        f"\t{n_frames}{extra_value}",
         "Frame#\tTime\t" + "\t".join(f"{label}\t\t" for label in trial_labels).rstrip("\t"),
         "\t\t" + "\t".join(f"X{k}\tY{k}\tZ{k}" for k in range(1, n_markers + 1)),
         "",
@@ -288,13 +350,14 @@ def write_trc(path: str | Path, trial_labels: list[str], markers_m: np.ndarray, 
 
 
 def write_trial(path: str | Path, labels: list[str], markers_m: np.ndarray, rate: float,
-                units: str = "mm", description: str = "") -> None:
+                units: str = "mm", description: str = "", artefact_mm: float = 0.0) -> None:
     """Write a C3D or TRC file, chosen by the ending of ``path`` (``description``: C3D's
-    FCCGRB:SOURCE)."""
+    FCCGRB:SOURCE; ``artefact_mm``: the artefact level added to the markers, recorded in the
+    file when not 0)."""
     suffix = Path(path).suffix.lower()
     if suffix == ".trc":
-        write_trc(path, labels, markers_m, rate, units)
+        write_trc(path, labels, markers_m, rate, units, artefact_mm)
     elif suffix == ".c3d":
-        write_markers(path, labels, markers_m, rate, units, description)
+        write_markers(path, labels, markers_m, rate, units, description, artefact_mm)
     else:
         raise InputError(f"{path}: expected an output ending in .c3d or .trc")

@@ -1,4 +1,4 @@
-"""A subject's measurements from a file, chosen by its ending: a Vicon ``.vsk``, a C3D's
+"""A subject's measurements from a file, chosen by its ending: a Vicon ``.vsk`` or ``.mp``, a C3D's
 ``PROCESSING`` group, or YAML holding a ``subject:`` section as a model file writes it (lengths
 in m, angles in degrees unless ``units: {angle: rad}``)."""
 
@@ -13,10 +13,11 @@ import yaml
 
 from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model.subject import SubjectMeasurements, from_flags, from_yaml, yaml_keys
+from fccgrb_cli.trial.mp import mp_measurements
 from fccgrb_cli.trial.processing import processing_measurements
 from fccgrb_cli.trial.vsk import vsk_measurements
 
-ENDINGS = (".vsk", ".c3d", ".yaml", ".yml")
+ENDINGS = (".vsk", ".mp", ".c3d", ".yaml", ".yml")
 
 
 def read_measurements(path: str | Path) -> SubjectMeasurements:
@@ -25,6 +26,8 @@ def read_measurements(path: str | Path) -> SubjectMeasurements:
     suffix = path.suffix.lower()
     if suffix == ".vsk":
         return vsk_measurements(path)
+    if suffix == ".mp":
+        return mp_measurements(path)
     if suffix == ".c3d":
         return processing_measurements(path)
     if suffix not in (".yaml", ".yml"):

@@ -32,6 +32,9 @@ CLASSES = (
     "C3D bytes",
     "OpenSim XML",
     "OpenSim storage",
+    "every rate",
+    "empty sections and grid value types",
+    "outputs that exist and are not ours",
 )
 
 Action = Callable[[Path], None]
@@ -759,6 +762,133 @@ def _bomb(width: int, levels: int) -> str:
     return "\n".join(lines) + f"\nname: *a{levels - 1}\n"
 
 
+# --- 12. every rate --------------------------------------------------------------------------
+
+RATES = ("1e30", "0", "-5", "nan", "inf", "200000")
+
+
+def _trc_rate(value: str) -> Callable[[str], str]:
+    """The TRC with DataRate (and CameraRate) ``value``."""
+    def change(text: str) -> str:
+        lines = text.split("\n")
+        fields = lines[2].split("\t")
+        fields[0] = fields[1] = value
+        lines[2] = "\t".join(fields)
+        return "\n".join(lines)
+    return change
+
+
+def _c3d_rate(source: str, target: str, key: str, value: float) -> Action:
+    """A copy of a C3D with the rate parameter ``key`` (and the header's rate, for POINT:RATE)
+    set to ``value``, byte by byte."""
+    def change(data: bytes) -> bytes:
+        data = c3dpatch.set_parameter(data, key, value)
+        return c3dpatch.set_header(data, "rate", value) if key == "POINT:RATE" else data
+    return edit(source, target, change)
+
+
+def _trc_rows_removed(text: str) -> str:
+    """Rows 10–12 of the TRC taken out and NumFrames made to agree: the clock skips."""
+    lines = text.split("\n")
+    fields = lines[2].split("\t")
+    fields[2] = str(int(fields[2]) - 3)
+    lines[2] = "\t".join(fields)
+    return "\n".join(lines[:14] + lines[17:])
+
+
+def rates() -> Iterator[Case]:
+    k = "every rate"
+    for value in RATES:
+        yield bad(k, f"trc-datarate-{value}", ("solve", "model.yaml", "r.trc", "-o", "n.h5"),
+                  ("r.trc", "DataRate"), text_edit("t.trc", "r.trc", _trc_rate(value)))
+        yield bad(k, f"c3d-point-rate-{value}", ("solve", "model.yaml", "r.c3d", "-o", "n.h5"),
+                  ("r.c3d", "POINT:RATE"),
+                  _c3d_rate("t.c3d", "r.c3d", "POINT:RATE", float(value)))
+        yield bad(k, f"calibrate-trc-datarate-{value}", ("calibrate", "ll.yaml", "w.trc", "-o",
+                                                         "p.yaml"), ("w.trc", "DataRate"),
+                  text_edit("walk.trc", "w.trc", _trc_rate(value)))
+    yield bad(k, "c3d-analog-rate-huge", ("solve", "model.yaml", "r.c3d", "-o", "n.h5"),
+              ("ANALOG:RATE",), _c3d_rate("t.c3d", "r.c3d", "ANALOG:RATE", 1e30))
+    yield bad(k, "trc-rows-removed-numframes-fixed", ("solve", "model.yaml", "g.trc", "-o",
+                                                      "n.h5"), ("g.trc", "Time"),
+              text_edit("t.trc", "g.trc", _trc_rows_removed))
+
+
+# --- 13. empty sections and grid value types --------------------------------------------------
+
+def _tracking(section: str) -> Callable[[str], str]:
+    def change(text: str) -> str:
+        return text[:text.index("\ntracking:")] + ("\n" + section if section else "") + "\n"
+    return change
+
+
+def empty_and_types() -> Iterator[Case]:
+    k = "empty sections and grid value types"
+    methods = ("ad", "nrm-ls", "nrm-wls", "cno-sqp", "cno-ip", "mo-tc", "mo-ed")
+    for label, section in (("empty-list", "tracking:\n  points: []"),
+                           ("empty-mapping", "tracking: {}"), ("absent", "")):
+        for method in methods:
+            yield bad(k, f"solve-tracking-{label}-{method}", ("solve", "e.yaml", "t.c3d",
+                                                              "--method", method, "-o", "n.h5"),
+                      ("e.yaml", "tracking"), text_edit("model.yaml", "e.yaml",
+                                                        _tracking(section)))
+    for key, value in (("seed", "{a: 1}"), ("seed", "[[1, 2]]"), ("level", "-5"),
+                       ("level", ".inf"), ("level", ".nan"), ("level", "{a: 1}"),
+                       ("tol", "[[1.0e-9]]"), ("tol", "-1"), ("method", "{a: 1}"),
+                       ("perturb_markers", "{a: 1}"), ("perturb_markers", "[[P1, {a: 1}]]"),
+                       ("filter_cutoff", "[[6]]"), ("points", "{a: 1}")):
+        label = "".join(c if c.isalnum() else "_" for c in value)
+        yield bad(k, f"sweep-grid-{key}-{label}", ("sweep", "s.yaml", "-o", "n.h5"),
+                  ("s.yaml",), write("s.yaml", sweep_text(
+                      cells=f"  - {{method: nrm-ls, {key}: {value}}}" if key != "method" else
+                      f"  - {{method: {value}}}")))
+    for method in ("ad", "nrm-ls", "nrm-wls"):
+        yield bad(k, f"solve-parallel-with-{method}", (*SOLVE, "--method", method,
+                                                       "--parallel", "-o", "n.h5"),
+                  ("--parallel",))
+        yield bad(k, f"sweep-parallel-with-{method}", ("sweep", "s.yaml", "-o", "n.h5"),
+                  ("s.yaml",), write("s.yaml", sweep_text(
+                      cells=f"  - {{method: {method}, parallel: true}}")))
+
+
+# --- 14. outputs that exist and are not ours ---------------------------------------------------
+
+def _bomb_in(key: str) -> Callable[[str], str]:
+    """The model with ``key``'s value a billion laughs (the anchors inside the value)."""
+    row = "[" + ", ".join(["x"] * 30) + "]"
+    value = f"[&b0 {row}" + "".join(
+        f", &b{n} [" + ", ".join([f"*b{n - 1}"] * 30) + "]" for n in range(1, 6)) + "]"
+    return model_with(f"{key}: {value}")
+
+
+def not_ours() -> Iterator[Case]:
+    k = "outputs that exist and are not ours"
+    for target, content in (("notes.txt", "my notes\n"), ("other.h5", "not HDF5\n")):
+        yield bad(k, f"sweep-over-{target}", ("sweep", "sweep.yaml", "-o", target), (target,),
+                  write(target, content))
+    yield bad(k, "sweep-over-solve-results", ("sweep", "sweep.yaml", "-o", "r.h5"), ("r.h5",))
+    yield Case(k, "sweep-over-another-sweep", (
+        Step(("sweep", "sweep.yaml", "-o", "o.h5"), "ok", outputs=("o.h5", "o.h5.cells")),
+        Step(("sweep", "s2.yaml", "-o", "o.h5"), "error", ("o.h5",))),
+        (write("s2.yaml", sweep_text(head="name: other")),))
+    yield bad(k, "export-c3d-onto-another-trial", ("export", "r.h5", "--format", "c3d",
+                                                   "--trial", "u.c3d", "-o", "x.c3d"),
+              ("u.c3d",))
+    yield bad(k, "solve-into-a-taken-run-name", ("solve", "model.yaml", "t.c3d", "--method",
+                                                 "nrm-ls", "-o", "r.h5"), ("r.h5", "--replace"))
+    yield Case(k, "solve-replace-a-taken-run-name", (
+        Step(("solve", "model.yaml", "t.c3d", "--method", "nrm-ls", "--replace", "-o", "r.h5"),
+             "ok", outputs=("r.h5",)),))
+    for key in ("name", "gravity"):
+        yield bad(k, f"yaml-bomb-inside-{key}", ("check", "b.yaml"), (f": {key}[",),
+                  text_edit("model.yaml", "b.yaml", _bomb_in(key)))
+    yield bad(k, "label-map-of-2-mib", (*SOLVE, "--map", "big.yaml", "-o", "n.h5"),
+              ("big.yaml",), write("big.yaml", "P1: P1\n" * (300 * 1024)))
+    yield bad(k, "sweep-failing-leaves-no-cells", ("sweep", "s.yaml", "-o", "n.h5"),
+              ("e.yaml",), text_edit("model.yaml", "e.yaml", _tracking("")),
+              write("s.yaml", sweep_text().replace("model: model.yaml", "model: e.yaml")))
+
+
 # --- all ------------------------------------------------------------------------------------
 
 def generate(seed: int = 0, full: bool = True) -> list[Case]:
@@ -768,8 +898,8 @@ def generate(seed: int = 0, full: bool = True) -> list[Case]:
     rng = random.Random(seed)
     cases = [*overwritten(), *outside(), *run_names(), *numbers(), *header_values(),
              *yaml_files(), *results_files(), *half_written(), *own_output(full), *nonsense(),
-             *c3d_bytes(rng, 20 if full else 8), *drawn(rng, 15 if full else 3),
-             *xml_cases(), *storage_cases()]
+             *c3d_bytes(rng, 20 if full else 8), *drawn(rng, 15 if full else 3), *rates(),
+             *empty_and_types(), *not_ours(), *xml_cases(), *storage_cases()]
     names = [c.name for c in cases]
     twice = {n for n in names if names.count(n) > 1}
     if twice:
