@@ -222,7 +222,8 @@ class SolveOptions:
              "out go to the model's contact bodies, if any, by proximity.")
     name: str | None = _option(
         None, help="Run name inside the results file [default: the method, then -truth, "
-                   "-f<cutoff>Hz and -P<mm> where they apply, e.g. ad-f6Hz-P30].")
+                   "-f<cutoff>Hz, -smooth[<cutoff>Hz|-n<mm>mm] and -P<mm> where they apply, "
+                   "e.g. ad-f6Hz-P30, nrm-wls-smooth].")
 
     def __post_init__(self) -> None:
         for f in fields(self):
