@@ -186,6 +186,10 @@ def calibrate(template: Model, trial: Trial, *, mass: float | None = None,
     mapping : dict of str to str, optional
         The template's marker label → the trial's label.
 
+    Plug-in Gait's foot-flat option, subject files and a stated vertical are
+    ``pipeline.calibration.calibrate_subject``'s (``Subject``, ``Choices``), which this calls
+    with their defaults, as ``fccgrb calibrate`` does.
+
     Returns
     -------
     Model
@@ -198,30 +202,14 @@ def calibrate(template: Model, trial: Trial, *, mass: float | None = None,
         A landmark missing from the trial, implausible measurements, or a template without a
         calibration section (one line naming it).
     """
-    from fccgrb_cli.anatomy.calibrate import calibrate as personalize
-    from fccgrb_cli.anatomy.davis_inputs import template_inputs
-    from fccgrb_cli.model import parse_model
-    from fccgrb_cli.trial.virtual import resolved
+    from fccgrb_cli.pipeline.calibration import Choices, Subject, calibrate_subject
 
-    trial, mapping = resolved(template, trial, dict(mapping or {}),
-                              {*template.marker_labels, *template.landmarks.values()})
-    source = f"{template.source} calibrated on {trial.path}"
-    typed = {k: None if v is None else f"{v:.17g}" for k, v in (
-        ("knee_width", knee_width), ("ankle_width", ankle_width),
-        ("marker_diameter", marker_diameter), ("body_mass", mass))}
-    if template.calibration_method == "plugin-gait":
-        from fccgrb_cli.plugin_gait.calibration import Options, calibrate_plugin_gait
-        from fccgrb_cli.trial.subject_files import gathered
-
-        measured = gathered(template.measurements, trial.path, (), typed)
-        result = calibrate_plugin_gait(template, trial, measured, Options(frames), mapping)
-        return parse_model(result.text, source)
-    inputs = template_inputs(template, trial.path, (), typed)
-    return parse_model(personalize(template, trial, frames, inputs.mass, inputs.measurements,
-                                   mapping).text, source)
+    subject = Subject.from_mm(mass, knee_width, ankle_width, marker_diameter)
+    return calibrate_subject(template, trial, subject, Choices(frames, mapping=dict(mapping or {}))
+                             ).model
 
 
-def write_results(run: Run, path: str | Path) -> None:
+def write_results(run: Run, path: str | Path, *, replace: bool = False) -> None:
     """Add ``run`` to the results file ``path`` (created when absent), atomically: the file
     ``fccgrb solve -o`` writes, which :func:`read_results` and every command read back.
 
@@ -230,18 +218,22 @@ def write_results(run: Run, path: str | Path) -> None:
     run : Run
         From :func:`solve` (or :func:`read_results`).
     path : str or Path
-        The results file (HDF5; layout in ``fccgrb_cli/results/storage.py``). A run of the
-        same name already in it is replaced; the other runs are kept.
+        The results file (HDF5; layout in ``fccgrb_cli/results/storage.py``); its other runs
+        are kept.
+    replace : bool, optional
+        Replace a run of the same name already in the file (default False: such a run is
+        refused, as ``fccgrb solve`` refuses it without ``--replace``).
 
     Raises
     ------
     InputError
-        The path is not a results file of this format, or the run's name is not a valid run
-        name; the file is then left as it was.
+        The path is not a results file of this format, the run's name is not a valid run name,
+        or a run of that name is there and ``replace`` is False; the file is then left as it
+        was.
     """
-    from fccgrb_cli.results.storage import write_run
+    from fccgrb_cli.results.storage import write_runs
 
-    write_run(path, run, "fccgrb_cli.write_results (Python API)")
+    write_runs(path, [run], "fccgrb_cli.write_results (Python API)", replace=replace)
 
 
 def read_results(path: str | Path) -> dict[str, Run]:

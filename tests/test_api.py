@@ -229,3 +229,19 @@ def test_the_installed_package_carries_the_paper_tables():
 
     assert PAPER_TABLES.is_relative_to(Path(fc.__file__).parent) and PAPER_TABLES.is_file()
     assert len(paper_figures("table1")) > 10 and len(paper_figures("table2")) > 10
+
+
+def test_a_second_run_of_the_same_name_is_refused_unless_replaced(tmp_path: Path) -> None:
+    """The API keeps the command line's promise: a run already in the results file is never
+    replaced silently; ``replace=True`` replaces it, and the file holds the new run's numbers."""
+    model, trial = fc.load_model(MODEL), fc.read_trial(TRIAL)
+    path = tmp_path / "r.h5"
+    first = fc.solve(model, trial, dynamics=False, name="same")
+    fc.write_results(first, path)
+    second = fc.solve(model, trial, dynamics=False, name="same", perturb_mm=5)
+    with pytest.raises(fc.InputError, match="same"):
+        fc.write_results(second, path)
+    kept = fc.read_results(path)["same"]
+    assert np.array_equal(kept.result.q, first.result.q)
+    fc.write_results(second, path, replace=True)
+    assert np.array_equal(fc.read_results(path)["same"].result.q, second.result.q)

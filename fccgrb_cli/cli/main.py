@@ -426,19 +426,6 @@ def _show(run: Run, output: str) -> None:
     click.echo(f"wrote run {run.name!r} ({run.result.n_frames} frames) to {output}")
 
 
-def _template_labels(template: Model, mapping: dict[str, str]) -> None:
-    """``calibrate --map``: every name is a label the template uses (a marker or a landmark),
-    and no two of its labels end on one trial label."""
-    from fccgrb_cli.trial.labels import one_label_each
-
-    known = dict.fromkeys([*template.marker_labels, *template.landmarks.values()])
-    unknown = [name for name in mapping if name not in known]
-    if unknown:
-        raise InputError(f"--map: expected labels the template {template.source} uses (its "
-                         f"markers and calibration.landmarks), got {', '.join(unknown)}")
-    one_label_each({name: mapping.get(name, name) for name in known}, "template label")
-
-
 def _frame_range(text: str | None) -> tuple[int, int] | None:
     if text is None:
         return None
@@ -502,101 +489,31 @@ def calibrate(model: str, trial: str, output: str, frames: str | None,
     template's subject: section, --subject files and the width options, in that order; every
     other template reads its body mass (and a Helen Hayes one its widths and marker diameter)
     from the same sources in the same order. Writes a model ready for `fccgrb solve`."""
-    from fccgrb_cli.anatomy.davis_inputs import template_inputs
-    from fccgrb_cli.anatomy.full_body import personalize
     from fccgrb_cli.core.atomic import atomic_path, check_target
-    from fccgrb_cli.model import parse_model
+    from fccgrb_cli.pipeline.calibration import Choices, Subject, calibrate_subject
     from fccgrb_cli.pipeline.options import from_cli
     from fccgrb_cli.trial.record import read_trial
-    from fccgrb_cli.trial.virtual import resolved
 
     refuse_inputs(output, [model, trial, *_map_files({"mapping": mapping})])
     check_target(output)
     template = load_model(model)
     data = read_trial(trial, accept_truncated)
-    data, labels = resolved(template, data, dict(from_cli({"mapping": mapping}).mapping),
-                            {*template.marker_labels, *template.landmarks.values()})
-    if template.calibration_method == "plugin-gait":
-        _calibrate_plugin_gait(template, data, output, (frames, mass, foot_flat),
-                               (knee_width, ankle_width, marker_diameter), subject_files,
-                               labels)
-        return
-    inputs = template_inputs(template, data.path, subject_files, {
-        "knee_width": knee_width, "ankle_width": ankle_width, "marker_diameter": marker_diameter,
-        "body_mass": None if mass is None else f"{mass:.17g}"})
-    _template_labels(template, labels)
-    result = personalize(template, data, _frame_range(frames), inputs.mass,
-                         inputs.measurements, labels, vertical)
-    for message in data.warnings:
+    done = calibrate_subject(
+        template, data,
+        Subject(mass, knee_width, ankle_width, marker_diameter, subject_files),
+        Choices(_frame_range(frames), foot_flat, dict(from_cli({"mapping": mapping}).mapping),
+                vertical), source=output)
+    for message in done.warnings:
         click.echo(f"fccgrb: warning: {message}", err=True)
-    if result.axes is not None:
-        for message in result.axes.warnings:
-            click.echo(f"fccgrb: warning: {message}", err=True)
-        click.echo(f"fccgrb: {result.axes.note()}", err=True)
-    personal = parse_model(result.text, output)
-    analyse(personal)
+    for message in done.notes:
+        click.echo(f"fccgrb: {message}", err=True)
     with atomic_path(output) as tmp:
-        tmp.write_text(result.text, encoding="utf-8")
-    start, stop = result.frames
-    click.echo(f"wrote {output}: {personal.name} from frame indices {start}:{stop} of {trial}")
-    click.echo(f"pelvis width {1e3 * result.pelvis_width:.0f} mm, depth "
-               f"{1e3 * result.pelvis_depth:.0f} mm; segment lengths (mm): " + ", ".join(
-                   f"{k} {1e3 * v:.0f}" for k, v in result.lengths.items()))
-    if result.measurements is not None:
-        click.echo(f"knee and ankle centres by Davis et al. (1991): "
-                   f"{result.measurements.describe()}")
-    for warning in inputs.warnings:
-        click.echo(f"fccgrb: warning: {warning}", err=True)
-    if inputs.mass is None:
-        click.echo("fccgrb: warning: no --mass (nor Bodymass in the static's PROCESSING or a "
-                   "subject file): the model has no inertia (inverse dynamics skipped)",
-                   err=True)
-    for warning in result.warnings:
-        click.echo(f"fccgrb: warning: {output}: implausible calibration: {warning}; every "
-                   "frame solved with this model is flagged", err=True)
-
-
-def _calibrate_plugin_gait(template, data, output: str, choices: tuple,
-                           widths: tuple[str | None, ...], subject_files: tuple[str, ...],
-                           labels: dict[str, str]) -> None:
-    """`calibrate` for a Plug-in Gait template: measurements merged from every source (the
-    static's PROCESSING group, the template's subject section, --subject files, options; later
-    wins), the model written with what was used."""
-    from fccgrb_cli.core.atomic import atomic_path
-    from fccgrb_cli.model import parse_model
-    from fccgrb_cli.plugin_gait.calibration import Options, calibrate_plugin_gait
-    from fccgrb_cli.trial.subject_files import gathered
-
-    frames, mass, foot_flat = choices
-    typed = dict(zip(("knee_width", "ankle_width", "marker_diameter"), widths, strict=True))
-    typed["body_mass"] = None if mass is None else f"{mass:.17g}"
-    measured = gathered(template.measurements, data.path, subject_files, typed)
-    result = calibrate_plugin_gait(template, data, measured,
-                                   Options(_frame_range(frames), foot_flat), labels)
-    personal = parse_model(result.text, output)
-    analyse(personal)
-    with atomic_path(output) as tmp:
-        tmp.write_text(result.text, encoding="utf-8")
-    m = result.measurements
-    start, stop = result.frames
-    for warning in (*data.warnings, *result.warnings):
-        click.echo(f"fccgrb: warning: {warning}", err=True)
-    click.echo(f"wrote {output}: {personal.name} from frame indices {start}:{stop} of "
-               f"{data.path}")
-    click.echo(f"measurements from {m.source or 'nowhere'}")
-    for note in result.notes:
-        click.echo(f"  {note}")
-    click.echo("segment lengths (mm): " + ", ".join(
-        f"{k} {1e3 * v:.0f}" for k, v in result.lengths.items()))
-    click.echo("static foot offsets (deg): plantarflexion L/R "
-               f"{np.degrees(m.static_plantar_flexion.left):.2f} / "
-               f"{np.degrees(m.static_plantar_flexion.right):.2f}, rotation L/R "
-               f"{np.degrees(m.static_rotation_offset.left):.2f} / "
-               f"{np.degrees(m.static_rotation_offset.right):.2f}"
-               f" ({'foot flat' if foot_flat else 'foot not flat'})")
-    if m.body_mass is None:
-        click.echo("fccgrb: warning: no body mass (Bodymass or --mass): the model has no "
-                   "inertia (inverse dynamics skipped)", err=True)
+        tmp.write_text(done.text, encoding="utf-8")
+    start, stop = done.frames
+    click.echo(f"wrote {output}: {done.model.name} from frame indices {start}:{stop} of "
+               f"{trial}")
+    for line in done.report:
+        click.echo(line)
 
 
 @main.command("perturb")

@@ -19,7 +19,7 @@ from fccgrb_cli.batch.cells import Job, cells_folder, pending, run_jobs
 from fccgrb_cli.batch.study.jobs import (
     CalibrationJob,
     TrialSolve,
-    calibrate_subject,
+    calibrate_job,
     calibration_file,
     solve_trial_cell,
     trial_file,
@@ -112,7 +112,7 @@ def _run_study(study: Study, output: Path, where: Executors, accept_truncated: b
             failures[f"{s.name} (calibration)"] = f"{error.filename}: cannot read it " \
                                                   f"({error.strerror})"
             continue
-        calibrations[s.name] = Job(s.name, target, calibrate_subject,
+        calibrations[s.name] = Job(s.name, target, calibrate_job,
                                    (CalibrationJob(s, target, accept_truncated),))
     run_jobs(pending(calibrations.values(), _readable_text), calibrated, workers=where.workers,
              executor=where.executor)

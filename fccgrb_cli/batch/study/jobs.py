@@ -14,10 +14,9 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from fccgrb_cli.batch.study.spec import FROM_C3D, SubjectSpec
+from fccgrb_cli.batch.study.spec import SubjectSpec
 from fccgrb_cli.core.atomic import atomic_path
 from fccgrb_cli.core.blas import single_threaded
-from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.pipeline.options import SolveOptions
 
 CELL_VERSION = 1  # bump when a job's output changes for the same inputs (old cells then rerun)
@@ -82,53 +81,25 @@ def trial_file(subject: SubjectSpec, model: Path, trial: Path, options: SolveOpt
 
 
 @single_threaded
-def calibrate_subject(job: CalibrationJob) -> None:
-    """Personalize the subject's template from its static trial (``fccgrb calibrate``'s steps)
-    with its mass and measurements, and write the model."""
-    from fccgrb_cli.anatomy.calibrate import calibrate, calibration_method
-    from fccgrb_cli.model import load_model, parse_model
-    from fccgrb_cli.system.structure import analyse
+def calibrate_job(job: CalibrationJob) -> None:
+    """Personalize the subject's template from its static trial with its mass and measurements
+    by ``pipeline.calibration.calibrate_subject``, as ``fccgrb calibrate`` and the API do (the
+    static's PROCESSING group read first, the study's values over it), and write the model."""
+    from fccgrb_cli.model import load_model
+    from fccgrb_cli.pipeline.calibration import Choices, Subject, calibrate_subject
     from fccgrb_cli.trial.record import read_trial
 
     s = job.subject
     template = load_model(s.template)
-    mass, measured = _measurements(s, calibration_method(template))
     static = read_trial(s.static, job.accept_truncated)
-    result = calibrate(template, static, s.frames, mass, measured, dict(s.mapping))
-    analyse(parse_model(result.text, f"{s.name}'s personalized {template.name}"))
+    given = dict(s.measurements) if isinstance(s.measurements, tuple) else {}
+    subject = Subject.from_mm(s.mass, **given)
+    done = calibrate_subject(template, static, subject,
+                             Choices(s.frames, mapping=dict(s.mapping)),
+                             source=f"{s.name}'s personalized {template.name}")
     job.target.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(job.target) as tmp:
-        tmp.write_text(result.text, encoding="utf-8")
-
-
-def _measurements(s: SubjectSpec, method: str):
-    """The body mass (kg) and Davis' measurements for ``calibrate``: as the study gives them,
-    or read from the static's PROCESSING group (``from-c3d``; the study's mass first)."""
-    from fccgrb_cli.anatomy.calibrate import Measurements
-
-    if s.measurements is None:
-        return s.mass, None
-    if s.measurements != FROM_C3D:
-        return s.mass, Measurements.from_mm(**dict(s.measurements))
-    from fccgrb_cli.trial.processing import processing_measurements
-
-    m = processing_measurements(s.static)
-    mass = s.mass if s.mass is not None else m.body_mass
-    if method != "davis":
-        return mass, None
-    widths = {}
-    for name in ("knee_width", "ankle_width"):
-        sided = getattr(m, name)
-        values = [v for v in (sided.left, sided.right) if v is not None]
-        if values:
-            widths[name] = 1e3 * sum(values) / len(values)
-    if m.marker_diameter is not None:
-        widths["marker_diameter"] = 1e3 * m.marker_diameter
-    missing = [k for k in ("knee_width", "ankle_width", "marker_diameter") if k not in widths]
-    if missing:
-        raise InputError(f"{s.static}: PROCESSING: expected the subject's "
-                         f"{', '.join(missing)} (measurements: from-c3d)")
-    return mass, Measurements.from_mm(**widths)
+        tmp.write_text(done.text, encoding="utf-8")
 
 
 @single_threaded
