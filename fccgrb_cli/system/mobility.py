@@ -25,7 +25,10 @@ TOLERANCE = 1e-12
 
 
 def _top_rows(system: System, q: np.ndarray, top: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    phi, J = system.evaluate(q, Drive(theta=system.angles_at(q)))
+    # the tracking rows (a floating base's model compiled with them) need targets: any will
+    # do, only the topological rows are kept
+    targets = np.zeros((system.n_targets, 3))
+    phi, J = system.evaluate(q, Drive(theta=system.angles_at(q), ref=targets))
     return phi[top], J[top]
 
 
