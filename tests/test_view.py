@@ -98,7 +98,8 @@ def smoothed(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The five-bar solved with the whole-trial smoother: every angle and moment with its
     standard deviation."""
     path = tmp_path_factory.mktemp("smooth") / "smooth.h5"
-    result = run_cli("solve", FIVE_BAR, TRIAL, "--perturb", 30, "--smooth", "auto", "-o", path)
+    result = run_cli("solve", FIVE_BAR, TRIAL, "--perturb", 30, "--smooth", "auto", "--name",
+                     "nrm-wls-P30", "-o", path)
     assert result.exit_code == 0, result.output
     return path
 
