@@ -2,7 +2,8 @@
 trial (markers generated on the model, 31 markers, 73 frames) every coordinate's RMS difference
 to OpenSim's own solution (std_subject01_walk1_ik.mot) is below 0.2° — translations below
 0.2 mm, the same criterion in metres at the scale of the markers' rounding — for the uniform
-and the weighted task sets, solved with the mixed coordinates by NRM-WLS and by CNO-SQP."""
+and the weighted task sets (``--tasks``, as a user gives them), solved with the mixed
+coordinates by NRM-WLS and by CNO-SQP."""
 
 from __future__ import annotations
 
@@ -13,8 +14,6 @@ import pytest
 
 from fccgrb_cli.api import solve
 from fccgrb_cli.model import load_model
-from fccgrb_cli.model.osim.convert import with_marker_tasks
-from fccgrb_cli.opensim.tasks import read_marker_tasks
 from fccgrb_cli.trial.record import read_trc
 
 IK_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "opensim" / \
@@ -22,7 +21,6 @@ IK_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "opensim" / \
 pytestmark = pytest.mark.skipif(not IK_DIR.is_dir(), reason="../shared/data/opensim not here")
 DEGREES = 0.2      # OpenSim's tolerance for its IK regression test, per coordinate (RMS)
 METRES = 0.2e-3    # translations (pelvis_tx/ty/tz)
-WLS_UNIT = 1e-3    # NRM-WLS: a task weight of 1 is the default tracking weight
 
 
 def opensim_solution() -> tuple[list[str], np.ndarray]:
@@ -44,9 +42,8 @@ def gait():
 @pytest.mark.parametrize("method", ["nrm-wls", "cno-sqp"])
 def test_opensims_ik_regression_passes_with_its_own_criterion(gait, method, tasks):
     model, trial = gait
-    weights = read_marker_tasks(IK_DIR / tasks).weights
-    model = with_marker_tasks(model, weights, WLS_UNIT if method == "nrm-wls" else 1.0)
-    run = solve(model, trial, method=method, dynamics=False)
+    run = solve(model, trial, method=method, dynamics=False, tasks=str(IK_DIR / tasks))
+    model = run.model  # the markers the task set tracks
     assert any(note.startswith("engine: numpy reference") for note in run.notes)
     names, reference = opensim_solution()
     assert len(reference) == trial.n_frames == run.result.n_frames

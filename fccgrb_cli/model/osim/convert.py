@@ -13,7 +13,6 @@ the bodies placed by the coordinates' default values.
 from __future__ import annotations
 
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -40,8 +39,7 @@ from fccgrb_cli.model.spatial import (
     SpatialTransform,
 )
 
-__all__ = ["body_poses", "for_trial", "load_osim", "model_from_osim", "parse_osim_model",
-           "with_marker_tasks"]
+__all__ = ["body_poses", "for_trial", "load_osim", "model_from_osim", "parse_osim_model",]
 
 AXES = ("x", "y", "z")
 
@@ -178,17 +176,6 @@ def for_trial(model: Model, trial, mapping: dict[str, str]) -> Model:
         sys.stderr.write(f"fccgrb: note: {model.source}: no tracked marker moves with "
                          f"{', '.join(unseen)}: held at the default value\n")
     return model
-
-
-def with_marker_tasks(model: Model, weights: dict[str, float], unit: float | None) -> Model:
-    """The model tracking the markers of an IK task set, each with its task's weight times
-    ``unit`` (the weight a task weight of 1 gets: NRM-WLS's tracking weight against the joints'
-    1; 1 for the optimizers, whose objective weighs markers against one another only); None
-    leaves the weights to the method (all markers alike)."""
-    kept = tuple(tp for tp in model.tracked_points if tp.marker in weights)
-    if unit is not None:
-        kept = tuple(replace(tp, weight=unit * weights[tp.marker]) for tp in kept)
-    return replace(model, tracked_points=kept)
 
 
 def parse_osim_model(text: str, source: str) -> Model:
