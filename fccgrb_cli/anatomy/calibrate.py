@@ -252,6 +252,24 @@ def _perpendicular(vector: np.ndarray, axis: np.ndarray) -> np.ndarray:
     return p / np.linalg.norm(p)
 
 
+def write_segments(doc: dict, bodies: tuple[str, ...], seg: dict[str, Frames],
+                   points: dict[str, dict], vectors: dict[str, dict], inertia: dict) -> None:
+    """Write each calibrated body into the model document ``doc``: its points (m, 6 decimals)
+    and vectors (9 decimals) over the template's, its pose from its segment frames, and its
+    inertia in place of the template's (none where ``inertia`` has no entry for it)."""
+    for body in bodies:
+        spec = doc["bodies"][body]
+        spec["points"] = {**spec.get("points", {}),
+                          **{k: _round(v, 6) for k, v in points[body].items()}}
+        if vectors[body]:
+            spec["vectors"] = {**spec.get("vectors", {}),
+                               **{k: _round(v, 9) for k, v in vectors[body].items()}}
+        spec["pose"] = _pose(seg[body])
+        for key in ("mass", "com", "inertia"):
+            spec.pop(key, None)
+        spec.update(inertia.get(body, {}))
+
+
 def _round(values, digits: int) -> list[float]:
     return [round(float(x), digits) + 0.0 for x in values]
 
@@ -369,17 +387,7 @@ def calibrate(model: Model, trial: Trial, frames: tuple[int, int] | None = None,
         for name in names) for s, side in SIDES.items()
         for segment, names in BUILDERS[method].items()}
     warnings = implausibilities(seg, lengths, builders)
-    for body in BODIES:
-        spec = doc["bodies"][body]
-        spec["points"] = {**spec.get("points", {}),
-                          **{k: _round(v, 6) for k, v in points[body].items()}}
-        if vectors[body]:
-            spec["vectors"] = {**spec.get("vectors", {}),
-                               **{k: _round(v, 9) for k, v in vectors[body].items()}}
-        spec["pose"] = _pose(seg[body])
-        for key in ("mass", "com", "inertia"):
-            spec.pop(key, None)
-        spec.update(inertia.get(body, {}))
+    write_segments(doc, BODIES, seg, points, vectors, inertia)
     if tuple(axes.gravity) != tuple(model.gravity):
         doc["gravity"] = _round(axes.gravity, 9)
     doc.pop("subject", None)

@@ -19,7 +19,7 @@ import numpy as np
 import yaml
 
 from fccgrb_cli.anatomy.anthropometry import SEGMENTS, segment_inertia
-from fccgrb_cli.anatomy.frames import Frames
+from fccgrb_cli.anatomy.calibrate import write_segments
 from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model import Model
 from fccgrb_cli.model.subject import PIG_KEYS, Sided, SubjectMeasurements
@@ -137,12 +137,6 @@ def _round(values, digits: int) -> list[float]:
     return [round(float(x), digits) + 0.0 for x in values]
 
 
-def _pose(frames: Frames) -> dict:
-    axes = frames.axes[0]
-    return {"r": _round(frames.origin[0], 6), "u": _round(axes[:, 0], 9),
-            "v": _round(axes[:, 1], 9), "w": _round(axes[:, 2], 9)}
-
-
 def _subject_section(m: SubjectMeasurements, angle_scale: float) -> dict:
     """The ``subject:`` section: lengths in m, angles in the file's unit, mass in kg."""
     out: dict = {}
@@ -226,17 +220,7 @@ def calibrate_plugin_gait(model: Model, trial: Trial, measured: SubjectMeasureme
             points[tp.body][tp.point] = seg[tp.body].mean_local(
                 _marker(trial, tp.marker, window, f"{model.source} tracking.points", mapping))
     inertia = _inertia(m.body_mass, points, lengths, foot_ends, m.inter_asis_distance)
-    for body in BODIES:
-        spec = doc["bodies"][body]
-        spec["points"] = {**spec.get("points", {}),
-                          **{k: _round(v, 6) for k, v in points[body].items()}}
-        if vectors[body]:
-            spec["vectors"] = {**spec.get("vectors", {}),
-                               **{k: _round(v, 9) for k, v in vectors[body].items()}}
-        spec["pose"] = _pose(seg[body])
-        for key in ("mass", "com", "inertia"):
-            spec.pop(key, None)
-        spec.update(inertia.get(body, {}))
+    write_segments(doc, BODIES, seg, points, vectors, inertia)
     angle_scale = np.pi / 180.0 if (doc.get("units") or {}).get("angle", "deg") == "deg" \
         else 1.0
     doc["subject"] = _subject_section(m, angle_scale)
