@@ -61,8 +61,18 @@ def clinical_results(model: Model, theta: np.ndarray, joint_moments: np.ndarray 
 def distal_contact(model: Model, angle) -> str | None:
     """The contact body on the far side of an angle's joint (reached from its second body
     without crossing its first), or None: a listed contact body (``loads.contact``) or a body
-    a force plate is assigned to."""
-    beyond = reachable(joint_neighbours(model), angle.body2, {angle.body1})
+    a force plate is assigned to. An imported coordinate's joint is the moving joint whose
+    transform it drives (the first, for a coordinate several drive); one no joint uses (a
+    coupler's independent coordinate alone) has none."""
+    if hasattr(angle, "body2"):
+        near, far = angle.body1, angle.body2
+    else:
+        joint = next((j for j in model.moving_joints
+                      if angle.name in j.transform.coordinates), None)
+        if joint is None:
+            return None
+        near, far = joint.parent, joint.child
+    beyond = reachable(joint_neighbours(model), far, {near})
     bodies = (*model.contact_bodies, *(p.body for p in model.force_plates))
     return next((body for body in bodies if body in beyond), None)
 

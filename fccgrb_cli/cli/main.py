@@ -259,7 +259,14 @@ def _trial_paths(patterns: tuple[str, ...]) -> list[str]:
 
 @main.command()
 @click.argument("model")
-@click.argument("trials", nargs=-1, required=True, metavar="TRIAL...")
+@click.argument("trials", nargs=-1, metavar="[TRIAL]...")
+@click.option("--coordinates", type=click.Path(dir_okay=False), default=None, metavar="FILE",
+              help="Inverse dynamics only, as OpenSim's ID tool: the model's coordinates from "
+                   "FILE (.mot/.sto: OpenSim's IK output or `fccgrb export --format mot`; "
+                   "degrees unless its header says inDegrees=no, metres for translations) in "
+                   "place of a trial; with --loads for the ground reactions and "
+                   "--filter-cutoff (Hz) to low-pass the coordinates as the tool does. An "
+                   "imported OpenSim model only.")
 @click.option("-o", "--output", default="results.h5", show_default=True,
               type=click.Path(dir_okay=False),
               help="HDF5 results file; an existing one gains this run (a run of the same "
@@ -273,8 +280,9 @@ def _trial_paths(patterns: tuple[str, ...]) -> list[str]:
 @click_options
 @ACCEPT_TRUNCATED
 @reports_input_errors
-def solve(model: str, trials: tuple[str, ...], output: str, replace: bool,
-          write_model: str | None, accept_truncated: bool, **options: Any) -> None:
+def solve(model: str, trials: tuple[str, ...], coordinates: str | None, output: str,
+          replace: bool, write_model: str | None, accept_truncated: bool,
+          **options: Any) -> None:
     """Solve the kinematics of MODEL (YAML) over TRIAL (C3D or TRC markers) and write HDF5.
 
     Prints a one-row summary: ms/frame (positions), iterations/frame, mean ‖Φ‖ over the active
@@ -285,6 +293,10 @@ def solve(model: str, trials: tuple[str, ...], output: str, replace: bool,
     Several trials of one subject (or a quoted glob, 'walk*.c3d'): one run each, named
     <trial file stem>-<run name>, and, for a lower-limb model, the subject's cycles over every
     trial's strides in /subject of the results file.
+
+    With --coordinates FILE in place of a trial: the inverse dynamics of an OpenSim model
+    along the coordinates FILE gives (OpenSim's ID tool), a run named id (id-f6Hz with
+    --filter-cutoff 6).
     """
     from fccgrb_cli.core.atomic import check_target
     from fccgrb_cli.core.inputs import check_name
@@ -292,6 +304,17 @@ def solve(model: str, trials: tuple[str, ...], output: str, replace: bool,
     from fccgrb_cli.trial.truth import truth_path
 
     chosen = from_cli(options)
+    if coordinates is not None:
+        if trials:
+            raise InputError(f"--coordinates {coordinates}: expected no trial beside it (the "
+                             f"coordinates stand for the solve), got {', '.join(trials)}")
+        if write_model is not None:
+            raise InputError("--write-model: expected a trial to solve (it writes the model a "
+                             "residual reduction adjusts), got --coordinates")
+        _coordinates_only(model, coordinates, output, replace, chosen)
+        return
+    if not trials:
+        raise InputError("solve: expected TRIAL (C3D or TRC markers) or --coordinates FILE")
     paths = _trial_paths(trials)
     refuse_inputs(output, [model, *paths, *map(truth_path, paths), *_map_files(options)])
     check_target(output)
@@ -338,6 +361,29 @@ def solve(model: str, trials: tuple[str, ...], output: str, replace: bool,
         from fccgrb_cli.presentation.gait_report import subject_report
 
         click.echo(subject_report(*subject))
+
+
+def _coordinates_only(model: str, coordinates: str, output: str, replace: bool,
+                      options: SolveOptions) -> None:
+    """``solve MODEL --coordinates FILE``: the inverse dynamics alone, one run written."""
+    from fccgrb_cli.core.atomic import check_target
+    from fccgrb_cli.opensim.storage import read_storage
+    from fccgrb_cli.pipeline.coordinates import coordinates_run
+    from fccgrb_cli.results.storage import check_output, refuse_taken_names, write_runs
+
+    refuse_inputs(output, [model, coordinates, *([options.loads] if options.loads else [])])
+    check_target(output)
+    check_output(output)
+    if options.name is not None and not replace and Path(output).exists():
+        refuse_taken_names(Path(output), [options.name])
+    loaded = load_checked(model, options.form)
+    run = coordinates_run(loaded, read_storage(coordinates), options)
+    if not replace and Path(output).exists():
+        refuse_taken_names(Path(output), [run.name])
+    write_runs(output, [run], " ".join(["fccgrb", *sys.argv[1:]]),
+               waiting=lambda line: click.echo(f"fccgrb: warning: {line}", err=True),
+               replace=replace)
+    _show(run, output)
 
 
 def _start_times(results: str) -> dict[str, float]:

@@ -6,29 +6,34 @@ couplings). Prescribing θ(t) adds the drivers θ − θ*(t) = 0, whose multipli
 generalized forces τ the coordinates need (docs/opensim.md §5). Lagrange's equations
 M q̈ + Φ_qᵀ λ = g + Q split into
 
-    x rows:   Φ_xᵀ λ = g_x − M ẍ          (Φ_x of full column rank: λ exists; its part in the
+    x rows:   Φ_xᵀ λ = g_x + Q_x − M ẍ    (Φ_x of full column rank: λ exists; its part in the
                                            null space of Φ_xᵀ — the rotation rows' redundancy —
                                            changes no τ)
     θ rows:   τ = Φ_θᵀ λ                  (no mass on θ: the driver's force is what the rows
                                            take from the coordinate; positive along increasing θ)
 
 with x, ẋ, ẍ from θ, θ̇, θ̈: x by the forward kinematics, Φ_x ẋ = −Φ_θ θ̇ and
-Φ_x ẍ = γ − Φ_θ θ̈ (γ of the mixed system at q̇ = [ẋ, θ̇], which holds θ̇ᵀ ∂²h/∂θ² θ̇).
+Φ_x ẍ = γ − Φ_θ θ̈ (γ of the mixed system at q̇ = [ẋ, θ̇], which holds θ̇ᵀ ∂²h/∂θ² θ̇), and Q_x
+the external loads' generalized forces on the bodies they act on (``dynamics.loads``).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
+from fccgrb_cli.dynamics.inverse import InverseDynamics
+from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.dynamics.mass import gravity_forces, mass_matrix
 from fccgrb_cli.system.compiled import Drive, System
 from fccgrb_cli.system.moving_pose import pose_from_coordinates
 
-__all__ = ["coordinate_forces", "forces_from_coordinates"]
+__all__ = ["coordinate_forces", "coordinate_inverse", "forces_from_coordinates"]
 
 
 def coordinate_forces(system: System, theta: np.ndarray, theta_d: np.ndarray,
-                      theta_dd: np.ndarray) -> np.ndarray:
+                      theta_dd: np.ndarray, loads: Sequence[ExternalLoad] = ()) -> np.ndarray:
     """The generalized forces of the coordinates along a prescribed motion.
 
     Parameters
@@ -39,6 +44,8 @@ def coordinate_forces(system: System, theta: np.ndarray, theta_d: np.ndarray,
     theta, theta_d, theta_dd
         The coordinates, their rates and accelerations (frames × n_θ; rad, m and per s, s²),
         in the order of ``model.angles``.
+    loads
+        External loads on the model's bodies at the same frames (ground reactions).
 
     Returns
     -------
@@ -46,59 +53,124 @@ def coordinate_forces(system: System, theta: np.ndarray, theta_d: np.ndarray,
         τ (frames × n_θ): N·m for a rotational coordinate, N for a translational one, positive
         along the coordinate (OpenSim's ``<coordinate>_moment`` / ``_force``).
     """
-    from scipy.linalg import lstsq
+    return coordinate_inverse(system, theta, theta_d, theta_dd, loads)[1].joint_moments
 
+
+def coordinate_inverse(system: System, theta: np.ndarray, theta_d: np.ndarray,
+                       theta_dd: np.ndarray, loads: Sequence[ExternalLoad] = ()
+                       ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], InverseDynamics]:
+    """:func:`coordinate_forces` with what it passes through: the mixed coordinates q = [x, θ]
+    and their rates (frames × nq each; SI), and the inverse dynamics: λ of the topological rows,
+    τ, the kinetic (½ ẋᵀMẋ) and potential (−gᵀx) energies (J), the loads' power (W) and the
+    residual ‖Φ_xᵀλ − (g + Q − Mẍ)‖ of the least-squares multipliers (N; zero when the rows'
+    forces balance the bodies' exactly, as they do for a model whose coordinates move every
+    body's six freedoms)."""
     M = mass_matrix(system.model)
     g = gravity_forces(system.model)
-    nb = system.layout.n_body_q
-    out = np.empty_like(np.asarray(theta, dtype=float))
-    for f in range(len(theta)):
-        q = pose_from_coordinates(system, theta[f])
-        J = system.jacobian(q)
+    layout = system.layout
+    nb = layout.n_body_q
+    theta = np.asarray(theta, dtype=float)
+    n = len(theta)
+    on = [(layout.x_offset(load.body), load) for load in loads]
+    q, qd, qdd = (np.empty((n, system.nq)) for _ in range(3))
+    lam = np.empty((n, system.n_rows))
+    tau = np.empty_like(theta)
+    kinetic, potential, power, residual = (np.empty(n) for _ in range(4))
+    for f in range(n):
+        q[f] = pose_from_coordinates(system, theta[f])
+        J = system.jacobian(q[f])
         Jx, Jt = J[:, :nb], J[:, nb:]
-        xd = lstsq(Jx, -Jt @ theta_d[f])[0]
-        qd = np.concatenate([xd, theta_d[f]])
-        gamma = system.gamma(q, qd, Drive())
-        xdd = lstsq(Jx, gamma - Jt @ theta_dd[f])[0]
-        lam = lstsq(Jx.T, g - M @ xdd)[0]
-        out[f] = Jt.T @ lam
-    return out
+        factor = _Factor(Jx)
+        xd = factor.solve(-Jt @ theta_d[f])
+        qd[f] = np.concatenate([xd, theta_d[f]])
+        gamma = system.gamma(q[f], qd[f], Drive())
+        xdd = factor.solve(gamma - Jt @ theta_dd[f])
+        qdd[f] = np.concatenate([xdd, theta_dd[f]])
+        applied = g.copy()
+        power[f] = 0.0
+        for at, load in on:
+            block = slice(at, at + 12)
+            generalized = load.generalized(q[f, block], f)
+            applied[block] += generalized
+            power[f] += generalized @ xd[block]
+        rhs = applied - M @ xdd
+        lam[f] = factor.solve_transposed(rhs)
+        residual[f] = float(np.linalg.norm(Jx.T @ lam[f] - rhs))
+        tau[f] = Jt.T @ lam[f]
+        kinetic[f] = 0.5 * xd @ M @ xd
+        potential[f] = -g @ q[f, :nb]
+    names = tuple(c.name for c in system.model.angles)
+    inverse = InverseDynamics(angle_names=names, row_labels=tuple(system.labels),
+                              lam=lam, joint_moments=tau, kinetic=kinetic, potential=potential,
+                              external_power=power, residual=residual)
+    return (q, qd, qdd), inverse
 
 
-def forces_from_coordinates(system: System, time: np.ndarray, theta: np.ndarray,
-                            cutoff: float | None = None, order: int = 4
-                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The inverse dynamics of a coordinates file, as OpenSim's ID tool runs it: the
-    coordinates low-passed (zero-lag Butterworth of ``order`` at ``cutoff`` Hz, None: not
-    filtered), their rates and accelerations from the natural quintic spline through them
-    (f‴ = f⁗ = 0 at the ends; OpenSim's GCVSpline of degree 5 without smoothing), then
-    :func:`coordinate_forces`.
+class _Factor:
+    """Φ_x = Q R (reduced QR; Φ_x rows ≥ columns, of full column rank): the least-squares
+    solution of Φ_x y = b (exact where b is in its range, as the rates' right-hand sides are),
+    and the minimum-norm solution of Φ_xᵀ λ = c (the rows' redundancy carries no force)."""
+
+    def __init__(self, matrix: np.ndarray) -> None:
+        self.q, self.r = np.linalg.qr(matrix)
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        from scipy.linalg import solve_triangular
+
+        return solve_triangular(self.r, self.q.T @ b)
+
+    def solve_transposed(self, c: np.ndarray) -> np.ndarray:
+        from scipy.linalg import solve_triangular
+
+        return self.q @ solve_triangular(self.r, c, trans="T")
+
+
+def coordinate_rates(time: np.ndarray, theta: np.ndarray, cutoff: float | None = None
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A coordinates file's θ, θ̇, θ̈ as OpenSim's ID tool takes them: the rows padded by half
+    their number and low-passed at ``cutoff`` Hz (``signals.opensim_lowpass``; None: neither),
+    then the natural quintic spline through the (padded) rows (f‴ = f⁗ = 0 at its ends;
+    OpenSim's GCVSpline of degree 5 without smoothing) and its derivatives at ``time``.
 
     Parameters
     ----------
-    system
-        As for :func:`coordinate_forces`.
     time
         Sample times (frames,), s, increasing, evenly spaced when ``cutoff`` is given.
     theta
-        The coordinates (frames × n_θ; rad, m) in the order of ``model.angles``.
-    cutoff, order
-        The low-pass filter's cutoff (Hz) and order.
+        The coordinates (frames × n_θ; rad, m).
+    cutoff
+        The low-pass filter's cutoff (Hz).
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        θ (filtered), θ̇, θ̈ at ``time`` (frames × n_θ each; rad, m and per s, s²).
+    """
+    from scipy.interpolate import make_interp_spline
+
+    from fccgrb_cli.signals.opensim_lowpass import lowpass_padded
+
+    time = np.asarray(time, dtype=float)
+    theta = np.asarray(theta, dtype=float)
+    knots, values = (time, theta) if cutoff is None else lowpass_padded(time, theta, cutoff)
+    zero = np.zeros(theta.shape[1:])
+    natural = [(3, zero), (4, zero)]
+    spline = make_interp_spline(knots, values, k=5, bc_type=(natural, natural))
+    return spline(time), spline(time, 1), spline(time, 2)
+
+
+def forces_from_coordinates(system: System, time: np.ndarray, theta: np.ndarray,
+                            cutoff: float | None = None, loads: Sequence[ExternalLoad] = ()
+                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The inverse dynamics of a coordinates file, as OpenSim's ID tool runs it:
+    :func:`coordinate_rates`, then :func:`coordinate_forces` with ``loads`` (at ``time``'s
+    frames, as the tool applies them: not filtered).
 
     Returns
     -------
     tuple of numpy.ndarray
         τ (frames × n_θ; N·m, N), and the θ, θ̇, θ̈ it was computed from.
     """
-    from scipy.interpolate import make_interp_spline
-
-    from fccgrb_cli.signals.butterworth import lowpass
-
-    time = np.asarray(time, dtype=float)
-    theta = np.asarray(theta, dtype=float)
-    if cutoff is not None:
-        theta = lowpass(theta, 1.0 / float(np.mean(np.diff(time))), cutoff, order)
-    natural = [(3, 0.0), (4, 0.0)]
-    spline = make_interp_spline(time, theta, k=5, bc_type=(natural, natural))
-    smooth, rate, acceleration = spline(time), spline(time, 1), spline(time, 2)
-    return coordinate_forces(system, smooth, rate, acceleration), smooth, rate, acceleration
+    smooth, rate, acceleration = coordinate_rates(time, theta, cutoff)
+    return (coordinate_forces(system, smooth, rate, acceleration, loads), smooth, rate,
+            acceleration)

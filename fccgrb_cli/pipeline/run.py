@@ -340,12 +340,17 @@ def summary(run: Run) -> dict[str, float | str | int]:
         "iter/frame": float(np.mean(r.iterations)),
         "mean |Phi|": float(np.nanmean(r.phi_norm)),
         "max |Phi_top|": float(np.nanmax(r.phi_top_max)),
-        "mean ED mm": 1e3 * float(np.nanmean(run.ed[ok])) if ok.any() else float("nan"),
-        "max ED mm": 1e3 * float(np.nanmax(run.ed[ok])) if ok.any() else float("nan"),
-        "jump mm": 1e3 * mean_jump(run.model_points),
+        "mean ED mm": 1e3 * float(np.nanmean(run.ed[ok])) if ok.any() and run.labels else
+        float("nan"),
+        "max ED mm": 1e3 * float(np.nanmax(run.ed[ok])) if ok.any() and run.labels else
+        float("nan"),
+        "jump mm": 1e3 * mean_jump(run.model_points) if run.labels else float("nan"),
         "failed": int((~r.converged).sum()),
         "flagged": int((r.converged & ~r.trusted).sum()),
     }
+    if not run.labels:  # a run of given coordinates (``--coordinates``) has no markers
+        for key in ("mean ED mm", "max ED mm", "jump mm"):
+            del row[key]
     if run.truth_theta is not None:
         err = np.abs(r.theta - run.truth_theta)[ok]
         distance = np.array(run._angle_units) == "m"

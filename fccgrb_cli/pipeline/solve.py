@@ -149,7 +149,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
         residuals = residual_stage(model, trial, result, solved_dynamics, stance, inputs, options,
                                    warnings)
         solved_dynamics = residuals.dynamics
-        if solved_dynamics is not None:
+        if solved_dynamics is not None and not model.moving_joints:  # the classical model's
             result = with_findings(result, dynamic_findings(model, solved_dynamics))
         pig = plugin_gait_results(model, result.q, result.trusted, solved_dynamics) \
             if model.calibration_method == "plugin-gait" else None
@@ -398,13 +398,6 @@ def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResul
         return None
     if options.dynamics is False:
         return None
-    if model.moving_joints:  # its coordinates' drivers are not yet converted (docs/opensim.md)
-        if options.dynamics:
-            raise InputError(f"{model.source}: the inverse dynamics of an imported OpenSim "
-                             f"model is not available yet")
-        warnings.append(f"{model.source}: the inverse dynamics of an imported OpenSim model is "
-                        f"not available yet; skipped")
-        return None
     n = result.n_frames
     least = shortest(options.filter_order if options.filter_cutoff is not None else None)
     if n < least:
@@ -444,6 +437,14 @@ def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResul
         on = np.abs(load.force).any(axis=1)
         stance[load.body] = stance.get(load.body, np.zeros_like(on)) | on
     cutoff = options.filter_cutoff
+    if model.moving_joints:  # the coordinates' own forces, as OpenSim's ID tool gives them
+        if not loads:
+            warnings.append(f"{model.source}: no external loads (--loads, or a C3D's plates "
+                            "with --plate): the generalized forces hold no ground reaction; "
+                            "while the model touches the ground its weight shows on the base's "
+                            "residual forces and the joint moments are not the subject's")
+        return _coordinate_dynamics(model, result, parts, loads, options,
+                                    smoothed=smoothing is not None)
     if smoothing is not None and parts == [(0, n)]:
         loads = smoothing.smoothed_loads(loads, trial.rate)
         return smoothed_dynamics(model, result, smoothing.drives, loads=loads, tol=options.tol,
@@ -457,6 +458,37 @@ def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResul
         pieces.append((part, classical_dynamics(
             model, take(result, part, n), cutoff=None if baseline else cutoff,
             order=options.filter_order, loads=some, tol=options.tol, engine=options.engine)))
+    if len(pieces) == 1 and parts[0] == (0, n):
+        return pieces[0][1]
+    return merged(pieces, n, result.time)
+
+
+def _coordinate_dynamics(model: Model, result: KinematicResult,
+                         parts: list[tuple[int, int]], loads: list[ExternalLoad],
+                         options: SolveOptions, smoothed: bool) -> Dynamics:
+    """The inverse dynamics of an imported model along its solved coordinates, on each stretch
+    of ``parts``: θ low-passed at ``--filter-cutoff`` as OpenSim's ID tool does and
+    differentiated through its quintic spline (``dynamics.moving.coordinate_rates``), or the
+    smoother's θ, θ̇, θ̈ as they are (``smoothed``); the loads applied as given, as the tool
+    applies them (docs/opensim.md). Frames outside ``parts`` are NaN."""
+    from fccgrb_cli.dynamics.moving import coordinate_inverse, coordinate_rates
+
+    system = compile_system(model, angles="coordinate")  # the topology alone: no tracking rows
+    n = result.n_frames
+    pieces = []
+    for a, b in parts:
+        part = slice(a, b)
+        if smoothed:
+            rates = result.theta[part], result.theta_d[part], result.theta_dd[part]
+        else:
+            rates = coordinate_rates(result.time[part], result.theta[part],
+                                     options.filter_cutoff)
+        some = [take(load, part, n) for load in loads]
+        (q, qd, qdd), inverse = coordinate_inverse(system, *rates, some)
+        kinematics = replace(take(result, part, n), q=q, qd=qd, qdd=qdd, theta=rates[0],
+                             theta_d=rates[1], theta_dd=rates[2])
+        pieces.append((part, Dynamics(kinematics, inverse, tuple(some),
+                                      options.filter_cutoff)))
     if len(pieces) == 1 and parts[0] == (0, n):
         return pieces[0][1]
     return merged(pieces, n, result.time)
