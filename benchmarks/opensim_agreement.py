@@ -7,9 +7,10 @@ the README's "Coming from OpenSim".
   with the subject's ``.osim`` model and each of OpenSim's task sets (``--tasks``), by NRM-WLS and
   CNO-SQP; the worst coordinate's RMS difference to OpenSim's ``std_subject01_walk1_ik.mot``
   (OpenSim's criterion: < 0.2°), and the solve's ms/frame.
-* ID: arm26's generalized forces from OpenSim's coordinates (``../shared/data/opensim/
-  id_gait2392``), low-passed at 6 Hz as its setup says, against OpenSim's
-  ``std_arm26_InverseDynamics.sto`` (OpenSim's criterion: RMS < 2.0 N·m).
+* ID: OpenSim's ID setups (``../shared/data/opensim/id_gait2392``: gait2392's walk with its two
+  plates' ground reactions, and arm26) run as ``fccgrb solve --opensim-setup SETUP.xml`` runs
+  them, against OpenSim's ``std_*_InverseDynamics.sto`` (OpenSim's criterion: RMS < 2.0 N·m
+  or N per generalized force).
 Skips what ``../shared`` does not hold."""
 
 from __future__ import annotations
@@ -57,25 +58,46 @@ def ik_rows() -> list[str]:
     return rows
 
 
-def arm26_rows() -> list[str]:
-    """arm26's inverse dynamics from OpenSim's coordinates, low-passed at 6 Hz as its setup
-    says, against OpenSim's generalized forces (its criterion: RMS < 2.0 N·m)."""
-    from fccgrb_cli.dynamics.moving import forces_from_coordinates
-    from fccgrb_cli.system.compiled import compile_system
+def id_rows() -> list[str]:
+    """Each ID setup run as ``fccgrb solve --opensim-setup SETUP.xml`` runs it (its model,
+    coordinates, loads, cutoff and time range), against OpenSim's generalized forces over the
+    rows both have (its criterion: RMS < 2.0 N·m or N)."""
+    from dataclasses import replace
 
-    model = fc.load_model(ID / "arm26.osim")
-    coordinates = read_storage(ID / "arm26_InverseKinematics.mot")
-    order = [c.name for c in model.angles]
-    theta = np.column_stack([np.radians(coordinates.values[:, coordinates.names.index(n)])
-                             for n in order])
-    tau = forces_from_coordinates(compile_system(model, angles="coordinate"), coordinates.time,
-                                  theta, cutoff=6.0)[0]
-    reference = read_storage(ID / "std_arm26_InverseDynamics.sto")
+    from fccgrb_cli.pipeline.coordinates import coordinates_run
+    from fccgrb_cli.pipeline.opensim_setup import setup_inputs
+    from fccgrb_cli.pipeline.options import SolveOptions
+
     rows = []
-    for k, name in enumerate(order):
-        column = reference.names.index(f"{name}_moment")
-        rms = np.sqrt(np.mean((tau[:, k] - reference.values[:, column]) ** 2))
-        rows.append(f"| arm26 | {name}_moment | {rms:.3f} |")
+    for setup, reference_file in (("subject01_Setup_InverseDynamics.xml",
+                                   "std_subject01_InverseDynamics.sto"),
+                                  ("arm26_Setup_InverseDynamics.xml",
+                                   "std_arm26_InverseDynamics.sto")):
+        found = setup_inputs(str(ID / setup), None, (), None, SolveOptions())
+        coordinates = read_storage(found.coordinates)
+        if coordinates.in_degrees is None and found.in_degrees is not None:
+            coordinates = replace(coordinates, in_degrees=found.in_degrees)
+        started = time.perf_counter()
+        run = coordinates_run(fc.load_model(found.model), coordinates, found.options)
+        seconds = time.perf_counter() - started
+        ours = run.result.time + run.start_time
+        reference = read_storage(ID / reference_file)
+        pairs = [(i, j) for i, t in enumerate(reference.time)
+                 for j in np.flatnonzero(np.abs(ours - t) < 1e-5)]
+        theirs, mine = (np.array(k) for k in zip(*pairs, strict=True))
+        worst = {"N·m": (0.0, ""), "N": (0.0, "")}
+        tau = run.dynamics.inverse.joint_moments
+        for k, (name, coordinate) in enumerate(zip(run.result.angle_names, run.model.angles,
+                                                   strict=True)):
+            unit = "N" if coordinate.translational else "N·m"
+            column = f"{name}_{'force' if unit == 'N' else 'moment'}"
+            expected = reference.values[theirs, reference.names.index(column)]
+            rms = float(np.sqrt(np.mean((tau[mine, k] - expected) ** 2)))
+            worst[unit] = max(worst[unit], (rms, column))
+        moment, force = worst["N·m"], worst["N"]
+        rows.append(f"| {setup} | {len(pairs)} | {moment[0]:.4f} ({moment[1]}) | "
+                    + (f"{force[0]:.4f} ({force[1]})" if force[1] else "–")
+                    + f" | {1e3 * seconds / run.result.n_frames:.1f} |")
     return rows
 
 
@@ -89,9 +111,10 @@ def main() -> int:
     for row in ik_rows():
         print(row)
     print()
-    print("| model | generalized force | RMS difference (N·m) |")
-    print("|---|---|---|")
-    for row in arm26_rows():
+    print("| ID setup | rows compared | worst moment RMS (N·m) | worst force RMS (N) | "
+          "ms/frame |")
+    print("|---|---|---|---|---|")
+    for row in id_rows():
         print(row)
     return 0
 

@@ -258,8 +258,14 @@ def _trial_paths(patterns: tuple[str, ...]) -> list[str]:
 
 
 @main.command()
-@click.argument("model")
+@click.argument("model", required=False)
 @click.argument("trials", nargs=-1, metavar="[TRIAL]...")
+@click.option("--opensim-setup", type=click.Path(dir_okay=False), default=None,
+              metavar="SETUP.xml",
+              help="Run an OpenSim IK or ID setup as its tool would: its model, marker file "
+                   "or coordinates file, task set, external loads, time range and low-pass "
+                   "cutoff (files relative to the setup's folder). What is typed beside it "
+                   "wins; MODEL and TRIAL may then be left out.")
 @click.option("--coordinates", type=click.Path(dir_okay=False), default=None, metavar="FILE",
               help="Inverse dynamics only, as OpenSim's ID tool: the model's coordinates from "
                    "FILE (.mot/.sto: OpenSim's IK output or `fccgrb export --format mot`; "
@@ -280,10 +286,11 @@ def _trial_paths(patterns: tuple[str, ...]) -> list[str]:
 @click_options
 @ACCEPT_TRUNCATED
 @reports_input_errors
-def solve(model: str, trials: tuple[str, ...], coordinates: str | None, output: str,
-          replace: bool, write_model: str | None, accept_truncated: bool,
-          **options: Any) -> None:
-    """Solve the kinematics of MODEL (YAML) over TRIAL (C3D or TRC markers) and write HDF5.
+def solve(model: str | None, trials: tuple[str, ...], opensim_setup: str | None,
+          coordinates: str | None, output: str, replace: bool, write_model: str | None,
+          accept_truncated: bool, **options: Any) -> None:
+    """Solve the kinematics of MODEL (YAML, or an OpenSim .osim) over TRIAL (C3D or TRC
+    markers), then its inverse dynamics, and write HDF5.
 
     Prints a one-row summary: ms/frame (positions), iterations/frame, mean ‖Φ‖ over the active
     equations, max |topological Φ|, mean and max Euclidean distance (mm) between each tracked
@@ -304,6 +311,19 @@ def solve(model: str, trials: tuple[str, ...], coordinates: str | None, output: 
     from fccgrb_cli.trial.truth import truth_path
 
     chosen = from_cli(options)
+    in_degrees = None
+    if opensim_setup is not None:
+        from fccgrb_cli.pipeline.opensim_setup import setup_inputs
+
+        found = setup_inputs(opensim_setup, model, trials, coordinates, chosen)
+        model, trials, coordinates, chosen = (found.model, found.trials, found.coordinates,
+                                              found.options)
+        in_degrees = found.in_degrees
+        for note in found.notes:
+            click.echo(f"fccgrb: {note}", err=True)
+    if model is None:
+        raise InputError("solve: expected MODEL (a YAML or OpenSim .osim model) or "
+                         "--opensim-setup SETUP.xml")
     if coordinates is not None:
         if trials:
             raise InputError(f"--coordinates {coordinates}: expected no trial beside it (the "
@@ -311,11 +331,15 @@ def solve(model: str, trials: tuple[str, ...], coordinates: str | None, output: 
         if write_model is not None:
             raise InputError("--write-model: expected a trial to solve (it writes the model a "
                              "residual reduction adjusts), got --coordinates")
-        _coordinates_only(model, coordinates, output, replace, chosen)
+        _coordinates_only(model, coordinates, output, replace, chosen, in_degrees)
         return
     if not trials:
         raise InputError("solve: expected TRIAL (C3D or TRC markers) or --coordinates FILE")
     paths = _trial_paths(trials)
+    from fccgrb_cli.pipeline.solve import check_window
+
+    for path in paths:
+        check_window(path, chosen)
     refuse_inputs(output, [model, *paths, *map(truth_path, paths), *_map_files(options)])
     check_target(output)
     if write_model is not None:
@@ -364,22 +388,23 @@ def solve(model: str, trials: tuple[str, ...], coordinates: str | None, output: 
 
 
 def _coordinates_only(model: str, coordinates: str, output: str, replace: bool,
-                      options: SolveOptions) -> None:
+                      options: SolveOptions, in_degrees: bool | None = None) -> None:
     """``solve MODEL --coordinates FILE``: the inverse dynamics alone, one run written."""
     from fccgrb_cli.core.atomic import check_target
     from fccgrb_cli.opensim.storage import read_storage
-    from fccgrb_cli.pipeline.coordinates import coordinates_run
+    from fccgrb_cli.pipeline.coordinates import coordinates_run, coordinates_run_name
     from fccgrb_cli.results.storage import check_output, refuse_taken_names, write_runs
 
     refuse_inputs(output, [model, coordinates, *([options.loads] if options.loads else [])])
     check_target(output)
     check_output(output)
-    if options.name is not None and not replace and Path(output).exists():
-        refuse_taken_names(Path(output), [options.name])
+    if not replace and Path(output).exists():  # before the work
+        refuse_taken_names(Path(output), [coordinates_run_name(options)])
     loaded = load_checked(model, options.form)
-    run = coordinates_run(loaded, read_storage(coordinates), options)
-    if not replace and Path(output).exists():
-        refuse_taken_names(Path(output), [run.name])
+    storage = read_storage(coordinates)
+    if storage.in_degrees is None and in_degrees is not None:  # the ID setup's word
+        storage = dataclasses.replace(storage, in_degrees=in_degrees)
+    run = coordinates_run(loaded, storage, options)
     write_runs(output, [run], " ".join(["fccgrb", *sys.argv[1:]]),
                waiting=lambda line: click.echo(f"fccgrb: warning: {line}", err=True),
                replace=replace)

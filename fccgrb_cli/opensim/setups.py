@@ -19,7 +19,7 @@ from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.core.xml import MAX_MAGNITUDE, element_path, number, numbers, parse
 
 __all__ = ["CoordinateTask", "IDSetup", "IKSetup", "MarkerTask", "TaskSet", "read_id_setup",
-           "read_ik_setup", "read_task_set"]
+           "read_ik_setup", "read_setup", "read_task_set"]
 
 # every property of OpenSim 4's tools (and 3.3's), used or not
 _IK_PROPERTIES = {"model_file", "constraint_weight", "accuracy", "IKTaskSet", "marker_file",
@@ -334,3 +334,19 @@ def _weight(task: ET.Element, here: str) -> float:
     if weight < 0 or weight > MAX_MAGNITUDE:
         raise InputError(f"{here}/weight: expected a weight of at least 0, got {weight:g}")
     return weight
+
+
+def read_setup(path: str | Path) -> IKSetup | IDSetup:
+    """An IK or ID setup, by its tool element (``InverseKinematicsTool`` or
+    ``InverseDynamicsTool``; a misspelt tag is judged by its properties, as OpenSim reads it)."""
+    root = parse(Path(path))
+    tools = list(root) if root.tag == "OpenSimDocument" else []
+    if len(tools) == 1 and (tools[0].tag == "InverseDynamicsTool" or
+                            tools[0].find("coordinates_file") is not None or
+                            tools[0].find("external_loads_file") is not None):
+        return read_id_setup(path)
+    if len(tools) == 1 and (tools[0].tag.startswith("InverseKinem") or
+                            tools[0].find("marker_file") is not None):
+        return read_ik_setup(path)
+    raise InputError(f"{path}: {root.tag}: expected an OpenSim IK or ID setup "
+                     "(OpenSimDocument/InverseKinematicsTool or InverseDynamicsTool)")

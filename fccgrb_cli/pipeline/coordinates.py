@@ -32,7 +32,7 @@ from fccgrb_cli.solvers.result import KinematicResult
 from fccgrb_cli.system import System, compile_system
 from fccgrb_cli.system.compiled import Drive
 
-__all__ = ["METHOD", "coordinates_run"]
+__all__ = ["METHOD", "coordinates_run", "coordinates_run_name"]
 
 METHOD = "coordinates"  # what a run of given coordinates records as its method
 MIN_ROWS = 6  # a quintic spline's points
@@ -83,6 +83,8 @@ def coordinates_run(model: Model, coordinates: Storage, options: SolveOptions | 
     notes += said
     system = compile_system(model, angles="coordinate")
     smooth, rate, acceleration = coordinate_rates(time, theta, options.filter_cutoff)
+    keep = _rows(time, options, source)  # the whole file filtered, the range evaluated
+    time, smooth, rate, acceleration = (v[keep] for v in (time, smooth, rate, acceleration))
     loads = []
     if options.loads is not None:
         found = read_external_loads(options.loads)
@@ -105,14 +107,19 @@ def coordinates_run(model: Model, coordinates: Storage, options: SolveOptions | 
     dynamics = Dynamics(kinematics=result, inverse=inverse, loads=tuple(loads),
                         cutoff=options.filter_cutoff)
     none = np.zeros((n, 0, 3))
-    cutoff = "" if options.filter_cutoff is None else f"-f{options.filter_cutoff:g}Hz"
-    return Run(name=options.name or f"id{cutoff}", options=options, result=result, labels=(),
+    return Run(name=coordinates_run_name(options), options=options, result=result, labels=(),
                rate=1.0 / float(np.mean(np.diff(time))), reference=none, markers_input=none,
                model_points=none, ed=np.zeros((n, 0)), ed_input=np.zeros((n, 0)),
                truth_theta=None, form=",".join(sorted({b.form for b in model.bodies})),
                model_text=model.text, trial_path=source, dynamics=dynamics,
                notes=tuple(notes), start_time=float(time[0]),
                moment_flags=np.zeros(inverse.joint_moments.shape, dtype=FLAG_DTYPE))
+
+
+def coordinates_run_name(options: SolveOptions) -> str:
+    """The run's name: ``--name``, else ``id`` and the cutoff (``id-f6Hz``)."""
+    cutoff = "" if options.filter_cutoff is None else f"-f{options.filter_cutoff:g}Hz"
+    return options.name or f"id{cutoff}"
 
 
 def _columns(model: Model, coordinates: Storage) -> tuple[np.ndarray, list[str]]:
@@ -148,6 +155,22 @@ def _columns(model: Model, coordinates: Storage) -> tuple[np.ndarray, list[str]]
         notes.append(f"{source}: columns left out (not coordinates of {model.source}): "
                      f"{', '.join(extra)[:200]}")
     return theta, notes
+
+
+def _rows(time: np.ndarray, options: SolveOptions, source: str) -> np.ndarray:
+    """The rows within ``--from``/``--to`` (OpenSim's time_range: from the later of the first
+    row and the range's start to the earlier of the last row and its end)."""
+    keep = np.ones(len(time), dtype=bool)
+    slack = 1e-6 * float(np.mean(np.diff(time)))
+    if options.time_from is not None:
+        keep &= time >= options.time_from - slack
+    if options.time_to is not None:
+        keep &= time <= options.time_to + slack
+    if keep.sum() < 2:
+        raise InputError(f"{source}: --from/--to: expected at least 2 rows within the range, "
+                         f"got {int(keep.sum())} (the file covers {time[0]:.6g}–"
+                         f"{time[-1]:.6g} s)")
+    return keep
 
 
 def _on_the_grid(coordinates: Storage) -> tuple[np.ndarray, list[str]]:

@@ -157,7 +157,9 @@ class SolveOptions:
         None, unit="Hz", low=0.0, low_open=True, high=1e5, metavar="HZ",
         help="Low-pass the angles (zero-lag Butterworth, forward and backward) before they "
              "drive the classical model: the AD baseline's drivers, and the solved angles "
-             "converted for inverse dynamics. Off by default; 6 Hz is the gait standard.")
+             "converted for inverse dynamics. Off by default; 6 Hz is the gait standard. An "
+             "imported OpenSim model's coordinates are low-passed as OpenSim's ID tool does "
+             "(third order, the rows padded by half their number; {filter_order} unused).")
     filter_order: int = _option(2, low=1, high=8,
                                 help="Order of that Butterworth filter (each pass).")
     # --- the lab ---------------------------------------------------------------------------
@@ -220,6 +222,15 @@ class SolveOptions:
              "names a body for each plate (repeatable or comma-separated: --plate 1=calcn_r "
              "--plate 2=calcn_l); replaces the model's loads.force_plates, and plates left "
              "out go to the model's contact bodies, if any, by proximity.")
+    time_from: float | None = _option(
+        None, flag="from", unit="s", low=-1e9, high=1e9, metavar="S",
+        help="Analyse from this time on (s, on the trial's or coordinates file's own clock: a "
+             "TRC's Time column, a C3D's first frame; OpenSim's time_range) [default: the "
+             "first frame]. With --coordinates the whole file is still low-passed, as "
+             "OpenSim's ID tool does.")
+    time_to: float | None = _option(
+        None, flag="to", unit="s", low=-1e9, high=1e9, metavar="S",
+        help="Analyse up to this time (s, the same clock) [default: the last frame].")
     name: str | None = _option(
         None, help="Run name inside the results file [default: the method, then -truth, "
                    "-f<cutoff>Hz, -smooth[<cutoff>Hz|-n<mm>mm] and -P<mm> where they apply, "
@@ -228,6 +239,10 @@ class SolveOptions:
     def __post_init__(self) -> None:
         for f in fields(self):
             _check(f.name, getattr(self, f.name), f.metadata)
+        if self.time_from is not None and self.time_to is not None and \
+                self.time_to < self.time_from:
+            raise InputError(f"time_to: expected a time at or after --from {self.time_from:g} s, "
+                             f"got {self.time_to:g}")
         if self.loads is not None and self.plates:
             raise InputError("plates: expected the trial's plates assigned or an OpenSim load "
                              "set (--loads) in their place, got both")

@@ -327,6 +327,8 @@ def mean_jump(points: np.ndarray) -> float:
     as a larger jump than the motion itself needs (compare runs of the same trial)."""
     if len(points) < 2:
         return 0.0
+    if not points.shape[1]:  # no markers (a run of given coordinates)
+        return float("nan")
     return float(np.nanmean(np.linalg.norm(np.diff(points, axis=0), axis=2)))
 
 
@@ -344,7 +346,7 @@ def summary(run: Run) -> dict[str, float | str | int]:
         float("nan"),
         "max ED mm": 1e3 * float(np.nanmax(run.ed[ok])) if ok.any() and run.labels else
         float("nan"),
-        "jump mm": 1e3 * mean_jump(run.model_points) if run.labels else float("nan"),
+        "jump mm": 1e3 * mean_jump(run.model_points),
         "failed": int((~r.converged).sum()),
         "flagged": int((r.converged & ~r.trusted).sum()),
     }

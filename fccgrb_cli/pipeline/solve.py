@@ -52,7 +52,7 @@ from fccgrb_cli.trial.record import Trial
 from fccgrb_cli.trial.truth import Truth, read_truth, truth_path
 from fccgrb_cli.trial.virtual import resolved
 
-__all__ = ["solve_trial"]
+__all__ = ["check_window", "solve_trial"]
 
 Progress = Callable[[int, int], None] | None
 
@@ -68,6 +68,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
     StoredArray in their place, which ``write_run`` copies into the results as stored), so that
     a long trial's memory stays at the markers, q and the dynamics stage's working arrays."""
     options = options or SolveOptions()
+    trial = _window(trial, options)
     _check_length(trial, options)
     model = prepared(model, options)
     if not model.tracked_points:
@@ -492,6 +493,22 @@ def _coordinate_dynamics(model: Model, result: KinematicResult,
     if len(pieces) == 1 and parts[0] == (0, n):
         return pieces[0][1]
     return merged(pieces, n, result.time)
+
+
+def check_window(path: str, options: SolveOptions) -> None:
+    """A ``--from``/``--to`` window into a C3D is refused rather than misaligned: its plates,
+    events and lab axes are read again from the file frame by frame from its first."""
+    windowed = options.time_from is not None or options.time_to is not None
+    if windowed and str(path).lower().endswith(".c3d"):
+        raise InputError(f"{path}: --from/--to: expected a TRC trial or --coordinates (a "
+                         "C3D's plates and events are aligned from its first frame; cut the "
+                         "trial to the range first)")
+
+
+def _window(trial: Trial, options: SolveOptions) -> Trial:
+    """The trial's frames within ``--from``/``--to`` (its own clock; :func:`check_window`)."""
+    check_window(trial.path, options)
+    return trial.between(options.time_from, options.time_to)
 
 
 def _check_length(trial: Trial, options: SolveOptions) -> None:

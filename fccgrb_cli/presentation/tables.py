@@ -112,7 +112,7 @@ def _row(run, points: str, extra: str = "") -> Row:
     trusted = run["converged"][()]
     converged = run["solver_converged"][()] if "solver_converged" in run else trusted
     ed = run["ed"][()]
-    ok = converged & np.isfinite(ed).all(axis=1)
+    ok = converged & np.isfinite(ed).all(axis=1) & (ed.shape[1] > 0)  # markers were solved
     time_s = run["time_s"][()]
     n = len(time_s)
     attrs = run.attrs

@@ -11,7 +11,7 @@ are read and the trial carries a warning saying so.
 from __future__ import annotations
 
 import contextlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -63,6 +63,29 @@ class Trial:
         if name in self.labels:
             return name
         return next((label for label in self.labels if label.split(":")[-1] == name), None)
+
+    def between(self, start: float | None, stop: float | None) -> Trial:
+        """The frames whose times on the file's clock (``start`` + frame / rate) lie in
+        [start, stop] (s; None: unbounded), as OpenSim's time_range selects them; an InputError
+        naming the file when none does."""
+        if start is None and stop is None:
+            return self
+        clock = self.start + self.time
+        slack = 1e-6 / self.rate
+        keep = np.ones(self.n_frames, dtype=bool)
+        if start is not None:
+            keep &= clock >= start - slack
+        if stop is not None:
+            keep &= clock <= stop + slack
+        if not keep.any():
+            raise InputError(f"{self.path}: --from/--to: expected a time range within the "
+                             f"trial's {clock[0]:.6g}–{clock[-1]:.6g} s, got "
+                             f"{'…' if start is None else f'{start:g}'}–"
+                             f"{'…' if stop is None else f'{stop:g}'} s")
+        first = int(np.argmax(keep))
+        last = first + int(keep[first:].sum())
+        return replace(self, markers=self.markers[first:last],
+                       start=float(clock[first]))
 
     def select(self, labels: list[str]) -> np.ndarray:
         """The markers with these file labels, in that order (frames × len(labels) × 3)."""
