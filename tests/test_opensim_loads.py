@@ -275,3 +275,15 @@ def test_loads_are_taken_at_the_trials_clock(tmp_path):
     (load,), notes = trial_loads(path, model, trial)
     np.testing.assert_allclose(load.force[:, 0], 0.4 + np.arange(30) / 60.0, rtol=0, atol=1e-12)
     assert notes[0].startswith(f"external loads from {path} (tip.mot): Tip → link2")
+
+
+def test_a_3x_files_defaults_block_is_ignored_as_opensim_ignores_it(tmp_path):
+    """OpenSim 2.x/3.x documents carry a ``<defaults>`` block of default objects (controls,
+    actuators) after the set's data: OpenSim ignores it, and so does the reader."""
+    time = np.arange(5) / 100.0
+    path = _load_files(tmp_path, time, np.ones((5, 3)), np.zeros((5, 3)), np.zeros((5, 3)))
+    text = path.read_text().replace("</ExternalLoads>", "<defaults><ControlLinear name="
+                                    "'default'><kp>100</kp></ControlLinear></defaults>"
+                                    "</ExternalLoads>")
+    path.write_text(text)
+    assert [f.name for f in read_external_loads(path).forces] == ["Tip"]

@@ -219,3 +219,21 @@ def test_a_function_is_read_in_both_property_styles_and_never_assumed():
     with pytest.raises(InputError, match="TransformAxis\\[name=translation1\\]: expected a "
                                          "function of knee"):
         parse_osim(bare.encode(), "bare.osim")
+
+
+def test_a_4x_coordinates_motion_comes_from_the_transform_it_drives():
+    """An OpenSim 4 CustomJoint's Coordinate states no motion_type: a coordinate that drives
+    translation axes only is a translation (metres: exports and the degrees of a .mot leave
+    it alone), one that drives a rotation axis a rotation, as OpenSim derives them."""
+    import re
+
+    from fccgrb_cli.model.osim.convert import parse_osim_model
+    from tests.osim_text import knee_model
+
+    stated = parse_osim_model(knee_model(), "knee.osim")
+    text = re.sub(r"<motion_type>[^<]*</motion_type>", "", knee_model())
+    derived = parse_osim_model(text, "knee.osim")
+    kinds = {c.name: c.translational for c in derived.angles}
+    assert kinds == {c.name: c.translational for c in stated.angles}
+    assert kinds["tx"] and kinds["ty"] and kinds["tz"] and not kinds["rx"] and \
+        not kinds["knee"]

@@ -230,3 +230,52 @@ def test_id_cutoff_negative_is_no_filter(tmp_path, cutoff, expected):
     setup = read_id_setup(path)
     assert setup.lowpass_cutoff == expected and setup.coordinates_in_degrees is False
     assert setup.time_range is None and setup.external_loads_file is None
+
+
+def test_coordinate_tasks_of_dominant_weight_become_holds(tmp_path):
+    """A coordinate task weighing at least 10 × the heaviest marker holds its coordinate (at
+    the model's default or its manual value, in the file's unit); a lighter one, or one from a
+    coordinates file, is left out with a note naming it."""
+    from fccgrb_cli.opensim.setups import read_task_set
+
+    def task(name: str, weight: float, kind: str = "default_value", value: str = "") -> str:
+        return (f'<IKCoordinateTask name="{name}"><apply>true</apply><weight>{weight}</weight>'
+                f"<value_type>{kind}</value_type>{value}</IKCoordinateTask>")
+
+    marker = '<IKMarkerTask name="M"><apply>true</apply><weight>20</weight></IKMarkerTask>'
+    tasks = [task("a", 1000), task("b", 100), task("c", 300, "manual_value", "<value>5</value>"),
+             task("d", 5000, "from_file")]
+    path = tmp_path / "tasks.xml"
+    path.write_text(f'<OpenSimDocument Version="40000"><IKTaskSet name="t"><objects>{marker}'
+                    f'{"".join(tasks)}</objects></IKTaskSet></OpenSimDocument>')
+    holds, notes = read_task_set(path).holds()
+    assert holds == ("a=default", "c=5")
+    assert len(notes) == 1 and "b (weight 100" in notes[0] and "d (its value from" in notes[0]
+
+
+IK = Path(__file__).resolve().parents[2] / "shared" / "data" / "opensim" / \
+    "ik_gait2354_synthetic"
+
+
+@pytest.mark.skipif(not IK.is_dir(), reason="../shared/data/opensim not here")
+def test_a_held_coordinate_keeps_its_value_in_every_frame():
+    """--hold NAME=VALUE (degrees) fixes the coordinate through the solve (a constraint row, met
+    as the method meets the topology: within 1e-4 rad by nrm-wls), NAME=default at the
+    model's default; the others still fit the markers."""
+    import numpy as np
+
+    import fccgrb_cli as fc
+
+    model = fc.load_model(IK / "subject01_simbody.osim")
+    trial = fc.read_trial(IK / "subject01_synthetic_marker_data.trc")
+    run = fc.solve(model, trial, dynamics=False, hold=("subtalar_angle_r=5", "mtp_angle_l=default"))
+    names = list(run.result.angle_names)
+    assert np.allclose(run.result.theta[:, names.index("subtalar_angle_r")], np.radians(5.0),
+                       atol=1e-4)
+    default = next(c.default for c in model.angles if c.name == "mtp_angle_l")
+    assert np.allclose(run.result.theta[:, names.index("mtp_angle_l")], default, atol=1e-4)
+    free = np.degrees(run.result.theta[:, names.index("subtalar_angle_l")])
+    assert np.ptp(free) > 0.5  # not held: it moves
+    assert run.result.converged.all()
+    with pytest.raises(InputError, match="--hold nope=1: expected a coordinate of"):
+        fc.solve(model, trial, dynamics=False, hold=("nope=1",))

@@ -39,7 +39,8 @@ _FORCE_FIELDS = {"appliesForce", "isDisabled", "applied_to_body", "force_express
                  "point_expressed_in_body", "force_identifier", "point_identifier",
                  "torque_identifier", "data_source_name"}
 _SET_FIELDS = {"objects", "groups", "datafile", "external_loads_model_kinematics_file",
-               "lowpass_cutoff_frequency_for_load_kinematics"}
+               "lowpass_cutoff_frequency_for_load_kinematics",
+               "defaults"}  # 2.x/3.x: default objects of each type, which OpenSim ignores
 
 
 @dataclass(frozen=True)

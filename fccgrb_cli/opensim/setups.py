@@ -24,14 +24,16 @@ __all__ = ["CoordinateTask", "IDSetup", "IKSetup", "MarkerTask", "TaskSet", "rea
 # every property of OpenSim 4's tools (and 3.3's), used or not
 _IK_PROPERTIES = {"model_file", "constraint_weight", "accuracy", "IKTaskSet", "marker_file",
                   "coordinate_file", "time_range", "report_errors", "output_motion_file",
-                  "report_marker_locations", "results_directory", "input_directory"}
+                  "report_marker_locations", "results_directory", "input_directory",
+                  "defaults"}  # 2.x/3.x: default objects of each type, which OpenSim ignores
 _ID_PROPERTIES = {"model_file", "time_range", "forces_to_exclude", "external_loads_file",
                   "coordinates_file", "coordinates_in_degrees",
                   "lowpass_cutoff_frequency_for_coordinates", "output_gen_force_file",
                   "joints_to_report_body_forces", "output_body_forces_file",
-                  "results_directory", "input_directory"}
+                  "results_directory", "input_directory", "defaults"}
 _TASK_PROPERTIES = {"apply", "weight", "value_type", "value"}
 VALUE_TYPES = ("default_value", "manual_value", "from_file")
+HOLD_RATIO = 10.0  # a coordinate task this many times the heaviest marker's weight is a hold
 
 
 @dataclass(frozen=True)
@@ -67,6 +69,32 @@ class TaskSet:
     def marker_weights(self) -> dict[str, float]:
         """The markers IK uses (applied, weight above zero) and their weights."""
         return {t.name: t.weight for t in self.markers if t.apply and t.weight > 0}
+
+    def holds(self) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """The coordinate tasks fccgrb keeps, as ``--hold`` items (``NAME=default`` or
+        ``NAME=VALUE`` in the file's unit: degrees for a rotation, metres for a translation),
+        and a note for each it leaves out. A task is kept when its weight dominates the
+        markers' (at least ``HOLD_RATIO`` times the largest marker weight, as OpenSim's
+        examples weigh subtalar and toe angles at 1000 beside markers of 1–20): IK then holds
+        the coordinate at its value to within a fraction of a degree, which fccgrb does
+        exactly. A lighter task (a soft pull towards a value), or one whose value comes from a
+        coordinates file, is left out with a note."""
+        heaviest = max(self.marker_weights().values(), default=1.0)
+        kept, left = [], []
+        for task in self.coordinates:
+            if not task.apply or task.weight <= 0:
+                continue
+            if task.value_type == "from_file":
+                left.append(f"{task.name} (its value from the coordinates file)")
+            elif task.weight < HOLD_RATIO * heaviest:
+                left.append(f"{task.name} (weight {task.weight:g} beside markers' up to "
+                            f"{heaviest:g}: a soft pull, not a hold)")
+            else:
+                value = "default" if task.value is None else f"{task.value:.10g}"
+                kept.append(f"{task.name}={value}")
+        notes = (f"{self.source}: IKCoordinateTask left out: {', '.join(left)}",) if left \
+            else ()
+        return tuple(kept), notes
 
 
 @dataclass(frozen=True)

@@ -57,11 +57,12 @@ class Storage:
     source: str = "<storage>"
 
     def column(self, name: str) -> np.ndarray:
-        """The column ``name`` (rows); an InputError naming the file when it has none."""
-        try:
-            return self.values[:, self.names.index(name)]
-        except ValueError:
-            raise InputError(f"{self.source}: expected a column {name!r}") from None
+        """The column ``name`` (rows); an InputError naming the file when it has none, or more
+        than one (a SIMM motion file repeats its plates' column names: which one is meant?)."""
+        count = self.names.count(name)
+        if count != 1:
+            raise InputError(f"{self.source}: expected one column {name!r}, got {count}")
+        return self.values[:, self.names.index(name)]
 
     def has(self, name: str) -> bool:
         return name in self.names
@@ -109,6 +110,10 @@ def read_storage(path: str | Path, missing: bool = False) -> Storage:
                          f"columns with time, {len(names)}, got {counts['columns']}")
     time = table[:, 0]
     notes = _time_notes(time, source)
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:  # read, and refused where one of them is used
+        notes += (f"{source}: columns named more than once (not usable): "
+                  f"{', '.join(twice)[:200]}",)
     return Storage(tuple(names[1:]), time, table[:, 1:], _in_degrees(header, source),
                    MappingProxyType(header), title, notes, source)
 
@@ -179,10 +184,6 @@ def _names(line: str, number: int, source: str) -> list[str]:
         first = names[0] if names else ""
         raise InputError(f"{source}: line {number}: expected column names starting with "
                          f"'time', got {first!r:.40}")
-    twice = sorted({n for n in names if names.count(n) > 1})
-    if twice:
-        raise InputError(f"{source}: line {number}: expected each column named once, got "
-                         f"{', '.join(twice)[:80]} more than once")
     return names
 
 

@@ -24,7 +24,7 @@ from fccgrb_cli.dynamics.moving import coordinate_inverse, coordinate_rates
 from fccgrb_cli.model import Model
 from fccgrb_cli.model.elements import in_metres
 from fccgrb_cli.opensim.loads import external_loads, read_external_loads
-from fccgrb_cli.opensim.storage import Storage
+from fccgrb_cli.opensim.storage import UNIFORM, Storage
 from fccgrb_cli.pipeline.options import SolveOptions
 from fccgrb_cli.pipeline.run import Run
 from fccgrb_cli.solvers.quality import FLAG_DTYPE
@@ -75,11 +75,10 @@ def coordinates_run(model: Model, coordinates: Storage, options: SolveOptions | 
     if len(coordinates.time) < MIN_ROWS:
         raise InputError(f"{source}: {len(coordinates.time)} rows; the inverse dynamics needs "
                          f"at least {MIN_ROWS} (a quintic spline through them)")
-    if options.filter_cutoff is not None and coordinates.notes:
-        raise InputError(f"{source}: --filter-cutoff: expected evenly spaced times "
-                         f"({'; '.join(coordinates.notes)})")
     theta, notes = _columns(model, coordinates)
     time, said = _on_the_grid(coordinates)
+    if options.filter_cutoff is not None and time is coordinates.time and len(said):
+        raise InputError(f"{source}: --filter-cutoff: expected evenly spaced times ({said[0]})")
     notes += said
     system = compile_system(model, angles="coordinate")
     smooth, rate, acceleration = coordinate_rates(time, theta, options.filter_cutoff)
@@ -177,15 +176,19 @@ def _on_the_grid(coordinates: Storage) -> tuple[np.ndarray, list[str]]:
     """The file's times, or the uniform grid from its first to its last when they lie on it
     but for their printed digits (a file written with 3 decimals at 60 Hz: 0.417, 0.433): a
     spline's accelerations through rounded times carry the rounding divided by the step
-    squared, tens of newtons on a body's weight. Said in a note when used."""
+    squared, tens of newtons on a body's weight. Said in a note either way: times put on the
+    grid, or times that are not uniform (taken as they are)."""
     time = coordinates.time
-    if coordinates.notes or len(time) < 3:  # not uniform: taken as they are
+    if len(time) < 3:
         return time, []
     grid = np.linspace(time[0], time[-1], len(time))
     off = float(np.abs(time - grid).max())
     step = float(grid[1] - grid[0])
     if off <= 1e-4 * step:  # 8 printed decimals at 60 Hz: 5e-9 s, 3e-7 of a step
         return time, []
+    if off > UNIFORM * step:
+        return time, [f"{coordinates.source}: times not evenly spaced (up to {1e3 * off:.3g} ms "
+                      f"from a uniform grid): taken as they are"]
     return grid, [f"{coordinates.source}: times rounded in the file (up to {1e3 * off:.3g} ms "
                   f"from a uniform {1.0 / step:.6g} Hz grid): taken on the grid"]
 

@@ -70,10 +70,10 @@ def setup_inputs(path: str, model: str | None, trials: tuple[str, ...],
     extra = dict(window)
     if not options.tasks and setup.tasks.markers:
         extra["tasks"] = tuple(setup.tasks.marker_weights().items())
-    if setup.tasks.coordinates:
-        notes.append(f"{path}: IKTaskSet: {len(setup.tasks.coordinates)} coordinate task(s) "
-                     "left out (fccgrb tracks the markers; a coordinate is held only where no "
-                     "marker moves it)")
+    holds, said = setup.tasks.holds()
+    if not options.hold and holds:
+        extra["hold"] = holds
+    notes += said
     if setup.output_motion_file is not None:
         notes.append(f"{path}: output_motion_file: write it with fccgrb export RESULTS.h5 "
                      f"--format mot -o {setup.output_motion_file}")

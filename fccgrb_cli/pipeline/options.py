@@ -15,6 +15,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from fccgrb_cli.anatomy.lab_axes import AXES
 from fccgrb_cli.core.bounds import describe_range, in_range
 from fccgrb_cli.core.errors import InputError
@@ -141,8 +143,16 @@ class SolveOptions:
         help="An OpenSim IK task set (an IKTaskSet file, or an IK setup holding one): track "
              "only the markers of its applied IKMarkerTasks of weight above 0, each weighted "
              "by its task's weight times {tracking_weight} (OpenSim's weights are relative); "
-             "its IKCoordinateTasks need an OpenSim model and are not read. In a sweep or the "
+             "its IKCoordinateTasks of dominant weight (10 × the heaviest marker's) hold their "
+             "coordinates ({hold}), lighter ones are left out with a note. In a sweep or the "
              "API: the file, or a list of [marker, weight] pairs.")
+    hold: tuple[str, ...] = _option(
+        (), names=True, metavar="NAME=VALUE",
+        help="Hold coordinates of an imported OpenSim model fixed during the solve "
+             "(comma-separated NAME=VALUE, degrees for a rotation and metres for a "
+             "translation, or NAME=default for the model's default value), as an IK "
+             "coordinate task of dominant weight does; {tasks} with such tasks, or an IK setup, "
+             "gives them.")
     # --- perturbation ----------------------------------------------------------------------
     perturb_mm: float = _option(
         0.0, flag="perturb", unit="mm", low=0.0, high=1000.0, sweep="level",
@@ -267,6 +277,7 @@ class SolveOptions:
                 raise InputError(f"{where}.{key}: expected one of {', '.join(sorted(by_key))}")
             f = by_key[key]
             out[f.name] = _coerce(f.name, value, f.metadata)
+        _task_holds(values.get("tasks"), out)
         try:
             return cls(**out)
         except InputError as error:
@@ -303,6 +314,15 @@ def _coerce(name: str, value: Any, meta: Mapping[str, Any]) -> Any:
     if meta["names"] and isinstance(value, str):
         return tuple(part.strip() for part in value.split(",") if part.strip())
     return value
+
+
+def _task_holds(file: Any, out: dict[str, Any]) -> None:
+    """``--tasks FILE``'s coordinate tasks of dominant weight as ``hold`` items
+    (``TaskSet.holds``), unless holds are given."""
+    if isinstance(file, str) and file.strip() and not out.get("hold"):
+        from fccgrb_cli.opensim.setups import read_task_set
+
+        out["hold"] = read_task_set(file.strip()).holds()[0]
 
 
 def _tasks(value: Any) -> tuple[tuple[str, float], ...]:
@@ -429,6 +449,7 @@ def from_cli(values: Mapping[str, Any]) -> SolveOptions:
         elif isinstance(f.default, tuple):
             value = _coerce(f.name, value or "", f.metadata)
         out[f.name] = value
+    _task_holds(values.get("tasks"), out)
     try:
         return SolveOptions(**out)
     except InputError as error:  # named as the command line spells it: --name, not name
@@ -501,6 +522,44 @@ def _weighted(model: Model, options: SolveOptions) -> Model:
     return replace(model, tracked_points=points)
 
 
+def _held(model: Model, items: tuple[str, ...]) -> Model:
+    """The model with each ``--hold`` coordinate fixed (a coupling to a constant)."""
+    from fccgrb_cli.model.elements import in_metres
+    from fccgrb_cli.model.observed import Fixed
+    from fccgrb_cli.model.spatial import Coupling
+
+    if not model.moving_joints:
+        raise InputError(f"--hold: {model.source}: expected an imported OpenSim model (a YAML "
+                         "model's angles are held by its drivers)")
+    coordinates = {c.name: c for c in model.angles}
+    held = []
+    for item in items:
+        name, _, text = item.partition("=")
+        coordinate = coordinates.get(name.strip())
+        if coordinate is None:
+            raise InputError(f"--hold {item}: expected a coordinate of {model.source} "
+                             f"({', '.join(coordinates)[:200]})")
+        text = text.strip()
+        if text == "default":
+            value = coordinate.default
+        else:
+            try:
+                value = float(text)
+            except ValueError:
+                raise InputError(f"--hold {item}: expected NAME=VALUE (degrees or metres) or "
+                                 "NAME=default") from None
+            if not np.isfinite(value):
+                raise InputError(f"--hold {item}: expected a finite value")
+            value = value if in_metres(coordinate) else float(np.radians(value))
+        held.append(Coupling(f"{coordinate.name} held", coordinate.name, None, Fixed(value)))
+    taken = {c.dependent for c in model.couplings}
+    twice = [c.dependent for c in held if c.dependent in taken]
+    if twice:
+        raise InputError(f"--hold: {', '.join(twice)}: expected a coordinate the model does "
+                         "not already lock or couple")
+    return replace(model, couplings=model.couplings + tuple(held))
+
+
 def prepared(model: Model, options: SolveOptions) -> Model:
     """The model as the options ask: every body in one form, only some markers tracked (and
     weighted, ``--tasks``), the force plates on the bodies ``--plate`` names."""
@@ -514,6 +573,8 @@ def prepared(model: Model, options: SolveOptions) -> Model:
         model = model.with_tracked(options.track)
     if options.tasks:
         model = _weighted(model, options)
+    if options.hold:
+        model = _held(model, options.hold)
     if options.plates:
         from fccgrb_cli.opensim.plates import assigned
 

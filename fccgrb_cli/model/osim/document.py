@@ -400,11 +400,30 @@ def _coordinates_of(r: _Reader, element: ET.Element, parents: list[ET.Element]
     if holder is None:
         return []
     plan = STANDARD_JOINTS.get(element.tag, ())
+    drives = _custom_motions(element)
     out = []
     for k, c in enumerate(holder.findall("Coordinate")):
-        default = plan[k][0] + "al" if k < len(plan) else "rotational"
+        default = plan[k][0] + "al" if k < len(plan) else drives.get(_name(c), "rotational")
         out.append(_coordinate(r, c, inside, _name(element), default))
     return out
+
+
+def _custom_motions(joint: ET.Element) -> dict[str, str]:
+    """A CustomJoint's coordinates' motion types as OpenSim 4 derives them (a 4.x Coordinate
+    states none): rotational when the coordinate drives a rotation axis of the
+    SpatialTransform, translational when it drives translation axes only (``pelvis_tx`` of a
+    planar gait model), coupled when it drives both. An explicit ``motion_type`` (3.x) wins."""
+    transform = joint.find("SpatialTransform")
+    if transform is None:
+        return {}
+    kinds: dict[str, set[str]] = {}
+    for axis in transform.findall("TransformAxis"):
+        kind = "rotation" if _name(axis).startswith("rotation") else "translation"
+        for coordinate in (axis.findtext("coordinates") or "").split():
+            kinds.setdefault(coordinate, set()).add(kind)
+    return {name: "coupled" if len(found) > 1 else
+            ("rotational" if "rotation" in found else "translational")
+            for name, found in kinds.items()}
 
 
 def _check_reverse(r: _Reader, element: ET.Element, parents: list[ET.Element]) -> None:
