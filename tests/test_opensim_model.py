@@ -237,3 +237,24 @@ def test_a_4x_coordinates_motion_comes_from_the_transform_it_drives():
     assert kinds == {c.name: c.translational for c in stated.angles}
     assert kinds["tx"] and kinds["ty"] and kinds["tz"] and not kinds["rx"] and \
         not kinds["knee"]
+
+
+def test_a_clamped_coordinate_outside_its_range_flags_its_frames():
+    """OpenSim's IK keeps a clamped coordinate inside its range; a solve that lands outside it
+    by more than 1° (another branch, swapped markers) has its frames flagged, naming the
+    coordinate; inside it, or within the margin, nothing is."""
+    import numpy as np
+
+    from fccgrb_cli.model.osim.convert import parse_osim_model
+    from fccgrb_cli.pipeline.assessment import clamped_range
+    from tests.osim_text import knee_model
+
+    text = knee_model().replace("<clamped>false</clamped>", "<clamped>true</clamped>", 1)
+    model = parse_osim_model(text, "knee.osim")
+    index = [k for k, a in enumerate(model.angles) if a.clamped]
+    assert [model.angles[k].name for k in index] == ["rx"]  # the first coordinate: range ±3
+    theta = np.zeros((4, len(model.angles)))
+    theta[:, index[0]] = [0.0, 3.0 + np.radians(0.5), 3.0 + np.radians(2.0), -3.5]
+    found = clamped_range(model, theta, index)
+    assert found.frames.tolist() == [False, False, True, True]
+    assert "rx" in found.detail and "outside its range" in found.detail

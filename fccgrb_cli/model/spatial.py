@@ -181,6 +181,7 @@ class JointCoordinate:
     translational: bool
     default: float
     range: tuple[float, float]
+    clamped: bool = False  # OpenSim keeps its IK inside ``range``; fccgrb flags frames outside
     motion: None = None
     clinical_sign: None = None
     clinical_range: None = None

@@ -24,6 +24,7 @@ from fccgrb_cli.dynamics.convert import Dynamics
 from fccgrb_cli.gait.analysis import FoundEvents
 from fccgrb_cli.gait.events import Events, side_of
 from fccgrb_cli.model import Model
+from fccgrb_cli.model.elements import in_metres
 from fccgrb_cli.pipeline.options import SolveOptions
 from fccgrb_cli.signals.butterworth import NOISE_BAND_HZ, noise_share
 from fccgrb_cli.solvers.conditioning import conditioning
@@ -79,6 +80,23 @@ def calibration_finding(model: Model, n: int, synthesized: bool) -> Finding:
     return Finding(np.zeros(n, dtype=bool))
 
 
+CLAMP_MARGIN = 1.0  # ° or mm beyond a clamped coordinate's range before a frame is flagged
+
+
+def clamped_range(model: Model, theta: np.ndarray, clamped: list[int]) -> Finding:
+    """Frames where an imported coordinate OpenSim clamps (``clamped``: its IK keeps it inside
+    its range) lies more than ``CLAMP_MARGIN`` (° or mm) outside that range: the solve found
+    another branch (an arm turned over, a mirrored elbow) or the markers are swapped, and the
+    answer is not the one OpenSim gives."""
+    scale = [1e3 if in_metres(model.angles[k]) else np.degrees(1.0) for k in clamped]
+    values = np.column_stack([theta[:, k] * f for k, f in zip(clamped, scale, strict=True)])
+    ranges = tuple((model.angles[k].range[0] * f, model.angles[k].range[1] * f)
+                   for k, f in zip(clamped, scale, strict=True))
+    units = tuple("mm" if in_metres(model.angles[k]) else "°" for k in clamped)
+    return out_of_range(values, tuple(model.angles[k].name for k in clamped), ranges,
+                        CLAMP_MARGIN, units)
+
+
 def kinematic_findings(model: Model, result: KinematicResult, fit: np.ndarray,
                        options: SolveOptions, synthesized: bool, recorded_m: float = 0.0
                        ) -> dict[int, Finding]:
@@ -103,6 +121,9 @@ def kinematic_findings(model: Model, result: KinematicResult, fit: np.ndarray,
         found[ANGLE_RANGE] = out_of_range(values, tuple(model.angles[k].name for k in clinical),
                                           tuple(model.angles[k].clinical_range
                                                 for k in clinical))
+    clamped = [k for k, a in enumerate(model.angles) if getattr(a, "clamped", False)]
+    if clamped and not clinical:
+        found[ANGLE_RANGE] = clamped_range(model, result.theta, clamped)
     half = np.array([a.kind == "angle" and not a.full for a in model.angles], dtype=bool)
     found[SINGULAR], found[BRANCH] = flat_or_mirrored(result.theta, result.angle_names, half)
     found[CALIBRATION] = calibration_finding(model, n, synthesized)

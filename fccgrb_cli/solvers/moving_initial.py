@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fccgrb_cli.model import GROUND
 from fccgrb_cli.solvers.newton import linear_solve
 from fccgrb_cli.system import System
 from fccgrb_cli.system.moving_pose import pose_from_coordinates
@@ -55,8 +56,43 @@ def moving_initial_guess(system: System, targets: np.ndarray) -> np.ndarray:
         follow = linear_solve(J[np.ix_(top, others)], -J[np.ix_(top, nb + free)])
         return J[np.ix_(tracked, others)] @ follow
 
-    start = functions.defaults[free]
+    low, high = _bounds(model, free)
+    start = np.clip(functions.defaults[free], low, high)
     if not which or not len(free):
         return pose_from_coordinates(system, coordinates(start))
-    fit = least_squares(misfit, start, jac=jacobian, method="trf", max_nfev=100 * len(start))
+    root = _root_coordinates(model, free)
+    if 0 < len(root) < len(free):  # the base first: the limbs then start near their markers
+        def misfit_root(values: np.ndarray) -> np.ndarray:
+            full = start.copy()
+            full[root] = values
+            return misfit(full)
+
+        def jacobian_root(values: np.ndarray) -> np.ndarray:
+            full = start.copy()
+            full[root] = values
+            return jacobian(full)[:, root]
+
+        placed = least_squares(misfit_root, start[root], jac=jacobian_root, method="trf",
+                               bounds=(low[root], high[root]), max_nfev=100 * len(root))
+        start = start.copy()
+        start[root] = placed.x
+    fit = least_squares(misfit, start, jac=jacobian, method="trf", bounds=(low, high),
+                        max_nfev=100 * len(start))
     return pose_from_coordinates(system, coordinates(fit.x))
+
+
+def _bounds(model, free: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each free coordinate's range where OpenSim clamps it (its IK keeps it inside, which
+    also keeps a limb off its mirrored branch: an arm turned over, an elbow bent backwards),
+    else unbounded."""
+    angles = [model.angles[k] for k in free]
+    low = np.array([a.range[0] if getattr(a, "clamped", False) else -np.inf for a in angles])
+    high = np.array([a.range[1] if getattr(a, "clamped", False) else np.inf for a in angles])
+    return low, high
+
+
+def _root_coordinates(model, free: np.ndarray) -> np.ndarray:
+    """Positions in ``free`` of the coordinates of the joints on the ground (the base)."""
+    names = {c for joint in model.moving_joints if joint.parent == GROUND
+             for c in joint.transform.coordinates}
+    return np.array([i for i, k in enumerate(free) if model.angles[k].name in names], dtype=int)

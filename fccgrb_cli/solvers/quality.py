@@ -222,9 +222,11 @@ def poor_fit(distances: np.ndarray, labels: tuple[str, ...], added_m: float = 0.
 
 
 def out_of_range(clinical: np.ndarray, names: tuple[str, ...],
-                 ranges: tuple[tuple[float, float] | None, ...]) -> Finding:
+                 ranges: tuple[tuple[float, float] | None, ...], margin: float = 0.0,
+                 units: tuple[str, ...] | None = None) -> Finding:
     """Frames where a clinical angle (frames × angles, deg) leaves its range (deg; None: not
-    checked); the explanation names the angle furthest outside and its values."""
+    checked) by more than ``margin``; the explanation names the angle furthest outside and its
+    values (``units`` per angle: '°' by default, 'mm' for a translation)."""
     bad = np.zeros(len(clinical), dtype=bool)
     worst, detail = 0.0, ""
     for k, extent in enumerate(ranges):
@@ -232,16 +234,17 @@ def out_of_range(clinical: np.ndarray, names: tuple[str, ...],
             continue
         low, high = extent
         values = clinical[:, k]
-        outside = np.isfinite(values) & ((values < low) | (values > high))
+        outside = np.isfinite(values) & ((values < low - margin) | (values > high + margin))
         if not outside.any():
             continue
         bad |= outside
         excess = float(np.max(np.maximum(low - values[outside], values[outside] - high)))
         if excess > worst:
             worst = excess
+            unit = "°" if units is None else units[k]
             detail = (f"{names[k]} reaches {np.nanmin(values[outside]):.4g}…"
-                      f"{np.nanmax(values[outside]):.4g}° on {int(outside.sum())} frames, "
-                      f"outside its range {low:g}…{high:g}°")
+                      f"{np.nanmax(values[outside]):.4g}{unit} on {int(outside.sum())} frames, "
+                      f"outside its range {low:.4g}…{high:.4g}{unit}")
     return Finding(bad, detail)
 
 

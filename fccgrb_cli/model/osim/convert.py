@@ -150,7 +150,7 @@ def model_from_osim(osim: OsimModel, text: str = "") -> Model:
         bodies=tuple(bodies),
         joints=(),
         angles=tuple(JointCoordinate(c.name, c.motion == "translational", defaults[c.name],
-                                     c.range) for c in osim.coordinates),
+                                     c.range, c.clamped) for c in osim.coordinates),
         tracked_points=tuple(TrackedPoint(m.body, m.name, m.name) for m in osim.markers
                              if m.body != GROUND),
         source=osim.source,
