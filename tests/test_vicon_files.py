@@ -135,6 +135,31 @@ def test_nexus_walking_angles_match_vicons(nexus_run):
         assert rms[0] <= 1.0 and rms[1] <= 2.0 and rms[2] <= 2.0, (name, rms)
 
 
+@needs_nexus
+def test_nexus_calibration_writes_plug_in_gaits_inertia(nexus_run):
+    """The personalized model's segment inertia is Plug-in Gait's table for the 74 kg subject:
+    thigh, shank and foot 10 %, 4.65 %, 1.45 % of the body mass, centres of mass 0.567 of the
+    way from the distal end (knee, ankle, toe marker) to the proximal joint centre (0.5 for the
+    foot), radii of gyration 0.540, 0.528, 0.690 of that length about the transverse axes and
+    nothing about the long one; the pelvis 14.2 %."""
+    model, _, _, _, _ = nexus_run
+    bodies = model["bodies"]
+    assert bodies["pelvis"]["mass"] == pytest.approx(0.142 * 74.0, rel=1e-5)
+    for name, ends, (fraction, com, gyration) in (
+            ("thigh_l", ("KJC", "HJC"), (0.1, 0.567, 0.540)),
+            ("shank_r", ("AJC", "KJC"), (0.0465, 0.567, 0.528)),
+            ("foot_l", ("LTOE", "AJC"), (0.0145, 0.5, 0.690))):
+        body = bodies[name]
+        distal, proximal = (np.array(body["points"][k]) for k in ends)
+        length = np.linalg.norm(proximal - distal)
+        assert body["mass"] == pytest.approx(fraction * 74.0, rel=1e-5), name
+        np.testing.assert_allclose(body["com"], distal + com * (proximal - distal), atol=1e-5)
+        moments, axes = np.linalg.eigh(np.array(body["inertia"]))
+        expected = fraction * 74.0 * (gyration * length) ** 2
+        np.testing.assert_allclose(moments, [0.0, expected, expected], rtol=1e-5, atol=1e-9)
+        assert abs(axes[:, 0] @ (proximal - distal)) / length == pytest.approx(1.0, abs=1e-6)
+
+
 def kinetics_rms(run, theirs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """RMS difference of every moment (X, Y, Z; N·mm/kg) and power (Z; W/kg) the run stores
     to Vicon's of the same name, over the frames where Vicon wrote it."""
