@@ -247,16 +247,16 @@ def _inertia(mass: float | None, points: dict[str, dict], toes: dict[str, np.nda
              ) -> dict[str, dict]:
     """Plug-in Gait's segment inertia (``PIG_SEGMENTS``, ``PIG_PELVIS``) from the body mass and
     the static's joint centres (local ``points``) and toe markers (``toes``, local to each
-    foot): thigh from the knee centre
-    (distal) to the hip centre, shank from the ankle centre to the knee centre, foot from the
-    toe marker to the ankle centre; each centre of mass on that line, each tensor about it
+    foot): thigh from the knee centre (distal) to the hip centre, shank from the ankle centre
+    to the knee centre, foot from the toe marker to the ankle centre; each centre of mass on
+    that line, each tensor about it
     m (k L)² (1 − e eᵀ) with e the unit line (in the body's axes: the corrected foot's long axis
     is the heel-to-toe line, not the ankle-to-toe one). None without a body mass."""
     if mass is None:
         return {}
     out = {}
+    ends = {"thigh": ("KJC", "HJC"), "shank": ("AJC", "KJC"), "foot": (None, "AJC")}
     for s in SIDES:
-        ends = {"thigh": ("KJC", "HJC"), "shank": ("AJC", "KJC"), "foot": (None, "AJC")}
         for segment, (distal, proximal) in ends.items():
             name = f"{segment}_{s}"
             fraction, com_from_distal, gyration = PIG_SEGMENTS[segment]
