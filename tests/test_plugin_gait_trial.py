@@ -89,24 +89,31 @@ def test_walking_angles_match_vicons(solved):
         assert rms[1] <= 2.0 and rms[2] <= 2.0, (name, rms)
 
 
-def test_walking_kinetics_in_plugin_gaits_units(solved):
-    """Moments in N·mm/kg and powers in W/kg: the same order of magnitude and shape as Vicon's
-    over the frames where both have them (correlation ≥ 0.85 in each joint's main component,
-    peaks within a factor of 2; measured: r 0.91–1.00, peaks 0.56–1.12 of Vicon's, the
-    inertia, filtering and plate processing differ, so no closer agreement is asked; N·m/kg for
-    N·mm/kg would be 1000 times off)."""
+# Per joint: RMS bounds for X, Y, Z (N·mm/kg) and the power (W/kg), over both sides
+# (measured, worst side: hip 24 / 11.3 / 3.4 and 0.052, knee 11.1 / 13.3 / 3.8 and 0.054,
+# ankle 7.1 / 7.0 / 4.3 and 0.037).
+KINETICS = {"Hip": (28.0, 13.0, 5.0, 0.06), "Knee": (13.0, 15.0, 5.0, 0.06),
+            "Ankle": (9.0, 8.0, 5.0, 0.045)}
+
+
+def test_walking_kinetics_match_vicons(solved):
+    """Moments in N·mm/kg and powers in W/kg beside Vicon's, both sides, over the frames where
+    Vicon wrote them, within ``KINETICS`` (with de Leva's inertia in place of Plug-in Gait's the
+    hip's X was 72 and its power 0.16; N·m/kg for N·mm/kg would be 1000 times off)."""
     _, run = solved
     points, _ = vicon(WALK)
     pig = run.plugin_gait
+    assert len(pig.moments) == len(pig.powers) == 6
     for name, ours in {**pig.moments, **pig.powers}.items():
         theirs = points[name]
         ok = np.isfinite(ours).all(axis=1) & np.isfinite(theirs).all(axis=1) \
             & np.any(theirs != 0, axis=1)
-        k = 2 if name.endswith("Power") else 0
-        r = np.corrcoef(ours[ok, k], theirs[ok, k])[0, 1]
-        assert r >= 0.85, (name, r)
-        peak = np.abs(theirs[ok, k]).max()
-        assert 0.5 * peak <= np.abs(ours[ok, k]).max() <= 2.0 * peak, name
+        rms = np.sqrt(np.mean((ours[ok] - theirs[ok]) ** 2, axis=0))
+        *moment, power = KINETICS[next(j for j in KINETICS if j in name)]
+        if name.endswith("Power"):
+            assert rms[2] <= power, (name, rms)
+        else:
+            assert np.all(rms <= moment), (name, rms)
 
 
 def test_plugin_gait_c3d_export_reads_back_in_plugin_gaits_layout(solved, tmp_path):

@@ -18,7 +18,6 @@ from dataclasses import dataclass, replace
 import numpy as np
 import yaml
 
-from fccgrb_cli.anatomy.anthropometry import SEGMENTS, segment_inertia
 from fccgrb_cli.anatomy.calibrate import write_segments
 from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model import Model
@@ -33,7 +32,17 @@ LANDMARKS = ("right_asis", "left_asis", "sacrum", *(
 BODIES = ("pelvis", *(f"{seg}_{s}" for s in SIDES for seg in ("thigh", "shank", "foot")))
 REQUIRED = ("leg_length", "knee_width", "ankle_width")
 MARKER_DIAMETER = 0.014  # Plug-in Gait's default where the subject's parameters give none (m)
-PELVIS_LENGTH_PER_WIDTH = 0.6  # as anatomy/calibrate.py: de Leva's lower trunk over ASIS width
+# Plug-in Gait's kinetic segments (Vicon, Plug-in Gait Reference Guide, "Kinetic modeling"; the
+# same numbers in pyCGM2's Bsp table, after Dempster 1955): mass as a fraction of body mass,
+# centre of mass as the fraction of the segment's length from its distal end towards its
+# proximal one, radius of gyration as a fraction of the length (about the two transverse axes,
+# none about the long axis).
+PIG_SEGMENTS = {"thigh": (0.1, 0.567, 0.540), "shank": (0.0465, 0.567, 0.528),
+                "foot": (0.0145, 0.5, 0.690)}
+# The pelvis: 14.2 % of body mass, length 0.925 × the distance between the hip centres (mid-hip
+# to the top of L5), its centre of mass 0.895 of the way from mid-hip along the pelvis's up axis,
+# radius of gyration 0.31 of the length about all three axes (Vicon's table; pyCGM2, cgm.py).
+PIG_PELVIS = (0.142, 0.925, 0.895, 0.31)
 
 
 @dataclass(frozen=True)
@@ -200,7 +209,7 @@ def calibrate_plugin_gait(model: Model, trial: Trial, measured: SubjectMeasureme
     points: dict[str, dict] = {b: {} for b in BODIES}
     vectors: dict[str, dict] = {b: {} for b in BODIES}
     lengths: dict[str, float] = {}
-    foot_ends: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    toes: dict[str, np.ndarray] = {}
     for s, side in SIDES.items():
         thigh, shank, foot = seg[f"thigh_{s}"], seg[f"shank_{s}"], seg[f"foot_{s}"]
         points["pelvis"][f"HJC_{s}"] = geometry[s].hip
@@ -211,7 +220,7 @@ def calibrate_plugin_gait(model: Model, trial: Trial, measured: SubjectMeasureme
         turn = pg.offset_rotation(*offsets[s])  # corrected axes in the uncorrected foot's
         vectors[f"foot_{s}"].update(uncorrected_u=turn[0], uncorrected_v=turn[1])
         heel, toe = foot.mean_local(lm[f"{side}_heel"]), foot.mean_local(lm[f"{side}_toe"])
-        foot_ends[s] = (heel, toe)
+        toes[s] = toe
         lengths.update({f"thigh_{s}": float(np.linalg.norm(knee)),
                         f"shank_{s}": float(np.linalg.norm(ankle)),
                         f"foot_{s}": float(np.linalg.norm(toe - heel))})
@@ -219,7 +228,7 @@ def calibrate_plugin_gait(model: Model, trial: Trial, measured: SubjectMeasureme
         if tp.body in seg:
             points[tp.body][tp.point] = seg[tp.body].mean_local(
                 _marker(trial, tp.marker, window, f"{model.source} tracking.points", mapping))
-    inertia = _inertia(m.body_mass, points, lengths, foot_ends, m.inter_asis_distance)
+    inertia = _inertia(m.body_mass, points, toes)
     write_segments(doc, BODIES, seg, points, vectors, inertia)
     angle_scale = np.pi / 180.0 if (doc.get("units") or {}).get("angle", "deg") == "deg" \
         else 1.0
@@ -227,39 +236,44 @@ def calibrate_plugin_gait(model: Model, trial: Trial, measured: SubjectMeasureme
     header = (f"# {doc.get('name', 'model')} personalized by `fccgrb calibrate` from "
               f"{trial.path}, frame indices {start}:{stop}\n# from the template {model.source}: "
               "Plug-in Gait's segments (Davis hip centres, chord knee and ankle centres, "
-              f"{'foot flat' if options.foot_flat else 'foot not flat'}); inertia: de Leva "
-              f"(1996){'' if m.body_mass is not None else ' (not computed: no body mass)'}.\n"
+              f"{'foot flat' if options.foot_flat else 'foot not flat'}); inertia: Plug-in "
+              f"Gait's{'' if m.body_mass is not None else ' (not computed: no body mass)'}.\n"
               + "".join(f"# {note}\n" for note in notes))
     text = header + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=100)
     return PigCalibration(text, (start, stop), m, notes, lengths, tuple(warnings))
 
 
-def _inertia(mass: float | None, points: dict[str, dict], lengths: dict[str, float],
-             foot_ends: dict[str, tuple[np.ndarray, np.ndarray]], inter_asis: float
+def _inertia(mass: float | None, points: dict[str, dict], toes: dict[str, np.ndarray]
              ) -> dict[str, dict]:
-    """de Leva (1996) segment inertia (as anatomy/calibrate.py) from the body mass and the
-    measured lengths: thigh hip → knee centre, shank knee → ankle centre, foot heel → toe
-    marker (``foot_ends``: their local positions); the pelvis's from 0.6 × the inter-ASIS
-    distance, its centre of mass mid-hip."""
+    """Plug-in Gait's segment inertia (``PIG_SEGMENTS``, ``PIG_PELVIS``) from the body mass and
+    the static's joint centres (local ``points``) and toe markers (``toes``, local to each
+    foot): thigh from the knee centre (distal) to the hip centre, shank from the ankle centre
+    to the knee centre, foot from the toe marker to the ankle centre; each centre of mass on
+    that line, each tensor about it
+    m (k L)² (1 − e eᵀ) with e the unit line (in the body's axes: the corrected foot's long axis
+    is the heel-to-toe line, not the ankle-to-toe one). None without a body mass."""
     if mass is None:
         return {}
     out = {}
+    ends = {"thigh": ("KJC", "HJC"), "shank": ("AJC", "KJC"), "foot": (None, "AJC")}
     for s in SIDES:
-        for name, end, start, long_axis in (
-                (f"thigh_{s}", points[f"thigh_{s}"]["KJC"], np.zeros(3), 1),
-                (f"shank_{s}", points[f"shank_{s}"]["AJC"], np.zeros(3), 1)):
-            segment = name.split("_")[0]
-            m, moments = segment_inertia(segment, mass, lengths[name], long_axis)
+        for segment, (distal, proximal) in ends.items():
+            name = f"{segment}_{s}"
+            fraction, com_from_distal, gyration = PIG_SEGMENTS[segment]
+            low = toes[s] if distal is None else np.asarray(points[name][distal])
+            high = np.asarray(points[name][proximal])
+            length = float(np.linalg.norm(high - low))
+            e = (high - low) / length
+            m = fraction * mass
+            tensor = m * (gyration * length) ** 2 * (np.eye(3) - np.outer(e, e))
             out[name] = {"mass": float(f"{m:.6g}"),
-                         "com": _round(start + SEGMENTS[segment].com * end, 5),
-                         "inertia": _round(moments, 7)}
-        m, moments = segment_inertia("foot", mass, lengths[f"foot_{s}"], 0)
-        heel, toe = foot_ends[s]
-        out[f"foot_{s}"] = {"mass": float(f"{m:.6g}"),
-                            "com": _round(heel + SEGMENTS["foot"].com * (toe - heel), 5),
-                            "inertia": _round(moments, 7)}
-    m, moments = segment_inertia("pelvis", mass, PELVIS_LENGTH_PER_WIDTH * inter_asis)
-    com = 0.5 * (points["pelvis"]["HJC_r"] + points["pelvis"]["HJC_l"])
+                         "com": _round(low + com_from_distal * (high - low), 5),
+                         "inertia": [_round(row, 12) for row in tensor]}
+    fraction, per_hip_width, com_fraction, gyration = PIG_PELVIS
+    right, left = np.asarray(points["pelvis"]["HJC_r"]), np.asarray(points["pelvis"]["HJC_l"])
+    length = per_hip_width * float(np.linalg.norm(left - right))
+    m = fraction * mass
+    com = 0.5 * (right + left) + com_fraction * length * np.array([0.0, 1.0, 0.0])
     out["pelvis"] = {"mass": float(f"{m:.6g}"), "com": _round(com, 5),
-                     "inertia": _round(moments, 7)}
+                     "inertia": _round(np.full(3, m * (gyration * length) ** 2), 7)}
     return out

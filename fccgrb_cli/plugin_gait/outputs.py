@@ -19,7 +19,11 @@ from fccgrb_cli.plugin_gait.kinetics import leg_kinetics, segment_motion
 from fccgrb_cli.system.layout import build_layout
 
 UNITS = {"angles": "deg", "moments": "N.mm/kg", "powers": "W/kg"}
-JOINT_POINTS = {"hip": ("thigh", "HJC"), "knee": ("shank", "KJC"), "ankle": ("foot", "AJC")}
+# Each joint centre's body and point. Plug-in Gait's knee centre is the chord point built from
+# the thigh's markers, and its tibia starts there every frame (its length follows the skin); here
+# that point is the thigh's KJC, which the knee's slide keeps on the tibia's long axis (the
+# shank's KJC is where the static put the tibia's origin, millimetres away along that axis).
+JOINT_POINTS = {"hip": ("thigh", "HJC"), "knee": ("thigh", "KJC"), "ankle": ("foot", "AJC")}
 
 
 @dataclass(frozen=True)
