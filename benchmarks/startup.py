@@ -1,12 +1,18 @@
 """Wall time of whole commands, start-up included: the README's first solve (the bundled
-five-bar sample, P30, NRM-WLS, inverse dynamics, HDF5 out) and ``fccgrb --help``, each the best
-of ``--repeat`` fresh processes (what ``/usr/bin/time -f %e`` reports), then where a solve's time
-goes: the interpreter and the imports (``python -X importtime``, heaviest top-level modules)
-and the steps of one in-process solve.
+five-bar sample, P30, NRM-WLS, inverse dynamics, HDF5 out), the same with ``--engine numpy``
+(what loading numba and its compiled kernels costs against the numpy engine's slower frames),
+the docs' gait solve (the shared Qualisys walking trial, 340 frames, the lower-limb template
+calibrated as docs/gait.md does, with the dynamics; skipped without ``../shared/data``) and
+``fccgrb --help``, each the best of ``--repeat`` fresh processes (what ``/usr/bin/time -f %e``
+reports) with its CPU time (user + system, which suffers less from other work on the machine),
+then where a solve's time goes: the interpreter and the imports of each whole command
+(``python -X importtime``: the sum over top-level imports, and the heaviest of other packages
+and of the command's own top-level modules) and the steps of one in-process solve.
 
     python benchmarks/startup.py [--repeat 5]
 
-Run it on a quiet machine: the figures are wall clock. Speed goals live here, never in tests.
+Run it on a quiet machine: the figures are wall clock (the load average is printed before and
+after). Speed goals live here, never in tests.
 """
 
 from __future__ import annotations
@@ -24,7 +30,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 SOLVE = ["solve", str(ROOT / "configs" / "models" / "five_bar.yaml"),
          str(ROOT / "sample_data" / "five_bar.c3d"), "--perturb", "30"]
-IMPORTS_ONLY = "import fccgrb_cli.cli.main, fccgrb_cli.pipeline.solve, fccgrb_cli.results.storage"
+GAIT_TRIAL = ROOT.parent / "shared" / "data" / "c3d" / "Qualisys.c3d"
+CALIBRATE = ["calibrate", str(ROOT / "configs" / "models" / "lower_limb.yaml"), str(GAIT_TRIAL),
+             "--mass", "67", "-o", "personal.yaml"]
+GAIT = ["solve", "personal.yaml", str(GAIT_TRIAL), "--method", "nrm-wls", "--filter-cutoff", "6"]
+ENTRY = "import sys; from fccgrb_cli.cli.main import main; sys.exit(main())"
 
 
 def command() -> list[str]:
@@ -34,44 +44,60 @@ def command() -> list[str]:
     if script.exists():
         return [str(script)]
     found = shutil.which("fccgrb")
-    return [found] if found else [sys.executable, "-c",
-                                  "import sys; from fccgrb_cli.cli.main import main; "
-                                  "sys.exit(main())"]
+    return [found] if found else [sys.executable, "-c", ENTRY]
 
 
-def best_wall(args: list[str], repeat: int, cwd: Path) -> float:
-    """Best wall time (s) of ``repeat`` runs of ``args``; a failing run stops the benchmark."""
-    best = float("inf")
-    for _ in range(repeat):
-        for stale in cwd.glob("*.h5"):
-            stale.unlink()
+def importtime_command(script: list[str]) -> list[str]:
+    """``script`` (from :func:`command`) run by this interpreter with ``-X importtime``."""
+    body = script[1:] if script[0] == sys.executable else script[:1]
+    return [sys.executable, "-X", "importtime", *body]
+
+
+def run(args: list[str], cwd: Path) -> tuple[float, float, str]:
+    """Wall and CPU (user + system) seconds of one run of ``args``, and its stderr; a failing
+    run stops the benchmark."""
+    for stale in cwd.glob("*.h5"):
+        stale.unlink()
+    with tempfile.TemporaryFile("w+") as err:
         started = time.perf_counter()
-        done = subprocess.run(args, cwd=cwd, capture_output=True, text=True)
-        elapsed = time.perf_counter() - started
-        if done.returncode:
-            sys.exit(f"{' '.join(args)} failed:\n{done.stderr}")
-        best = min(best, elapsed)
-    return best
+        child = subprocess.Popen(args, cwd=cwd, stdout=subprocess.DEVNULL, stderr=err)
+        _, status, usage = os.wait4(child.pid, 0)
+        wall = time.perf_counter() - started
+        child.returncode = os.waitstatus_to_exitcode(status)
+        err.seek(0)
+        text = err.read()
+    if child.returncode:
+        sys.exit(f"{' '.join(args)} failed:\n{text}")
+    return wall, usage.ru_utime + usage.ru_stime, text
 
 
-def heaviest_imports(code: str, count: int = 8) -> tuple[float, list[tuple[float, str]]]:
-    """Total import time (s) of ``code`` in a fresh interpreter and its heaviest imports of other
-    packages (those imported from the package's own modules or from the top), from
-    ``-X importtime`` (which adds its own overhead)."""
-    done = subprocess.run([sys.executable, "-X", "importtime", "-c", code], capture_output=True,
-                          text=True, check=True)
+def best(args: list[str], repeat: int, cwd: Path) -> tuple[float, float]:
+    """Best wall and best CPU seconds over ``repeat`` fresh processes of ``args``."""
+    times = [run(args, cwd)[:2] for _ in range(repeat)]
+    return min(wall for wall, _ in times), min(cpu for _, cpu in times)
+
+
+def import_profile(args: list[str], cwd: Path, count: int = 8
+                   ) -> tuple[float, list[tuple[float, str]], list[tuple[float, str]]]:
+    """For one run of ``args`` under ``-X importtime`` (which adds its own overhead): the sum of
+    its top-level imports' cumulative seconds, its heaviest imports of other packages (those
+    imported from the package's own modules or from the top) and its heaviest top-level
+    imports of the package's own modules."""
+    _, _, err = run(args, cwd)
     rows = []  # (depth, cumulative s, module), children listed before their parent
-    for line in done.stderr.splitlines():
+    for line in err.splitlines():
         match = re.match(r"import time:\s+\d+ \|\s+(\d+) \| ( *)(\S+)", line)
         if match:
             rows.append((len(match.group(2)) // 2, int(match.group(1)) / 1e6, match.group(3)))
     total = sum(seconds for depth, seconds, _ in rows if depth == 0)
-    entry_points = []
+    others, own = [], []
     for k, (depth, seconds, name) in enumerate(rows):
         parent = next((n for d, _, n in rows[k + 1:] if d == depth - 1), "")
         if not name.startswith("fccgrb_cli") and (not depth or parent.startswith("fccgrb_cli")):
-            entry_points.append((seconds, name))
-    return total, sorted(entry_points, reverse=True)[:count]
+            others.append((seconds, name))
+        elif name.startswith("fccgrb_cli") and not depth:
+            own.append((seconds, name))
+    return total, sorted(others, reverse=True)[:count], sorted(own, reverse=True)[:count]
 
 
 def solve_steps() -> list[tuple[str, float]]:
@@ -113,22 +139,32 @@ def main() -> None:
     args = parser.parse_args()
     fccgrb = command()
     env_note = "" if os.environ.get("OPENBLAS_NUM_THREADS") is None else " (BLAS threads set)"
+    load = os.getloadavg()
     with tempfile.TemporaryDirectory() as folder:
         cwd = Path(folder)
-        solve = best_wall([*fccgrb, *SOLVE, "-o", "results.h5"], args.repeat, cwd)
-        help_ = best_wall([*fccgrb, "--help"], args.repeat, cwd)
-        bare = best_wall([sys.executable, "-c", "pass"], args.repeat, cwd)
-        imports = best_wall([sys.executable, "-c", IMPORTS_ONLY], args.repeat, cwd)
-    print(f"best of {args.repeat} fresh processes{env_note}, wall s:")
-    print(f"  fccgrb solve (README's first command: five-bar, P30, dynamics)  {solve:6.3f}")
-    print(f"  fccgrb --help                                                   {help_:6.3f}")
-    print(f"  python -c pass (the interpreter alone)                          {bare:6.3f}")
-    print(f"  python -c '{IMPORTS_ONLY}'  {imports:6.3f}")
-    total, top = heaviest_imports(IMPORTS_ONLY)
-    print(f"heaviest imports of other packages on the solve path (-X importtime, {total:.3f} s "
-          "in all):")
-    for seconds, name in top:
-        print(f"  {name:40} {seconds:6.3f}")
+        cases = [("fccgrb solve (README's first command: five-bar, P30, dynamics)",
+                  [*SOLVE, "-o", "results.h5"]),
+                 ("  the same, --engine numpy", [*SOLVE, "-o", "results.h5", "--engine", "numpy"])]
+        if GAIT_TRIAL.is_file():
+            run([*fccgrb, *CALIBRATE], cwd)
+            cases.append(("fccgrb solve (docs/gait.md: Qualisys, 340 frames, dynamics)",
+                          [*GAIT, "-o", "gait.h5"]))
+        cases.append(("fccgrb --help", ["--help"]))
+        walls = [(name, *best([*fccgrb, *case], args.repeat, cwd)) for name, case in cases]
+        bare = best([sys.executable, "-c", "pass"], args.repeat, cwd)
+        profiles = [(name, import_profile(importtime_command(fccgrb) + case, cwd))
+                    for name, case in cases if case[0] == "solve" and "--engine" not in case]
+    print(f"best of {args.repeat} fresh processes{env_note}; load average "
+          f"{load[0]:.2f} before, {os.getloadavg()[0]:.2f} after (2 busy cores = 2.0):")
+    print(f"  {'':64} {'wall s':>7} {'CPU s':>7}")
+    for name, wall, cpu in [*walls, ("python -c pass (the interpreter alone)", *bare)]:
+        print(f"  {name:64} {wall:7.3f} {cpu:7.3f}")
+    for name, (total, others, own) in profiles:
+        print(f"imports of {name.split(' (')[1].split(':')[0]} (-X importtime, "
+              f"{total:.3f} s in all): heaviest of other packages, then of fccgrb_cli's:")
+        for seconds, module in [*others, ("", ""), *own]:
+            if module:
+                print(f"  {module:40} {seconds:6.3f}")
     print("steps of a solve in a warm process (s):")
     for name, seconds in solve_steps():
         print(f"  {name:40} {seconds:6.3f}")

@@ -11,7 +11,10 @@ steps; guesses moved by the extrapolated corrections of the frames before.
 * a taller Φ_q whose equations cannot all be met (a floating base driven by low-passed
   features) keeps Gauss–Newton: numpy's least-squares motion, not a chord's fixed point;
 * the LAPACK the solvers use (fccgrb_cli.core.blas.lapack) is scipy's, without importing the
-  scipy.linalg package: a solve's start-up does not pay for it (checked in a fresh process).
+  scipy.linalg package: a solve's start-up does not pay for it (checked in a fresh process);
+  nor for numba's (scipy's Cython BLAS and LAPACK modules, loaded from their files: the kernels'
+  matrix products and solves give numpy's figures), nor for the rank test of a model with
+  redundant equations (LAPACK's pivoted QR, scipy.linalg.qr's pivots).
 """
 
 from __future__ import annotations
@@ -127,3 +130,57 @@ def test_solvers_lapack_is_scipys_without_scipy_linalg() -> None:
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           check=True)
     assert done.stdout.strip() == "False"
+
+
+NUMBA_BLAS = """
+import sys
+import numpy as np
+import fccgrb_cli.solvers  # noqa: F401  (configure: scipy's Cython modules for numba)
+from numba import njit
+
+@njit
+def products(a, b):
+    return np.dot(a, b), np.linalg.solve(a, b)
+
+a = np.array([[4.0, 1.0, 0.5], [1.0, 3.0, 0.2], [0.5, 0.2, 2.0]])
+b = np.arange(9.0).reshape(3, 3)
+dot, solved = products(a, b)
+print(np.abs(dot - a @ b).max() < 1e-14, np.abs(a @ solved - b).max() < 1e-13)
+print("scipy.linalg" in sys.modules)
+import scipy.linalg
+from scipy.linalg import cython_blas, cython_lapack
+print(cython_blas is sys.modules["scipy.linalg.cython_blas"], cython_lapack.__file__)
+"""
+
+
+def test_numba_gets_scipys_cython_blas_without_scipy_linalg() -> None:
+    done = subprocess.run([sys.executable, "-c", NUMBA_BLAS], capture_output=True, text=True,
+                          check=True)
+    import scipy
+
+    products, imported, same = done.stdout.splitlines()
+    assert products == "True True"
+    assert imported == "False"  # numba's kernels loaded without the package
+    kept, path = same.split(" ", 1)
+    assert kept == "True" and Path(path).parent == Path(scipy.__file__).parent / "linalg"
+
+
+def test_redundant_rows_without_scipy_linalg() -> None:
+    import scipy.linalg
+
+    from fccgrb_cli.system.rank import pivoted_columns
+
+    rng = np.random.default_rng(3)
+    for shape in ((6, 4), (4, 6), (9, 9)):
+        A = rng.standard_normal(shape)
+        A[:, 1] = A[:, 0] + A[:, 2]  # rank-deficient: the pivots' order matters
+        assert pivoted_columns(A).tolist() == \
+            scipy.linalg.qr(A, pivoting=True, mode="economic")[2].tolist()
+    template = ROOT / "configs" / "models" / "lower_limb.yaml"
+    code = ("import sys; from fccgrb_cli.model import load_model; "
+            "from fccgrb_cli.system.structure import analyse; "
+            f"print(len(analyse(load_model({str(template)!r})).redundant) > 0, "
+            "'scipy.linalg' in sys.modules)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True)
+    assert done.stdout.strip() == "True False"

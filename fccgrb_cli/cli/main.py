@@ -7,7 +7,6 @@ import dataclasses
 import functools
 import sys
 from collections.abc import Callable, Iterator
-from concurrent.futures import Executor
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -33,6 +32,8 @@ from fccgrb_cli.pipeline.options import (
 from fccgrb_cli.system.structure import analyse, check_tracking
 
 if TYPE_CHECKING:
+    from concurrent.futures import Executor
+
     from fccgrb_cli.pipeline.run import Run
 
 FORM = click.Choice(["model", "full", "reduced"])

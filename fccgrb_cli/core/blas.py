@@ -50,6 +50,57 @@ def _scipy_lapack() -> ModuleType:
 lapack = _scipy_lapack()
 
 
+def cython_modules_for_numba() -> tuple[str, ...]:
+    """Put scipy's Cython BLAS and LAPACK (``scipy.linalg.cython_blas``, ``cython_lapack``) in
+    ``sys.modules``, each loaded from its compiled file without the ``scipy.linalg`` package,
+    unless that package or numba's array functions are loaded already (or numba is not
+    installed); the names it put there.
+
+    numba imports those two modules when it loads its first kernel (``numba.np.arraymath``
+    checks that a BLAS is there; its compiled code takes the routines' addresses from the
+    modules' ``__pyx_capi__``). Through the package that import costs ~0.3 s of every solve's
+    start-up (the package's array-API layer, see ``_scipy_lapack``); the modules alone ~10 ms,
+    the ``scipy`` package's own ``__init__`` ~25 ms. They are the package's own files, so the
+    kernels call the same routines; ``scipy.linalg`` imported later finds them in
+    ``sys.modules`` (``import scipy.linalg.cython_blas as blas`` and ``from scipy.linalg
+    import cython_blas`` give them; the package's attribute ``scipy.linalg.cython_blas`` is
+    not set, even after ``import scipy.linalg.cython_blas``). Where scipy's layout is not the
+    expected one, nothing is put there and numba imports the package as usual."""
+    import sys
+    from importlib.machinery import EXTENSION_SUFFIXES, ExtensionFileLoader
+    from importlib.util import find_spec, module_from_spec, spec_from_file_location
+
+    if "scipy.linalg" in sys.modules or "numba.np.arraymath" in sys.modules or \
+            find_spec("numba") is None:
+        return ()
+    scipy = find_spec("scipy")
+    if not scipy or not scipy.origin:
+        return ()
+    folder = Path(scipy.origin).parent / "linalg"
+    found = {}
+    for short in ("cython_blas", "cython_lapack"):
+        name = f"scipy.linalg.{short}"
+        path = next((folder / f"{short}{suffix}" for suffix in EXTENSION_SUFFIXES
+                     if (folder / f"{short}{suffix}").is_file()), None)
+        spec = None if path is None else spec_from_file_location(
+            name, path, loader=ExtensionFileLoader(name, str(path)))
+        if spec is None or name in sys.modules:
+            return ()
+        found[name] = spec
+    done = []
+    for name, spec in found.items():
+        module = module_from_spec(spec)
+        sys.modules[name] = module
+        try:
+            spec.loader.exec_module(module)
+        except Exception:  # as if never tried: numba's own import then says what is wrong
+            for put in (*done, name):
+                del sys.modules[put]
+            return ()
+        done.append(name)
+    return tuple(done)
+
+
 @functools.cache
 def _controller():
     from threadpoolctl import ThreadpoolController

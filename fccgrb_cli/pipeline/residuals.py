@@ -6,23 +6,20 @@ adjusted model's dynamics then stand for the run's."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.dynamics.convert import Dynamics
-from fccgrb_cli.dynamics.reduction import (
-    Reduction,
-    RunData,
-    Stage,
-    reduce_residuals,
-    report_of,
-)
 from fccgrb_cli.dynamics.residuals import ResidualReport
 from fccgrb_cli.model import Model
 from fccgrb_cli.pipeline.options import SolveOptions
 from fccgrb_cli.solvers.result import KinematicResult
 from fccgrb_cli.trial.record import Trial
+
+if TYPE_CHECKING:  # loaded where a model has a floating base to report on
+    from fccgrb_cli.dynamics.reduction import Reduction
 
 
 @dataclass(frozen=True)
@@ -52,6 +49,8 @@ def residual_stage(model: Model, trial: Trial, result: KinematicResult,
                              f"(its drivers give the residual); {model.source} has "
                              f"{len(model.floating_bases)}")
         return ResidualStage(None, None, dynamics)
+    from fccgrb_cli.dynamics.reduction import RunData, Stage, reduce_residuals, report_of
+
     stage = Stage(trial.rate, options.filter_cutoff, options.filter_order, options.tol,
                   options.engine)
     if not options.reduce_residuals:

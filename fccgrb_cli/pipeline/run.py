@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -14,16 +15,18 @@ from fccgrb_cli.anatomy.clinical import ClinicalResults
 from fccgrb_cli.anatomy.lab_axes import LabAxes
 from fccgrb_cli.core.named import NamedArray
 from fccgrb_cli.dynamics.convert import Dynamics
-from fccgrb_cli.dynamics.reduction import Reduction
-from fccgrb_cli.dynamics.residuals import ResidualReport
 from fccgrb_cli.gait.analysis import GaitResults
 from fccgrb_cli.model import Model
 from fccgrb_cli.model.elements import in_metres
 from fccgrb_cli.pipeline.options import SolveOptions
-from fccgrb_cli.pipeline.smoothing import Uncertainty
-from fccgrb_cli.plugin_gait.outputs import PluginGaitResults
 from fccgrb_cli.solvers.methods import Method
 from fccgrb_cli.solvers.result import KinematicResult
+
+if TYPE_CHECKING:  # what only some solves hold (their modules load where a solve makes them)
+    from fccgrb_cli.dynamics.reduction import Reduction
+    from fccgrb_cli.dynamics.residuals import ResidualReport
+    from fccgrb_cli.pipeline.smoothing import Uncertainty
+    from fccgrb_cli.plugin_gait.outputs import PluginGaitResults
 
 __all__ = ["Run", "mean_jump", "summary"]
 

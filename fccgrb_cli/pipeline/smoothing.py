@@ -29,23 +29,24 @@ import time as clock
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from itertools import pairwise
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.dynamics.loads import ExternalLoad
-from fccgrb_cli.dynamics.uncertainty import moment_uncertainty
 from fccgrb_cli.model import Model
 from fccgrb_cli.solvers.batched import Drives, Stacked, blocks
 from fccgrb_cli.solvers.methods import Method
 from fccgrb_cli.solvers.rates import consistent_rates
 from fccgrb_cli.solvers.result import KinematicResult
-from fccgrb_cli.solvers.smooth import SmoothedMotion, SmoothSettings, smooth_motion
-from fccgrb_cli.solvers.smooth.coordinates import Coordinates
-from fccgrb_cli.solvers.smooth.signal import smoothed_signal
 from fccgrb_cli.system import System, compile_system
 from fccgrb_cli.system.constraints import joint_neighbours
 from fccgrb_cli.system.sparse import supported
+
+if TYPE_CHECKING:  # the smoother itself is imported where a solve asks for it (--smooth auto)
+    from fccgrb_cli.solvers.smooth import SmoothedMotion, SmoothSettings
+    from fccgrb_cli.solvers.smooth.coordinates import Coordinates
 
 
 @dataclass(frozen=True)
@@ -98,6 +99,8 @@ class Smoothing:
     def smoothed_loads(self, loads: Sequence[ExternalLoad], rate: float
                        ) -> list[ExternalLoad]:
         """Each load's force and free moment through the smoother's filter at its cutoff."""
+        from fccgrb_cli.solvers.smooth.signal import smoothed_signal
+
         out = []
         for load in loads:
             cutoff = self.plate_cutoff(load.body)
@@ -107,6 +110,8 @@ class Smoothing:
     def uncertainty(self, q: np.ndarray | None, loads: Sequence[ExternalLoad]) -> Uncertainty:
         """The standard deviations, the moments' at the classical model's positions ``q``
         (None: no dynamics)."""
+        from fccgrb_cli.dynamics.uncertainty import moment_uncertainty
+
         motion = self.motion
         na = len(self.system.angle_rows)
         sd = motion.sd
@@ -164,6 +169,8 @@ def smooth(model: Model, result: KinematicResult, markers: np.ndarray,
            settings: SmoothSettings) -> Smoothing:
     """The stage on a mixed-coordinate ``result`` whose frames followed ``markers`` (frames ×
     tracked points × 3, NaN where missing): frames not solved give no data."""
+    from fccgrb_cli.solvers.smooth import smooth_motion
+
     started = clock.perf_counter()
     system = compile_system(model, angles="driver")
     use = result.converged & np.isfinite(result.q).all(axis=1)
@@ -237,6 +244,8 @@ def applies(options, model: Model) -> str | None:
 
 def settings_of(options, model: Model) -> SmoothSettings:
     """The smoother's settings from a solve's options and its model."""
+    from fccgrb_cli.solvers.smooth import SmoothSettings
+
     noise = None if options.smooth_noise is None else 1e-3 * options.smooth_noise
     engine = "numpy" if options.engine == "numpy" else "compiled"
     return SmoothSettings(noise=noise, cutoff=options.smooth_cutoff, engine=engine,

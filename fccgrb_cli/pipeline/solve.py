@@ -23,7 +23,6 @@ from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.dynamics.plate_loads import plate_loads
 from fccgrb_cli.gait.analysis import analyse_gait, find_events, landmark_labels
 from fccgrb_cli.model import Model
-from fccgrb_cli.opensim.loads import trial_loads
 from fccgrb_cli.pipeline.assessment import (
     contact_events,
     curve_trust,
@@ -36,7 +35,6 @@ from fccgrb_cli.pipeline.options import SolveOptions, prepared
 from fccgrb_cli.pipeline.residuals import residual_stage
 from fccgrb_cli.pipeline.run import Run
 from fccgrb_cli.pipeline.smoothing import Smoothing, smoothed_or_warned
-from fccgrb_cli.plugin_gait.outputs import plugin_gait_results
 from fccgrb_cli.signals.artefact import perturb
 from fccgrb_cli.signals.butterworth import frames_needed
 from fccgrb_cli.solvers import KinematicResult, solve_ad
@@ -75,7 +73,11 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
         raise InputError(f"{model.source}: tracking.points: expected at least one tracked point "
                          "(a marker on a body) to solve a trial from; the section is empty or "
                          "absent")
-    given = None if options.loads is None else trial_loads(options.loads, model, trial)
+    given = None
+    if options.loads is not None:  # --loads: an OpenSim load set
+        from fccgrb_cli.opensim.loads import trial_loads
+
+        given = trial_loads(options.loads, model, trial)
     if model.moving_joints and Method(options.method).drives_angles:
         raise InputError(f"--method ad: {model.source}: the angular-driver baseline computes "
                          f"angles from segment frames, which an imported OpenSim model's "
@@ -152,8 +154,11 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
         solved_dynamics = residuals.dynamics
         if solved_dynamics is not None and not model.moving_joints:  # the classical model's
             result = with_findings(result, dynamic_findings(model, solved_dynamics))
-        pig = plugin_gait_results(model, result.q, result.trusted, solved_dynamics) \
-            if model.calibration_method == "plugin-gait" else None
+        pig = None
+        if model.calibration_method == "plugin-gait":
+            from fccgrb_cli.plugin_gait.outputs import plugin_gait_results
+
+            pig = plugin_gait_results(model, result.q, result.trusted, solved_dynamics)
         result = store.coordinates(result)
         solved_dynamics = store.dynamics(solved_dynamics)
         clinical = clinical_results(

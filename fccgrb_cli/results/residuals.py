@@ -24,13 +24,15 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from fccgrb_cli.core.datasets import put
-from fccgrb_cli.dynamics.inertia_fit import InertiaFit
-from fccgrb_cli.dynamics.kinematic_correction import RigidCorrection
-from fccgrb_cli.dynamics.reduction import Reduction
 from fccgrb_cli.dynamics.residuals import STATES, ResidualReport, ResidualSummary
+
+if TYPE_CHECKING:  # the reduction's modules load where a reduction is read back
+    from fccgrb_cli.dynamics.reduction import Reduction
 
 SUMMARY_FIELDS = ("frames", "single", "force_peak", "force_rms", "moment_peak", "moment_rms",
                   "weight", "model_mass")
@@ -94,6 +96,10 @@ def _read_report(out, force: np.ndarray, moment: np.ndarray) -> ResidualReport:
 
 def read_residuals(g) -> tuple[ResidualReport | None, Reduction | None]:
     """The report and reduction a results group holds (None where absent)."""
+    from fccgrb_cli.dynamics.inertia_fit import InertiaFit
+    from fccgrb_cli.dynamics.kinematic_correction import RigidCorrection
+    from fccgrb_cli.dynamics.reduction import Reduction
+
     if "residuals" not in g:
         return None, None
     out = g["residuals"]

@@ -104,7 +104,6 @@ from fccgrb_cli.core.lock import exclusive
 from fccgrb_cli.core.spill import StoredArray
 from fccgrb_cli.results.format import FORMAT_VERSION, check_run, reading, runs_group
 from fccgrb_cli.results.gait import write_gait, write_subject
-from fccgrb_cli.results.plugin_gait import write_plugin_gait
 from fccgrb_cli.results.residuals import write_residuals
 from fccgrb_cli.solvers.quality import BITS, FLAG_DTYPE, FRAME_BITS, MOMENT_BITS, bit_summary
 
@@ -300,7 +299,9 @@ def _write_run(h5, run: Run, command: str, cell: dict | None) -> None:
         _write_uncertainty(g, run)
     if run.gait is not None:
         write_gait(g, run.gait)
-    if run.plugin_gait is not None:
+    if run.plugin_gait is not None:  # its module loads with a Plug-in Gait run only
+        from fccgrb_cli.results.plugin_gait import write_plugin_gait
+
         write_plugin_gait(g, run.plugin_gait)
     if run.residuals is not None:
         write_residuals(g, run.residuals, run.reduction)
