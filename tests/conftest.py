@@ -14,6 +14,7 @@ about a minute on two cores. ``long`` (``pytest --hypothesis-profile long``): ra
 ten times the examples, for local runs.
 """
 
+import os
 import time
 from pathlib import Path
 
@@ -28,6 +29,11 @@ settings.register_profile("ci", derandomize=True, deadline=None, max_examples=25
 settings.register_profile("long", deadline=None, max_examples=250,
                           suppress_health_check=HEALTH, print_blob=True)
 settings.load_profile("ci")
+
+# a first run with no compiled kernels would solve in numpy while a background process compiles
+# them (cli.main._first_run_engine): a suite's runs must all use one engine, so they compile in
+# the foreground as before (tests/test_first_run.py sees the background path)
+os.environ["FCCGRB_BACKGROUND_COMPILE"] = "0"
 
 
 # whole modules, or single tests (their node id without parameters)

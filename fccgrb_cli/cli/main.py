@@ -336,6 +336,7 @@ def solve(model: str | None, trials: tuple[str, ...], opensim_setup: str | None,
         return
     if not trials:
         raise InputError("solve: expected TRIAL (C3D or TRC markers) or --coordinates FILE")
+    chosen = _first_run_engine(chosen)
     paths = _trial_paths(trials)
     from fccgrb_cli.pipeline.solve import check_window
 
@@ -386,6 +387,34 @@ def solve(model: str | None, trials: tuple[str, ...], opensim_setup: str | None,
         from fccgrb_cli.presentation.gait_report import subject_report
 
         click.echo(subject_report(*subject))
+
+
+def _first_run_engine(options: SolveOptions) -> SolveOptions:
+    """``--engine auto`` before the kernels were ever compiled on this machine: this run in
+    the numpy engine (the same answers to 1e-12) while a background process compiles them for
+    the next runs, so that a first command does not wait a minute; said on stderr and recorded
+    with the run (its options' engine). ``FCCGRB_BACKGROUND_COMPILE=0`` keeps the foreground
+    compile (the tests set it: every run of a suite then uses one engine)."""
+    import os
+
+    from fccgrb_cli.pipeline.precompile import BACKGROUND, compile_in_background
+    from fccgrb_cli.solvers.engine import numba_available
+
+    if options.engine != "auto" or os.environ.get(BACKGROUND) == "0" or \
+            not numba_available():
+        return options
+    import fccgrb_cli.solvers  # noqa: F401  (names the kernels' cache folder)
+    from fccgrb_cli.core.kernel_cache import compiled_here
+
+    folder = os.environ.get("NUMBA_CACHE_DIR")
+    if not folder or compiled_here():
+        return options
+    started = compile_in_background(Path(folder))
+    click.echo("fccgrb: the compiled kernels are not built on this machine yet: this run uses "
+               "the numpy engine (the same answers to 1e-12, slower per frame)"
+               + (" while they compile in the background for the next runs (about a minute)"
+                  if started else "") + "; 'fccgrb compile' builds them now", err=True)
+    return dataclasses.replace(options, engine="numpy")
 
 
 def _coordinates_only(model: str, coordinates: str, output: str, replace: bool,

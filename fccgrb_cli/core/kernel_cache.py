@@ -18,7 +18,7 @@ import os
 import sys
 from pathlib import Path
 
-__all__ = ["SOURCES", "cache_folder", "configure", "source_digest"]
+__all__ = ["SOURCES", "cache_folder", "compiled_here", "configure", "source_digest"]
 
 PACKAGE = Path(__file__).resolve().parents[1]
 # the folders whose modules the compiled kernels are written in or take constants from
@@ -74,3 +74,12 @@ def configure(version: str | None = None, root: Path = PACKAGE,
     if config is not None:  # numba loaded before us: its config read the environment already
         config.CACHE_DIR = str(folder)
     return folder
+
+
+def compiled_here(folder: Path | None = None) -> bool:
+    """Whether the kernels' cache folder (``folder``, else the one :func:`configure` set)
+    holds compiled kernels: numba's index files (``*.nbi``) of at least one."""
+    base = folder if folder is not None else Path(os.environ.get("NUMBA_CACHE_DIR") or ".")
+    if folder is None and not os.environ.get("NUMBA_CACHE_DIR"):
+        return False
+    return base.is_dir() and next(base.rglob("*.nbi"), None) is not None

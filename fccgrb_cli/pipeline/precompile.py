@@ -5,8 +5,11 @@ the model)."""
 
 from __future__ import annotations
 
+import os
+import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 from fccgrb_cli.model import parse_model
 from fccgrb_cli.pipeline.options import SolveOptions
@@ -74,3 +77,43 @@ def precompile(report: Callable[[str, float], None] | None = None) -> float:
         if report is not None:
             report(name, time.perf_counter() - begun)
     return time.perf_counter() - started
+
+
+BACKGROUND = "FCCGRB_BACKGROUND_COMPILE"  # "0": a first run compiles in the foreground
+LOCK = ".compiling"  # in the cache folder while a background compile runs
+STALE = 900.0  # s: a lock older than this was left by a compile that died
+
+
+def compile_in_background(folder: Path) -> bool:
+    """Start ``fccgrb compile`` as a detached process (its own session, no terminal, output
+    discarded) that fills the kernel cache ``folder`` for the next runs, unless one is running
+    already (a :data:`LOCK` file younger than :data:`STALE`). Returns whether a compile is now
+    under way."""
+    import subprocess
+
+    lock = folder / LOCK
+    try:
+        if lock.exists() and time.time() - lock.stat().st_mtime < STALE:
+            return True
+        lock.write_text(str(os.getpid()))
+    except OSError:
+        return False
+    code = ("import sys; from fccgrb_cli.pipeline.precompile import background_main; "
+            f"sys.exit(background_main({str(lock)!r}))")
+    try:
+        subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.DEVNULL,
+                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                         start_new_session=True, env={**os.environ, BACKGROUND: "0"})
+    except OSError:
+        lock.unlink(missing_ok=True)
+        return False
+    return True
+
+
+def background_main(lock: str) -> int:
+    """The background compile's process: :func:`precompile`, then the lock removed."""
+    try:
+        precompile()
+    finally:
+        Path(lock).unlink(missing_ok=True)
+    return 0
