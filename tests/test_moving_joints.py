@@ -196,3 +196,25 @@ def test_stacked_evaluation_equals_each_joint_on_its_own(seed):
         assert np.allclose(h2[block][:, index[:, None], index[None, :]], d2, atol=1e-12)
         others = np.setdiff1d(np.arange(functions.n_coordinates), index)
         assert not h1[block][:, others].any() and not h2[block][:, others].any()
+
+
+def test_a_coupled_coordinate_without_markers_follows_its_independent_one():
+    """A coupler's dependent coordinate moving a body without markers (Rajagopal's patella,
+    ``knee_angle_r_beta = knee_angle_r``) is set by the coupling, never held at its default:
+    holding it would hold the knee through the coupling. Here the foot has no marker and its
+    coordinate is coupled to the knee's; the knee is free to follow the shank's markers."""
+    from fccgrb_cli.model.observed import unobserved
+
+    text = random_model_text(3)
+    foot_coordinate = text.split('<CustomJoint name="extra">')[1].split('<Coordinate name="')[1]
+    name = foot_coordinate.split('"')[0]
+    coupler = ('<CoordinateCouplerConstraint name="follow"><isEnforced>true</isEnforced>'
+               + named("<LinearFunction><coefficients>1 0</coefficients></LinearFunction>",
+                       "coupled_coordinates_function")
+               + '<independent_coordinate_names>knee</independent_coordinate_names>'
+               f'<dependent_coordinate_name>{name}</dependent_coordinate_name>'
+               '</CoordinateCouplerConstraint>')
+    text = text.replace("</objects></ConstraintSet>", coupler + "</objects></ConstraintSet>")
+    model = parse_osim_model(text, "generated.osim")
+    left = unobserved(model)
+    assert name not in left and "knee" not in left

@@ -28,8 +28,9 @@ class Fixed:
 
 
 def unobserved(model: Model) -> list[str]:
-    """The coordinates that move no tracked point and are not already held, in the model's
-    order."""
+    """The coordinates that move no tracked point and that nothing else sets (not held, and
+    not the dependent of a coupling: Rajagopal's patella angle ``knee_angle_r_beta`` follows
+    the knee angle, so holding it would hold the knee), in the model's order."""
     children: dict[str, list[str]] = {}
     for joint in model.moving_joints:
         children.setdefault(joint.parent, []).append(joint.child)
@@ -38,7 +39,7 @@ def unobserved(model: Model) -> list[str]:
     def seen_beyond(body: str) -> bool:
         return body in tracked or any(seen_beyond(c) for c in children.get(body, []))
 
-    held = {c.dependent for c in model.couplings if c.independent is None}
+    held = {c.dependent for c in model.couplings}  # locked, held or coupled: already set
     moving = set()
     for joint in model.moving_joints:
         if seen_beyond(joint.child):
