@@ -27,14 +27,20 @@ from fccgrb_cli.signals.opensim_lowpass import lowpass_padded
 from fccgrb_cli.system.compiled import compile_system
 from fccgrb_cli.system.moving_pose import pose_from_coordinates
 from tests.osim_text import knee_model
+from tests.test_moving_joints import random_model_text
 
 ID_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "opensim" / "id_gait2392"
 TOLERANCE = 2.0  # N·m: OpenSim's own, RMS per column
 
 
-@pytest.mark.parametrize("loaded", [False, True])
-def test_coordinate_forces_balance_the_power_of_the_motion(loaded):
-    system = compile_system(parse_osim_model(knee_model(), "knee.osim"), angles="coordinate")
+@pytest.mark.parametrize(("seed", "loaded"), [(None, False), (None, True), (1, True), (2, True),
+                                             (5, False)])
+def test_coordinate_forces_balance_the_power_of_the_motion(seed, loaded):
+    """``seed`` None: the knee model; a number: a generated model (random transforms, splines,
+    polynomials, and a coupler: tests/test_moving_joints.py), whose coupled coordinate's force
+    counts in the balance like any other's."""
+    text = knee_model() if seed is None else random_model_text(seed)
+    system = compile_system(parse_osim_model(text, "knee.osim"), angles="coordinate")
     nb = system.layout.n_body_q
     M, g = mass_matrix(system.model), gravity_forces(system.model)
     rng = np.random.default_rng(7)
