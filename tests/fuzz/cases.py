@@ -32,6 +32,7 @@ CLASSES = (
     "C3D bytes",
     "OpenSim XML",
     "OpenSim storage",
+    "OpenSim coordinates and setups",
     "every rate",
     "empty sections and grid value types",
     "outputs that exist and are not ours",
@@ -893,13 +894,14 @@ def not_ours() -> Iterator[Case]:
 
 def generate(seed: int = 0, full: bool = True) -> list[Case]:
     """Every case, the random parts drawn from ``seed``."""
-    from .opensim_cases import storage_cases, xml_cases
+    from .opensim_cases import coordinates_cases, storage_cases, xml_cases
 
     rng = random.Random(seed)
     cases = [*overwritten(), *outside(), *run_names(), *numbers(), *header_values(),
              *yaml_files(), *results_files(), *half_written(), *own_output(full), *nonsense(),
              *c3d_bytes(rng, 20 if full else 8), *drawn(rng, 15 if full else 3), *rates(),
-             *empty_and_types(), *not_ours(), *xml_cases(), *storage_cases()]
+             *empty_and_types(), *not_ours(), *xml_cases(), *storage_cases(),
+             *coordinates_cases()]
     names = [c.name for c in cases]
     twice = {n for n in names if names.count(n) > 1}
     if twice:

@@ -136,3 +136,93 @@ def storage_cases() -> Iterator[Case]:
     yield Case(k, "storage-good-is-valid", (
         Step((*SOLVE, "--loads", "L.xml", "-o", "n.h5"), "ok", outputs=("n.h5",)),),
         (xml, write("f.mot", storage())))
+
+
+COORDINATES_CLASS = "OpenSim coordinates and setups"
+
+
+def _knee_osim() -> str:
+    """A small imported model (tests/osim_text.py) without the ForceSet its note would name."""
+    import re
+
+    from tests.osim_text import knee_model
+
+    return re.sub(r"<ForceSet>.*?</ForceSet>", "", knee_model(), flags=re.S)
+
+
+KNEE_COORDINATES = ("rx", "ry", "rz", "tx", "ty", "tz", "knee", "patella")
+
+
+def coordinates_mot(rows: int = 30, row: str | None = None, header: str | None = None,
+                    step: float = 0.01) -> str:
+    """The knee model's coordinates over ``rows`` rows (degrees, metres), a row changed."""
+    head = header if header is not None else \
+        f"c\nversion=1\nnRows={rows}\nnColumns=9\ninDegrees=yes\nendheader\n"
+    values = "\t".join(["5", "-3", "2", "0.1", "0.9", "-0.05", "-30", "0"])
+    lines = [row if (row is not None and k == 3) else f"{k * step:.4f}\t{values}"
+             for k in range(rows)]
+    return head + "time\t" + "\t".join(KNEE_COORDINATES) + "\n" + "\n".join(lines) + "\n"
+
+
+def id_setup(model: str = "knee.osim", coordinates: str = "c.mot", more: str = "",
+             tool: str = "InverseDynamicsTool") -> str:
+    return (f'<?xml version="1.0"?>\n<OpenSimDocument Version="40000"><{tool} name="s">'
+            f"<model_file>{model}</model_file><coordinates_file>{coordinates}"
+            f"</coordinates_file><lowpass_cutoff_frequency_for_coordinates>6"
+            f"</lowpass_cutoff_frequency_for_coordinates>{more}</{tool}></OpenSimDocument>\n")
+
+
+def coordinates_cases() -> Iterator[Case]:
+    """``solve MODEL.osim --coordinates FILE`` and ``solve --opensim-setup SETUP.xml`` with
+    bad coordinates files, setups and option combinations."""
+    k = COORDINATES_CLASS
+    model = write("knee.osim", _knee_osim())
+    good = write("c.mot", coordinates_mot())
+    run = ("solve", "knee.osim", "--coordinates", "c.mot", "-o", "n.h5")
+    for name, text in (
+            ("nan", coordinates_mot(row="0.03\t5\tnan\t2\t0.1\t0.9\t-0.05\t-30\t0")),
+            ("huge", coordinates_mot(row="0.03\t5\t1e300\t2\t0.1\t0.9\t-0.05\t-30\t0")),
+            ("time-back", coordinates_mot(row="0.0\t5\t-3\t2\t0.1\t0.9\t-0.05\t-30\t0")),
+            ("no-model-column", coordinates_mot().replace("\trx\t", "\tother\t")
+             .replace("\try\t", "\tb\t").replace("\trz\t", "\tc\t").replace("\ttx\t", "\td\t")
+             .replace("\tty\t", "\te\t").replace("\ttz\t", "\tf\t")
+             .replace("\tknee\t", "\tg\t").replace("\tpatella\n", "\th\n")),
+            ("too-few-rows", coordinates_mot(rows=4)),
+            ("trc", "PathFileType\t4\t(X/Y/Z)\tx.trc\nDataRate\t100\n1\t2\n"),
+            ("empty", ""),
+            ("a-column-twice", coordinates_mot().replace("\tpatella\n", "\tknee\n"))):
+        yield bad(k, f"coordinates-{name}", run, ("c.mot",), model, write("c.mot", text))
+    uneven = coordinates_mot().replace("\n0.0300\t", "\n0.0370\t")
+    yield bad(k, "coordinates-uneven-with-cutoff", (*run, "--filter-cutoff", "6"),
+              ("c.mot", "--filter-cutoff"), model, write("c.mot", uneven))
+    yield bad(k, "coordinates-window-outside", (*run, "--from", "9"), ("--from/--to",),
+              model, good)
+    yield bad(k, "coordinates-window-reversed", (*run, "--from", "0.2", "--to", "0.1"),
+              ("--to",), model, good)
+    yield bad(k, "coordinates-beside-a-trial",
+              ("solve", "knee.osim", "t.c3d", "--coordinates", "c.mot", "-o", "n.h5"),
+              ("--coordinates",), model, good)
+    yield bad(k, "coordinates-yaml-model",
+              ("solve", "model.yaml", "--coordinates", "c.mot", "-o", "n.h5"),
+              ("--coordinates", "model.yaml"), good)
+    yield bad(k, "coordinates-hold-unknown", (*run, "--hold", "nope=3"), ("--hold",), model,
+              good)
+    setup = ("solve", "--opensim-setup", "S.xml", "-o", "n.h5")
+    for name, text, names in (
+            ("setup-billion-laughs", LAUGHS, ("S.xml",)),
+            ("setup-external-entity", EXTERNAL, ("S.xml",)),
+            ("setup-not-xml", "<OpenSimDocument><Inverse", ("S.xml",)),
+            ("setup-other-tool", id_setup(tool="ScaleTool").replace(
+                "<coordinates_file>c.mot</coordinates_file>", ""), ("S.xml",)),
+            ("setup-missing-model", id_setup(model="none.osim"), ("none.osim",)),
+            ("setup-missing-coordinates", id_setup(coordinates="none.mot"), ("none.mot",)),
+            ("setup-no-coordinates", id_setup(coordinates=""), ("S.xml", "coordinates_file")),
+            ("setup-unknown-property", id_setup(more="<speed>3</speed>"), ("S.xml", "speed")),
+            ("setup-bad-time-range", id_setup(more="<time_range>2 1</time_range>"),
+             ("S.xml", "time_range")),
+            ("setup-bad-cutoff", id_setup().replace(">6<", ">fast<"), ("S.xml",))):
+        yield bad(k, name, setup, names, model, good, write("S.xml", text))
+    yield Case(k, "coordinates-good-is-valid", (
+        Step(run, "ok", outputs=("n.h5",)),
+        Step(("solve", "--opensim-setup", "S.xml", "-o", "m.h5"), "ok", outputs=("m.h5",))),
+        (model, good, write("S.xml", id_setup())))
