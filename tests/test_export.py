@@ -69,7 +69,8 @@ def test_csv_reads_in_one_pandas_call_with_units_in_the_header(five_bar, tmp_pat
     target = tmp_path / "run.csv"
     assert run_cli("export", results, "--format", "csv", "-o", target).exit_code == 0
     table = pd.read_csv(target)
-    assert list(table.columns[:4]) == ["time [s]", "trusted", "moments trusted", "J1_z [deg]"]
+    assert list(table.columns[:4]) == ["trial time [s]", "trusted", "moments trusted",
+                                      "J1_z [deg]"]
     assert table["trusted"].dtype == bool and table["trusted"].all()
     assert len(table) == len(run.result.time)
     np.testing.assert_allclose(np.radians(table["J3_w [deg]"]), run.angles["J3_w"], rtol=1e-9)

@@ -78,7 +78,7 @@ def test_csv_degrees_and_newton_metres(solved, tmp_path: Path):
     header = lines[0].split(",")
     values = [*(f"{n} [deg]" for n in SIGNS), *(f"{n}_moment [N·m]" for n in SIGNS)]
     sd = [v.replace(" [", " sd [") for v in values]  # the smoother's, when it ran
-    assert header[:3] == ["time [s]", "trusted", "moments trusted"]
+    assert header[:3] == ["trial time [s]", "trusted", "moments trusted"]
     assert header[3:] in (values, values + sd)
     rows = np.array([[float(v) for v in line.split(",")[3:]] for line in lines[1:]])
     np.testing.assert_allclose(rows[:, :4], degrees, rtol=1e-9, atol=1e-9)

@@ -1046,3 +1046,28 @@ def test_perturb_calibrate_and_sweep_refuse_a_cut_trial_unless_told(five_bar_300
     with h5py.File(out, "r") as h5:
         (cell,) = h5["cells"].values()
         assert "only 24" in str(cell["runs/run"].attrs["warnings"][0])
+
+
+def test_messages_count_time_on_the_trial_files_clock():
+    """A trial whose first frame is at 2 s (a C3D's first frame, a TRC's first Time): its
+    warnings give the times its events and exports use, not the time since its first frame."""
+    import fccgrb_cli as fc
+    from fccgrb_cli.core.stretches import clocked
+    from fccgrb_cli.model import load_model
+    from fccgrb_cli.pipeline.synth import synthesize
+    from fccgrb_cli.trial.record import Trial
+
+    assert clocked("x (t = 0.100 s) and t = 0.200–0.300 s", 2.0) == \
+        "x (t = 2.100 s) and t = 2.200–2.300 s"
+    assert clocked("t = 0.100 s", 0.0) == "t = 0.100 s"
+    model = load_model(FIVE_BAR)
+    truth = synthesize(model, duration=0.5, rate=100.0)
+    markers = truth.markers.copy()
+    markers[10:13] = np.nan  # frames 10–12 without markers: flagged
+    trial = Trial("late.trc", tuple(truth.labels), markers, truth.rate, start=2.0)
+    with pytest.raises(InputError, match=r"frame index 10 \(t = 2\.100 s\)"):
+        fc.solve(model, trial)
+    run = fc.solve(model, trial, skip_unsolvable=True)
+    said = " ".join((*run.result.messages, *run.warnings))
+    assert "t = 2.100 s" in said and "t = 0.100 s" not in said
+    assert run.angles.time[0] == pytest.approx(2.0)  # the API's times: the same clock

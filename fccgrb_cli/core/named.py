@@ -24,7 +24,8 @@ class NamedArray:
     units : tuple of str
         Each column's unit (n_columns), e.g. 'rad', 'N·m', 'deg'.
     time : ndarray
-        The frames' times (n_frames, s).
+        The frames' times (n_frames, s) on the trial file's clock (its first frame's time: a
+        C3D's first frame, a TRC's first Time), as its events and every export count them.
     """
 
     values: np.ndarray
@@ -99,5 +100,5 @@ class NamedArray:
             raise ImportError("to_dataframe needs pandas: pip install 'fccgrb-cli[pandas]'") \
                 from None
         columns = [f"{n} [{u}]" for n, u in zip(self.names, self.units, strict=True)]
-        return pd.DataFrame(self.values, index=pd.Index(self.time, name="time [s]"),
+        return pd.DataFrame(self.values, index=pd.Index(self.time, name="trial time [s]"),
                             columns=columns)

@@ -104,6 +104,26 @@ def merged(parts: Sequence[tuple[slice, object]], n: int, like_time: np.ndarray 
 _FRAME = re.compile(r"(frame index |first frame index |frame indices )(\d+)")
 
 
+_TIME = re.compile(r"\bt = (-?\d+\.\d+)(?:–(-?\d+\.\d+))? s\b")
+
+
+def clocked(message: str, start: float) -> str:
+    """A message's times (``t = 1.234 s``, ``t = 1.234–2.345 s``), counted from the trial's
+    first frame where it was written, on the trial file's own clock (its first frame at
+    ``start`` s: a C3D's first frame, a TRC's first Time), the clock of its events and of every
+    export."""
+    if not start:
+        return message
+
+    def moved(match: re.Match) -> str:
+        first = f"t = {float(match.group(1)) + start:.3f}"
+        if match.group(2) is None:
+            return f"{first} s"
+        return f"{first}–{float(match.group(2)) + start:.3f} s"
+
+    return _TIME.sub(moved, message)
+
+
 def shifted(message: str, offset: int) -> str:
     """A message of a stretch's solve with its frame indices counted from the trial's start."""
     if not offset:

@@ -159,7 +159,7 @@ class Run:
 
     def _named(self, values: np.ndarray, names: tuple[str, ...], units: tuple[str, ...]
                ) -> NamedArray:
-        return NamedArray(values, names, units, self.result.time)
+        return NamedArray(values, names, units, self.result.time + self.start_time)
 
     @property
     def _angle_units(self) -> tuple[str, ...]:

@@ -17,7 +17,7 @@ import numpy as np
 from fccgrb_cli.anatomy.clinical import clinical_results
 from fccgrb_cli.anatomy.lab_axes import lab_axes
 from fccgrb_cli.core.errors import InputError
-from fccgrb_cli.core.stretches import merged, runs, shifted, shortest, spans, take
+from fccgrb_cli.core.stretches import clocked, merged, runs, shifted, shortest, spans, take
 from fccgrb_cli.dynamics.convert import Dynamics, classical_dynamics, smoothed_dynamics
 from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.dynamics.plate_loads import plate_loads
@@ -177,6 +177,10 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
         gait = None if events is None else analyse_gait(
             model, trial, clinical, result.trusted, options.events, events=events,
             trusted_curves=curve_trust(model, result.trusted, moments))
+        # every time a message gives on the trial file's clock, as its events and exports
+        result = replace(result, messages=tuple(clocked(m, trial.start)
+                                                for m in result.messages))
+        warnings = [clocked(w, trial.start) for w in warnings]
         return Run(
             name=options.name or run_name(result.method, options.ad_drivers,
                                           options.filter_cutoff, options.perturb_level_m,
@@ -293,8 +297,8 @@ def _kinematics(model: Model, trial: Trial, inputs: np.ndarray, options: SolveOp
     labels = model.marker_labels + tuple(tv.marker for tv in model.tracked_vectors)
     if not known.all() and not o.skip_unsolvable:
         f = int(np.flatnonzero(~known)[0])
-        text = unsolvable_text(f, time, ~np.isfinite(targets[f]).all(axis=1), labels,
-                               trial.path)
+        text = unsolvable_text(f, trial.start + time, ~np.isfinite(targets[f]).all(axis=1),
+                               labels, trial.path)
         why = "; the angular-driver pre-analysis needs every marker" if driven else ""
         raise InputError(f"{text}{why} (--skip-unsolvable leaves such frames unsolved)")
     system = compile_system(model, angles="driver") if driven else mixed

@@ -182,9 +182,10 @@ def sd_curves(run: Run) -> list[Curves]:
 
 
 def write_csv(run: Run, path: str | Path) -> None:
-    """One row per frame: ``time [s]``, ``trusted``, ``moments trusted`` (with moments: the frame
-    and every moment in the row trusted), then every angle and moment as ``name [unit]`` and,
-    with ``--smooth auto``, each one's standard deviation as ``name sd [unit]``;
+    """One row per frame: ``trial time [s]`` (the trial file's clock), ``trusted``, ``moments
+    trusted`` (with moments: the frame and every moment in the row trusted), then every angle
+    and moment as ``name [unit]`` and, with ``--smooth auto``, each one's standard deviation as
+    ``name sd [unit]``;
     ``pandas.read_csv(path)`` reads it in one call."""
     parts = [angle_curves(run)]
     moments = moment_curves(run)
@@ -192,8 +193,9 @@ def write_csv(run: Run, path: str | Path) -> None:
         parts.append(moments)
     flags = [run.trusted] + ([moments_trusted(run)] if moments is not None else [])
     parts += sd_curves(run)
-    header = ["time [s]", "trusted"] + (["moments trusted"] if moments is not None else []) + [
-        f"{n} [{u}]" for c in parts for n, u in zip(c.names, c.units, strict=True)]
+    header = ["trial time [s]", "trusted"] + \
+        (["moments trusted"] if moments is not None else []) + \
+        [f"{n} [{u}]" for c in parts for n, u in zip(c.names, c.units, strict=True)]
     values = np.column_stack([c.values for c in parts])
     rows = [",".join(header)]
     for t, *ok, row in zip(run.result.time + run.start_time, *flags, values, strict=True):
