@@ -101,3 +101,40 @@ def test_the_write_itself_refuses_a_taken_name(tmp_path):
     assert results.read_bytes() == before
     write_runs(results, [run], "third", replace=True)
     assert runs_in(results) == {"ad": "third"}
+
+
+@pytest.mark.parametrize("changes,expected", [
+    ({"method": "nrm-ls"}, "nrm-ls"),
+    ({"method": "cno-sqp", "objective": "ed"}, "cno-sqp-ed"),
+    ({"method": "cno-ip"}, "cno-ip"),
+    ({"method": "mo-ed", "filter_cutoff": 6.0}, "mo-ed-f6Hz"),
+    ({"method": "cno-sqp", "parallel": True, "workers": 1, "parallel_init": "same"},
+     "cno-sqp-parallel"),
+    ({"method": "nrm-wls", "perturb_mm": 7.5, "seed": 3}, "nrm-wls-P7.5"),
+])
+def test_the_name_known_before_the_solve_is_the_runs(changes, expected):
+    """``expected_run_name`` (what the CLI checks the results file for before any work) is the
+    name the solved run carries, for the methods whose solver labels itself."""
+    from fccgrb_cli.model import load_model
+    from fccgrb_cli.pipeline.solve import expected_run_name, solve_trial
+    from fccgrb_cli.trial.record import read_trial
+
+    options = SolveOptions.from_mapping({"events": "none", **changes})
+    assert expected_run_name(options) == expected
+    trial = read_trial(TRIAL)
+    short = type(trial)(trial.path, trial.labels, trial.markers[:12], trial.rate)
+    run = solve_trial(load_model(MODEL), short, options)
+    assert run.name == expected and run.result.method == expected.split("-f")[0].split("-P")[0]
+
+
+def test_a_second_solve_is_refused_before_any_work(tmp_path, monkeypatch):
+    results = tmp_path / "r.h5"
+    assert run_cli("solve", MODEL, TRIAL, "-o", results).exit_code == 0
+    before = results.read_bytes()
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("solved before refusing")
+
+    monkeypatch.setattr("fccgrb_cli.pipeline.solve.solve_trial", no_work)
+    one_error_line(run_cli("solve", MODEL, TRIAL, "-o", results), "already holds the run")
+    assert results.read_bytes() == before

@@ -350,8 +350,12 @@ def solve(model: str | None, trials: tuple[str, ...], opensim_setup: str | None,
         _check_model_output(write_model, taken, chosen, paths)
         check_target(write_model)
     check_output(output)
-    if chosen.name is not None and not replace and len(paths) == 1 and Path(output).exists():
-        refuse_taken_names(Path(output), [chosen.name])  # before a long solve, when known
+    if not replace and Path(output).exists():  # before any solve: the names are known
+        from fccgrb_cli.pipeline.solve import expected_run_name
+
+        name = expected_run_name(chosen)
+        refuse_taken_names(Path(output), [name] if len(paths) == 1 else
+                           [f"{Path(p).stem}-{name}" for p in paths])
     loaded = load_checked(model, chosen.form)
     runs = []
     for path in paths:

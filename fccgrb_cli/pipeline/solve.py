@@ -43,6 +43,7 @@ from fccgrb_cli.solvers.determined import determined
 from fccgrb_cli.solvers.methods import Method, solve_stretch
 from fccgrb_cli.solvers.mixed import recounted
 from fccgrb_cli.solvers.nrm.problem import unsolvable_text
+from fccgrb_cli.solvers.optimize.frame import method_label
 from fccgrb_cli.solvers.quality import JUMP, NO_DATA, Finding, assessed, with_findings
 from fccgrb_cli.system import System, compile_system
 from fccgrb_cli.trial.labels import match_labels, vector_targets
@@ -50,7 +51,7 @@ from fccgrb_cli.trial.record import Trial
 from fccgrb_cli.trial.truth import Truth, read_truth, truth_path
 from fccgrb_cli.trial.virtual import resolved
 
-__all__ = ["check_window", "solve_trial"]
+__all__ = ["check_window", "expected_run_name", "solve_trial"]
 
 Progress = Callable[[int, int], None] | None
 
@@ -182,9 +183,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
                                                 for m in result.messages))
         warnings = [clocked(w, trial.start) for w in warnings]
         return Run(
-            name=options.name or run_name(result.method, options.ad_drivers,
-                                          options.filter_cutoff, options.perturb_level_m,
-                                          options.perturb_markers, _smoothing(options)),
+            name=expected_run_name(options),
             options=options, result=result, labels=model.marker_labels, rate=trial.rate,
             reference=reference, markers_input=inputs, model_points=points, ed=ed,
             ed_input=ed_input, truth_theta=truth.theta if truth is not None else None,
@@ -552,6 +551,18 @@ def _smoothing(options: SolveOptions) -> str:
     if options.smooth_noise is not None:
         return f"smooth-n{options.smooth_noise:g}mm"
     return "smooth"
+
+
+def expected_run_name(options: SolveOptions) -> str:
+    """The name a solve with ``options`` writes its run under, known before it solves (so that
+    a second run into a results file is refused before the work): ``--name``, else
+    :func:`run_name` of the method's label (``solvers.optimize.frame.method_label``)."""
+    if options.name:
+        return options.name
+    label = method_label(options.method, options.objective, options.parallel,
+                         options.parallel_init)
+    return run_name(label, options.ad_drivers, options.filter_cutoff, options.perturb_level_m,
+                    options.perturb_markers, _smoothing(options))
 
 
 def run_name(method: str, ad_drivers: str, cutoff: float | None, level_m: float,

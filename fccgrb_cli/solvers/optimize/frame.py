@@ -169,3 +169,21 @@ def solve_frame(system: System, settings: Settings, q0: np.ndarray, y: np.ndarra
     phi_norm, phi_top = problem.statistics(out.q)
     return FrameRecord(out.q, out.iterations, out.converged, out.message, seconds, phi_norm,
                        phi_top)
+
+
+
+def method_label(method: str, objective: str = "tc", parallel: bool = False,
+                 init: str = "nrm") -> str:
+    """What a solve records as its method (``KinematicResult.method``) and the default run
+    name starts with: the method, ``-ed`` for CNO on the distances' objective, and
+    ``-parallel`` (``-parallel-<init>`` unless each frame starts from the same guess) for
+    frames solved apart by the optimization methods (CNO, goal attainment); any other
+    method's name as it is."""
+    label = str(method)
+    if not label.startswith(("cno", "mo")):
+        return label
+    if label.startswith("cno") and objective == "ed":
+        label += "-ed"
+    if parallel:
+        label += "-parallel" + ("" if init == "same" else f"-{init}")
+    return label

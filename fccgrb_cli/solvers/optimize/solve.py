@@ -31,6 +31,7 @@ from fccgrb_cli.solvers.nrm.solve import solve_nrm
 from fccgrb_cli.solvers.optimize.frame import (
     FrameRecord,
     Settings,
+    method_label,
     solve_frame,
 )
 from fccgrb_cli.solvers.optimize.problem import FrameProblem
@@ -90,8 +91,7 @@ def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
     n = len(time)
     started = clock.perf_counter()
     first = initial_guess(system, targets[0])
-    label = settings.method + ("-ed" if settings.method.startswith("cno")
-                               and settings.objective == "ed" else "")
+    label = method_label(settings.method, settings.objective, settings.parallel, settings.init)
     init = settings.init
     compiled = not settings.parallel and compiled_structured(system, settings)
     if compiled:
@@ -108,7 +108,6 @@ def solve_optimization(system: System, time: np.ndarray, targets: np.ndarray,
         records = _parallel(system, time, targets, settings, first, progress)
         resolved = 0 if init == "same" else repair(system, settings, targets, records)
         wall = clock.perf_counter() - started
-        label += "-parallel" + ("" if init == "same" else f"-{init}")
     messages = [f"frame index {f} (t = {time[f]:.3f} s): {r.message}"
                 for f, r in enumerate(records) if not r.converged]
     if settings.parallel and init != "same" and resolved:
