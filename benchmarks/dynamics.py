@@ -17,15 +17,12 @@ from __future__ import annotations
 import fccgrb_cli  # noqa: F401  (first: pins BLAS to one thread before numpy loads)
 import argparse
 import time
-from functools import partial
 from pathlib import Path
-from unittest import mock
 
 import numpy as np
 
 from fccgrb_cli.pipeline import solve as pipeline
 from fccgrb_cli.anatomy.calibrate import calibrate
-from fccgrb_cli.dynamics import convert
 from fccgrb_cli.trial.record import read_trial
 from fccgrb_cli.model import Model, load_model, parse_model
 from fccgrb_cli.pipeline.options import SolveOptions, prepared
@@ -45,14 +42,12 @@ def stage_ms(model: Model, trial, options: SolveOptions, repeat: int, batched: b
     model = prepared(model, options)
     system = compile_system(model, angles="coordinate", track=True)
     best, tau = float("inf"), float("nan")
-    path = partial(convert.classical_dynamics, batched=batched)
-    with mock.patch.object(pipeline, "classical_dynamics", path):
-        for _ in range(repeat + 1):
-            started = time.perf_counter()
-            dyn = pipeline._dynamics(model, trial, system, run.result, options,
-                                     pipeline._Notes([], [], {}))
-            best = min(best, time.perf_counter() - started) if _ else best
-            tau = float(np.abs(dyn.inverse.joint_moments).max())
+    for _ in range(repeat + 1):
+        started = time.perf_counter()
+        dyn = pipeline.dynamics_stage(model, trial, system, run.result, options,
+                                      pipeline.StageNotes([], [], {}), batched=batched)
+        best = min(best, time.perf_counter() - started) if _ else best
+        tau = float(np.abs(dyn.inverse.joint_moments).max())
     return 1e3 * best / trial.n_frames, tau
 
 

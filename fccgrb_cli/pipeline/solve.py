@@ -51,7 +51,7 @@ from fccgrb_cli.trial.record import Trial
 from fccgrb_cli.trial.truth import Truth, read_truth, truth_path
 from fccgrb_cli.trial.virtual import resolved
 
-__all__ = ["check_window", "expected_run_name", "solve_trial"]
+__all__ = ["StageNotes", "check_window", "dynamics_stage", "expected_run_name", "solve_trial"]
 
 Progress = Callable[[int, int], None] | None
 
@@ -141,8 +141,8 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
                                      (("reference", reference), ("markers_input", inputs),
                                       ("model_points", points)))
         stance: dict[str, np.ndarray] = {}
-        solved_dynamics = _dynamics(model, trial, system, bridged, options,
-                                    _Notes(warnings, notes, stance), smoothing, given)
+        solved_dynamics = dynamics_stage(model, trial, system, bridged, options,
+                                         StageNotes(warnings, notes, stance), smoothing, given)
         uncertainty = None
         if smoothing is not None:
             uncertainty = _blank(smoothing.uncertainty(
@@ -380,7 +380,7 @@ def _blank_frames(dynamics: Dynamics | None, frames: np.ndarray, time: np.ndarra
 
 
 @dataclass(frozen=True)
-class _Notes:
+class StageNotes:
     """Where the dynamics stage reports: warnings, notes, and each foot's stance frames."""
 
     warnings: list[str]
@@ -388,10 +388,11 @@ class _Notes:
     stance: dict[str, np.ndarray]
 
 
-def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResult,
-              options: SolveOptions, report: _Notes,
-              smoothing: Smoothing | None = None,
-              given: tuple[list[ExternalLoad], list[str]] | None = None) -> Dynamics | None:
+def dynamics_stage(model: Model, trial: Trial, system: System, result: KinematicResult,
+                   options: SolveOptions, report: StageNotes,
+                   smoothing: Smoothing | None = None,
+                   given: tuple[list[ExternalLoad], list[str]] | None = None, *,
+                   batched: bool | None = None) -> Dynamics | None:
     """The inverse dynamics of the classical model driven by the run's angles
     (docs/formulation.md §4), with the trial's force plates (or the ``--loads`` set, ``given``:
     loads and notes), on every stretch of solved frames long enough for its rates
@@ -399,7 +400,9 @@ def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResul
     None, with a warning, when it cannot or need not run, or no stretch is long enough. With
     ``smoothing`` the model is driven by the smoothed rates over the whole trial (the smoother
     bridged its gaps with the model; their frames stay untrusted and so do their moments) and the
-    plates are smoothed alike (smoothing.py)."""
+    plates are smoothed alike (smoothing.py). ``batched``: the classical model's frames all at
+    once, or one by one (None: as ``dynamics.convert.classical_dynamics`` chooses); the
+    benchmarks time each."""
     warnings, notes, stance = report.warnings, report.notes, report.stance
     if options.dynamics is None and not model.has_inertia:
         warnings.append(f"{model.source}: no mass and inertia on every body; inverse dynamics "
@@ -466,7 +469,8 @@ def _dynamics(model: Model, trial: Trial, system: System, result: KinematicResul
             some = [load.lowpassed(trial.rate, cutoff, options.filter_order) for load in some]
         pieces.append((part, classical_dynamics(
             model, take(result, part, n), cutoff=None if baseline else cutoff,
-            order=options.filter_order, loads=some, tol=options.tol, engine=options.engine)))
+            order=options.filter_order, loads=some, tol=options.tol, engine=options.engine,
+            batched=batched)))
     if len(pieces) == 1 and parts[0] == (0, n):
         return pieces[0][1]
     return merged(pieces, n, result.time)
