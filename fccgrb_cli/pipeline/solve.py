@@ -142,7 +142,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
                                       ("model_points", points)))
         stance: dict[str, np.ndarray] = {}
         solved_dynamics = dynamics_stage(model, trial, system, bridged, options,
-                                         StageNotes(warnings, notes, stance), smoothing, given)
+                                         StageNotes(warnings, notes, stance, given), smoothing)
         uncertainty = None
         if smoothing is not None:
             uncertainty = _blank(smoothing.uncertainty(
@@ -381,21 +381,24 @@ def _blank_frames(dynamics: Dynamics | None, frames: np.ndarray, time: np.ndarra
 
 @dataclass(frozen=True)
 class StageNotes:
-    """Where the dynamics stage reports: warnings, notes, and each foot's stance frames."""
+    """Where the dynamics stage reports: warnings, notes, and each foot's stance frames; and
+    the ``--loads`` set it applies in place of the trial's force plates (its loads and the
+    notes that say which force went where; None: the plates), read before the solve so that a
+    bad file stops the run before the work."""
 
     warnings: list[str]
     notes: list[str]
     stance: dict[str, np.ndarray]
+    given: tuple[list[ExternalLoad], list[str]] | None = None
 
 
 def dynamics_stage(model: Model, trial: Trial, system: System, result: KinematicResult,
                    options: SolveOptions, report: StageNotes,
-                   smoothing: Smoothing | None = None,
-                   given: tuple[list[ExternalLoad], list[str]] | None = None, *,
+                   smoothing: Smoothing | None = None, *,
                    batched: bool | None = None) -> Dynamics | None:
     """The inverse dynamics of the classical model driven by the run's angles
-    (docs/formulation.md §4), with the trial's force plates (or the ``--loads`` set, ``given``:
-    loads and notes), on every stretch of solved frames long enough for its rates
+    (docs/formulation.md §4), with the trial's force plates (or the ``--loads`` set,
+    ``report.given``), on every stretch of solved frames long enough for its rates
     (``stretches.shortest``): θ̇, θ̈ and the filter within each stretch, never across a gap;
     None, with a warning, when it cannot or need not run, or no stretch is long enough. With
     ``smoothing`` the model is driven by the smoothed rates over the whole trial (the smoother
@@ -403,7 +406,7 @@ def dynamics_stage(model: Model, trial: Trial, system: System, result: Kinematic
     plates are smoothed alike (smoothing.py). ``batched``: the classical model's frames all at
     once, or one by one (None: as ``dynamics.convert.classical_dynamics`` chooses); the
     benchmarks time each."""
-    warnings, notes, stance = report.warnings, report.notes, report.stance
+    warnings, notes, stance, given = report.warnings, report.notes, report.stance, report.given
     if options.dynamics is None and not model.has_inertia:
         warnings.append(f"{model.source}: no mass and inertia on every body; inverse dynamics "
                         "skipped")
