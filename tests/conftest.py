@@ -9,9 +9,9 @@ still runs in CI.
 
 ``ci`` (the default): derandomized (a fixed seed: every run draws the same cases), no
 deadline (solver times vary on a shared machine), no example database written into the tree;
-the generated tests scale their own example counts from ``max_examples`` so that they run in
-about a minute on two cores. ``long`` (``pytest --hypothesis-profile long``): random seeds,
-ten times the examples, for local runs.
+the generated tests (in the slow part) scale their own example counts from ``max_examples`` so
+that they run in about a minute on two cores. ``long`` (``pytest --hypothesis-profile long``):
+random seeds, ten times the examples, for local runs.
 """
 
 import time
@@ -46,6 +46,23 @@ SLOW = (
     "tests/test_batch.py::test_killed_batch_resumes_and_equals_an_uninterrupted_run",
     "tests/test_sweep.py::test_killed_sweep_resumes_with_the_missing_cells",
     "tests/test_engine.py::test_batches_load_each_kernel_once_per_process",
+    # every generated tree solved by every path against the test's own Newton–Euler: about a
+    # minute, the suite's largest sweep
+    "tests/test_generated.py",
+)
+
+# The longest files (about 15–90 s each), run first, longest first: the README's
+# command hands whole files to two processes (pytest-xdist, --dist loadfile), and a long file
+# handed out last would leave the other process idle while it runs.
+FIRST = (
+    "tests/test_trust.py",
+    "tests/test_checks.py",
+    "tests/test_kernels.py",
+    "tests/test_optimization.py",
+    "tests/test_full_turns.py",
+    "tests/test_inverse_dynamics.py",
+    "tests/test_sweep.py",
+    "tests/test_api.py",
 )
 
 
@@ -54,6 +71,8 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
         node = item.nodeid.split("[")[0]
         if any(node == slow or node.startswith(f"{slow}::") for slow in SLOW):
             item.add_marker(pytest.mark.slow)
+    module = {name: rank for rank, name in enumerate(FIRST)}
+    items.sort(key=lambda item: module.get(item.nodeid.split("::")[0], len(FIRST)))
 
 
 @pytest.fixture(scope="session")
