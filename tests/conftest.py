@@ -49,6 +49,11 @@ SLOW = (
     # every generated tree solved by every path against the test's own Newton–Euler: about a
     # minute, the suite's largest sweep
     "tests/test_generated.py",
+    # the compiled engines against numpy on generated trees (25 trees each, ~10 s a test); the
+    # bundled models and the gait trial keep checking the engines in the README's command
+    "tests/test_kernels.py::test_engines_agree_on_generated_trees",
+    "tests/test_kernels.py::test_compiled_rates_on_moving_bases_and_gaps",
+    "tests/test_kernels.py::test_compiled_dynamics_on_moving_bases",
 )
 
 # The longest files (about 15–90 s each), run first, longest first: the README's
@@ -57,7 +62,6 @@ SLOW = (
 FIRST = (
     "tests/test_trust.py",
     "tests/test_checks.py",
-    "tests/test_kernels.py",
     "tests/test_optimization.py",
     "tests/test_full_turns.py",
     "tests/test_inverse_dynamics.py",
