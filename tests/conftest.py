@@ -56,27 +56,12 @@ SLOW = (
     "tests/test_kernels.py::test_compiled_dynamics_on_moving_bases",
 )
 
-# The longest files (about 15–90 s each), run first, longest first: the README's
-# command hands whole files to two processes (pytest-xdist, --dist loadfile), and a long file
-# handed out last would leave the other process idle while it runs.
-FIRST = (
-    "tests/test_trust.py",
-    "tests/test_checks.py",
-    "tests/test_optimization.py",
-    "tests/test_full_turns.py",
-    "tests/test_inverse_dynamics.py",
-    "tests/test_sweep.py",
-    "tests/test_api.py",
-)
-
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
         node = item.nodeid.split("[")[0]
         if any(node == slow or node.startswith(f"{slow}::") for slow in SLOW):
             item.add_marker(pytest.mark.slow)
-    module = {name: rank for rank, name in enumerate(FIRST)}
-    items.sort(key=lambda item: module.get(item.nodeid.split("::")[0], len(FIRST)))
 
 
 @pytest.fixture(scope="session")
