@@ -24,7 +24,7 @@ own energy). Then:
 * tracked vectors (TOC) through the pipeline recover the truth, and the same model with
   ``from``/``to`` swapped does not (the direction is pinned).
 
-Cases per CI run (profile ``ci`` in tests/conftest.py, max_examples = 10): see the settings of
+Cases per CI run (profile ``ci`` in tests/conftest.py, max_examples = 25): see the settings of
 each test; the featured cases put every joint type on a fixed and on a floating base in every
 run.
 """
@@ -53,7 +53,7 @@ from fccgrb_cli.solvers.optimize.solve import Settings, solve_optimization
 from fccgrb_cli.system import compile_system
 from fccgrb_cli.trial.record import Trial
 
-EXAMPLES = settings().max_examples   # the active profile's (ci: 10, long: 100)
+EXAMPLES = settings().max_examples   # the active profile's (ci: 25, long: 250)
 
 
 def scaled(share: float) -> settings:
