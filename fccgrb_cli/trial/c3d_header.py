@@ -27,6 +27,7 @@ import math
 import struct
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
@@ -208,7 +209,7 @@ def _check_records(section: bytes, processor: str, path: Path) -> None:
     endian = ">" if processor == "MIPS" else "<"
     pos, end = 4, len(section)
 
-    def fail(what: str) -> None:
+    def fail(what: str) -> NoReturn:
         raise InputError(f"{path}: not a readable C3D file (the parameter record at byte "
                          f"{pos} of the parameter section {what})")
 
