@@ -43,6 +43,12 @@ class ClinicalResults:
         return self.moments / self.mass
 
 
+def _declared(angle: np.ndarray | None) -> np.ndarray:
+    """A clinical angle series of a coordinate that declares its clinical sign (never None)."""
+    assert angle is not None
+    return angle
+
+
 def clinical_results(model: Model, theta: np.ndarray, joint_moments: np.ndarray | None,
                      stance: dict[str, np.ndarray] | None = None) -> ClinicalResults | None:
     """The clinical view of a run (θ: frames × angles in the model's order, rad; moments τ:
@@ -51,7 +57,7 @@ def clinical_results(model: Model, theta: np.ndarray, joint_moments: np.ndarray 
     if not index:
         return None
     signs = np.array([model.angles[k].clinical_sign for k in index], dtype=float)
-    angles = np.column_stack([model.angles[k].clinical(theta[:, k]) for k in index])
+    angles = np.column_stack([_declared(model.angles[k].clinical(theta[:, k])) for k in index])
     moments = None if joint_moments is None else joint_moments[:, index] * signs
     contact = tuple(distal_contact(model, model.angles[k]) for k in index)
     return ClinicalResults(tuple(model.angles[k].name for k in index), angles, moments,
