@@ -89,7 +89,8 @@ def _read_axes(a: dict) -> LabAxes | None:
         return None
     walking = np.asarray(a["walking"], dtype=float)
     gx, gy, gz = (float(x) for x in a["gravity"])
-    return LabAxes(str(a["vertical"]), np.asarray(a["up"], dtype=float), (gx, gy, gz), str(a["vertical_chosen_by"]),
+    return LabAxes(str(a["vertical"]), np.asarray(a["up"], dtype=float), (gx, gy, gz),
+                   str(a["vertical_chosen_by"]),
                    str(a["vertical_why"]), None if np.isnan(walking).any() else walking)
 
 
