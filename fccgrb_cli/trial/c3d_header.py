@@ -368,6 +368,7 @@ def read_points(path: str | Path, layout: C3DLayout, frames: int,
     out = np.empty((frames, layout.points, 3))
     for start in range(0, frames, chunk):
         block = np.asarray(raw[start:start + chunk, :4 * layout.points])
+        values: np.ndarray
         if layout.processor == "DEC" and layout.float_data:
             values = decode_floats(block.tobytes(), "DEC").reshape(block.shape)
         else:
