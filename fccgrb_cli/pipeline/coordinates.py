@@ -141,9 +141,7 @@ def _columns(model: Model, coordinates: Storage) -> tuple[np.ndarray, list[str]]
     missing = []
     for k, coordinate in enumerate(model.angles):
         if not coordinates.has(coordinate.name):
-            if not isinstance(coordinate, JointCoordinate):
-                raise InputError(f"{coordinates.source}: expected a column {coordinate.name} "
-                                 "(a driven angle has no default pose to hold)")
+            assert isinstance(coordinate, JointCoordinate)  # an imported model's are all
             theta[:, k] = coordinate.default
             missing.append(coordinate.name)
             continue

@@ -541,9 +541,7 @@ def _held(model: Model, items: tuple[str, ...]) -> Model:
                              f"({', '.join(coordinates)[:200]})")
         text = text.strip()
         if text == "default":
-            if not isinstance(coordinate, JointCoordinate):
-                raise InputError(f"--hold {item}: {coordinate.name} is a driven angle with no "
-                                 "default pose: expected NAME=VALUE")
+            assert isinstance(coordinate, JointCoordinate)  # an imported model's are all
             value = coordinate.default
         else:
             try:
