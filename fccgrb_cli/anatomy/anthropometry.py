@@ -69,8 +69,8 @@ def combine(parts: list[tuple[float, np.ndarray, np.ndarray]]
     """One rigid body from parts (mass, CoM, inertia tensor about the part's CoM, all in one
     frame): the total mass, the mass-weighted CoM and the tensor about it by the parallel-axis
     theorem, I = Σ [I_k + m_k (|d_k|² 1 − d_k d_kᵀ)], d_k the part's CoM from the total's."""
-    mass = sum(m for m, _, _ in parts)
-    com = sum(m * np.asarray(c, float) for m, c, _ in parts) / mass
+    mass: float = sum(m for m, _, _ in parts)
+    com = sum((m * np.asarray(c, float) for m, c, _ in parts), np.zeros(3)) / mass
     tensor = np.zeros((3, 3))
     for m, c, inertia in parts:
         d = np.asarray(c, float) - com

@@ -56,7 +56,7 @@ DAVIS_LANDMARKS = ("right_asis", "left_asis", "sacrum", *(
         "second_metatarsal")))
 METHODS = {"anatomical": LANDMARKS, "davis": DAVIS_LANDMARKS}
 # the landmarks each segment's frame is built from, by method (named by calibrate's warnings)
-BUILDERS = {
+BUILDERS: dict[str, dict[str, tuple[str, ...]]] = {
     "anatomical": {"thigh": ("lateral_epicondyle", "medial_epicondyle"),
                    "shank": ("lateral_malleolus", "medial_malleolus"),
                    "foot": ("heel", "first_metatarsal", "fifth_metatarsal")},
@@ -333,8 +333,8 @@ def calibrate(model: Model, trial: Trial, frames: tuple[int, int] | None = None,
         anatomy = segment_frames(lm)
     seg, width, depth = anatomy.frames, anatomy.width, anatomy.depth
     doc = yaml.safe_load(model.text)
-    points: dict[str, dict[str, list[float]]] = {b: {} for b in BODIES}
-    vectors: dict[str, dict[str, list[float]]] = {b: {} for b in BODIES}
+    points: dict[str, dict[str, np.ndarray]] = {b: {} for b in BODIES}
+    vectors: dict[str, dict[str, np.ndarray]] = {b: {} for b in BODIES}
     lengths: dict[str, float] = {}
     inertia: dict[str, dict] = {}
     for s in SIDES:

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fccgrb_cli.model import Model
+from fccgrb_cli.model.elements import Coordinate
 from fccgrb_cli.system.constraints import joint_neighbours, reachable
 
 
@@ -43,6 +44,13 @@ class ClinicalResults:
         return self.moments / self.mass
 
 
+def clinical_series(coordinate: Coordinate, theta: np.ndarray) -> np.ndarray:
+    """The clinical angle (deg) of a coordinate that declares its clinical sign."""
+    angle = coordinate.clinical(theta)
+    assert angle is not None  # declared: only a coordinate without a sign gives None
+    return angle
+
+
 def clinical_results(model: Model, theta: np.ndarray, joint_moments: np.ndarray | None,
                      stance: dict[str, np.ndarray] | None = None) -> ClinicalResults | None:
     """The clinical view of a run (θ: frames × angles in the model's order, rad; moments τ:
@@ -51,7 +59,7 @@ def clinical_results(model: Model, theta: np.ndarray, joint_moments: np.ndarray 
     if not index:
         return None
     signs = np.array([model.angles[k].clinical_sign for k in index], dtype=float)
-    angles = np.column_stack([model.angles[k].clinical(theta[:, k]) for k in index])
+    angles = np.column_stack([clinical_series(model.angles[k], theta[:, k]) for k in index])
     moments = None if joint_moments is None else joint_moments[:, index] * signs
     contact = tuple(distal_contact(model, model.angles[k]) for k in index)
     return ClinicalResults(tuple(model.angles[k].name for k in index), angles, moments,

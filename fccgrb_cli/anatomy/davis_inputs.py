@@ -38,7 +38,8 @@ def _one_width(value: Sided, vicon: str, warnings: list[str]) -> float | None:
     given = [v for v in (value.left, value.right) if v is not None]
     if not given:
         return None
-    if max(given) - min(given) > SIDE_TOLERANCE:
+    if value.left is not None and value.right is not None \
+            and max(given) - min(given) > SIDE_TOLERANCE:  # both given, and they differ
         warnings.append(f"L{vicon} {1e3 * value.left:g} mm and R{vicon} {1e3 * value.right:g} "
                         f"mm: this template takes one width, their mean "
                         f"{1e3 * sum(given) / len(given):g} mm")

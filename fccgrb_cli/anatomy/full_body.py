@@ -103,7 +103,7 @@ def personalize(model: Model, trial: Trial, frames: tuple[int, int] | None = Non
     lower = (calibrate(model, trial, frames, mass, measurements, mapping, vertical) if legs
              else _pelvis_alone(model, trial, frames, mass, mapping, vertical))
     lumped = LUMPED in names
-    needed = TRUNK_LANDMARKS
+    needed: tuple[str, ...] = TRUNK_LANDMARKS
     if not lumped:
         needed += HEAD_LANDMARKS if "head" in names else ()
         needed += tuple(f"{side}_{n}" for s, side in SIDES.items() if f"upper_arm_{s}" in names
@@ -120,6 +120,7 @@ def personalize(model: Model, trial: Trial, frames: tuple[int, int] | None = Non
     if not legs:
         pelvis = _pelvis_frames(lm)[0]
     elif calibration_method(model) == "davis":
+        assert lower.measurements is not None  # Davis' calibration keeps the ones it used
         pelvis = davis_segment_frames(lm, lower.measurements).frames["pelvis"]
     else:
         pelvis = segment_frames(lm).frames["pelvis"]

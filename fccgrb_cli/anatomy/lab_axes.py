@@ -37,6 +37,7 @@ import numpy as np
 
 from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model import GROUND, Model
+from fccgrb_cli.model.spatial import JointCoordinate
 from fccgrb_cli.trial.record import Trial
 
 AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
@@ -119,7 +120,7 @@ def model_defines_lab(model: Model) -> str | None:
         if moving.parent == GROUND:
             return f"joint {moving.name}"
     for coordinate in model.angles:
-        if coordinate.kind == "joint":  # held by a moving joint, named above
+        if isinstance(coordinate, JointCoordinate):  # held by a moving joint, named above
             continue
         ends = (coordinate.body1, coordinate.body2)
         axis = getattr(coordinate, "axis", None)
@@ -181,7 +182,7 @@ def plate_cue(model: Model, trial: Trial) -> Cue | None:
     if len(labels) > 1:
         each = ", ".join(f"{n} {label}" for n, (label, _) in axes.items())
         return Cue("force plates", None, f"force plates disagree ({each})")
-    label, off = nearest_axis(sum(found.values()))
+    label, off = nearest_axis(sum(found.values(), np.zeros(3)))
     if off > SNAP_DEG:
         return Cue("force plates", None, f"force plates {names}: normal {off:.0f}° from "
                                          f"the nearest axis {label}")
@@ -288,7 +289,8 @@ def lab_axes(model: Model, trial: Trial, markers: np.ndarray, vertical: str = "a
     gravity = model.gravity
     if chosen and own != chosen:
         magnitude = float(np.linalg.norm(model.gravity))
-        gravity = tuple(float(x) + 0.0 for x in -magnitude * up)
+        turned = -magnitude * up
+        gravity = (float(turned[0]) + 0.0, float(turned[1]) + 0.0, float(turned[2]) + 0.0)
         why += f"; the model's gravity {_vector_text(model.gravity)} turned onto it"
     elif model_up is not None and chosen:
         up = model_up  # kept as written: its exact direction

@@ -19,7 +19,7 @@ from concurrent.futures import Executor
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from fccgrb_cli.batch.cells import Job, cells_folder, pending, run_jobs
 from fccgrb_cli.core.atomic import atomic_path, remove_stale
@@ -69,7 +69,7 @@ class Sweep:
     cells: tuple[Cell, ...]
 
 
-def _fail(source: Path, path: str, expected: str, got: Any = None) -> None:
+def _fail(source: Path, path: str, expected: str, got: Any = None) -> NoReturn:
     raise InputError(f"{source}: {path}: expected {expected}" +
                      ("" if got is None else f", got {shown(got)}"))
 

@@ -6,9 +6,9 @@ import contextlib
 import dataclasses
 import functools
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import click
 import numpy as np
@@ -62,7 +62,10 @@ def reports_input_errors(command: Callable) -> Callable:
 def load_with_form(path: str, form: str = "model") -> Model:
     """Load a model and apply a body-form override ('model' keeps the file's forms)."""
     model = load_model(path)
-    return model if form == "model" else model.with_form(form)
+    if form == "model":
+        return model
+    assert form in ("full", "reduced")  # the option's choices, checked by click
+    return model.with_form("full" if form == "full" else "reduced")
 
 
 def load_checked(path: str, form: str = "model") -> Model:
@@ -94,8 +97,9 @@ class Main(click.Group):
     click's own included, is one line ``fccgrb: error: …`` and exit status 2 (130 for an
     interrupt)."""
 
-    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True,
-             **extra: Any) -> None:
+    def main(self, args: Sequence[str] | None = None, prog_name: str | None = None,
+             complete_var: str | None = None, standalone_mode: bool = True,
+             **extra: Any) -> NoReturn:
         previous = scratch.install()
         try:
             code = self._invoke(args, prog_name, extra)
@@ -345,8 +349,9 @@ def solve(model: str | None, trials: tuple[str, ...], opensim_setup: str | None,
     refuse_inputs(output, [model, *paths, *map(truth_path, paths), *_map_files(options)])
     check_target(output)
     if write_model is not None:
-        taken = {Path(p).resolve() for p in (model, *paths, *map(truth_path, paths), output,
-                                             *_map_files(options))}
+        named: list[str | Path] = [model, *paths, *map(truth_path, paths), output,
+                                   *_map_files(options)]
+        taken = {Path(p).resolve() for p in named}
         _check_model_output(write_model, taken, chosen, paths)
         check_target(write_model)
     check_output(output)
@@ -373,15 +378,17 @@ def solve(model: str | None, trials: tuple[str, ...], opensim_setup: str | None,
         if write_model is not None:
             from fccgrb_cli.core.atomic import atomic_path
 
+            assert run.reduction is not None  # --write-model asks for the reduction
             with atomic_path(write_model) as tmp:
                 tmp.write_text(run.reduction.text, encoding="utf-8")
             click.echo(f"wrote {write_model}: the model with the adjusted segment inertia")
     with_gait = [r for r in runs if r.gait is not None]
+    gaits = [r.gait for r in runs if r.gait is not None]  # with_gait's, in order
     subject = None
     if len(with_gait) > 1:
         from fccgrb_cli.gait.cycles import pooled
 
-        subject = ([r.name for r in with_gait], pooled([r.gait.cycles for r in with_gait]))
+        subject = ([r.name for r in with_gait], pooled([g.cycles for g in gaits]))
     write_runs(output, runs, " ".join(["fccgrb", *sys.argv[1:]]), subject=subject,
                waiting=lambda line: click.echo(f"fccgrb: warning: {line}", err=True),
                replace=replace)
@@ -651,7 +658,7 @@ def perturb_command(source: str, target: str, level_mm: float, markers: str | No
 
     sidecar = truth_path(source)
     copy_truth = sidecar.exists() and sidecar.resolve() != truth_path(target).resolve()
-    outputs = (target, *([truth_path(target)] if copy_truth else []))
+    outputs: tuple[str | Path, ...] = (target, *([truth_path(target)] if copy_truth else []))
     for path in outputs:
         refuse_inputs(path, [source, sidecar])
     if Path(target).suffix.lower() not in TRIAL_ENDINGS:

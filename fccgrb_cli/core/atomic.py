@@ -30,8 +30,11 @@ _PENDING = threading.local()  # the open transaction's staged (scratch, target) 
 
 def reason(error: OSError) -> str:
     """Why a write failed, in words."""
-    return {errno.ENOSPC: "the disk is full", errno.EDQUOT: "the disk quota is exceeded",
-            errno.EFBIG: "the file size limit was reached"}.get(error.errno, error.strerror)
+    words = {errno.ENOSPC: "the disk is full", errno.EDQUOT: "the disk quota is exceeded",
+             errno.EFBIG: "the file size limit was reached"}
+    if error.errno is not None and error.errno in words:
+        return words[error.errno]
+    return str(error.strerror)  # "None" where the system gave no words, as printed before
 
 
 def cannot_write(target: str | Path, error: OSError) -> InputError:

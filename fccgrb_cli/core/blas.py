@@ -34,12 +34,14 @@ def _scipy_lapack() -> ModuleType:
     scipy = find_spec("scipy")
     folder = Path(scipy.origin).parent / "linalg" if scipy and scipy.origin else None
     for suffix in EXTENSION_SUFFIXES if folder else ():
+        assert folder is not None  # no suffixes are tried without it
         path = folder / f"_flapack{suffix}"
         if path.is_file():
             spec = spec_from_file_location(name, path, loader=ExtensionFileLoader(name,
                                                                                   str(path)))
             if spec is not None:
                 module = module_from_spec(spec)
+                assert spec.loader is not None  # the one given to spec_from_file_location
                 spec.loader.exec_module(module)
                 return module
     from scipy.linalg import lapack as ordinary
@@ -87,10 +89,11 @@ def cython_modules_for_numba() -> tuple[str, ...]:
         if spec is None or name in sys.modules:
             return ()
         found[name] = spec
-    done = []
+    done: list[str] = []
     for name, spec in found.items():
         module = module_from_spec(spec)
         sys.modules[name] = module
+        assert spec.loader is not None  # the one given to spec_from_file_location
         try:
             spec.loader.exec_module(module)
         except Exception:  # as if never tried: numba's own import then says what is wrong

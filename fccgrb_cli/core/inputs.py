@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import os
 import stat
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -222,9 +223,10 @@ def same_file(a: str | Path, b: str | Path) -> bool:
         return False
 
 
-def refuse_inputs(output: str | Path, inputs: list[str | Path], option: str = "") -> None:
+def refuse_inputs(output: str | Path, inputs: Sequence[str | Path | None], option: str = ""
+                  ) -> None:
     """An InputError when ``output`` is one of the command's ``inputs`` (inputs are never
-    modified)."""
+    modified); an input not given (None) is skipped."""
     for given in inputs:
         if given is not None and same_file(output, given):
             name = f"{option} " if option else ""

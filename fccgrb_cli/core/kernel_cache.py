@@ -17,6 +17,7 @@ import hashlib
 import os
 import sys
 from pathlib import Path
+from typing import Any
 
 __all__ = ["SOURCES", "cache_folder", "compiled_here", "configure", "source_digest"]
 
@@ -61,7 +62,9 @@ def configure(version: str | None = None, root: Path = PACKAGE,
 
     cython_modules_for_numba()
     if version is None:
-        from fccgrb_cli import __version__ as version
+        from fccgrb_cli import __version__
+
+        version = __version__
     if _USER_SET not in os.environ:
         os.environ[_USER_SET] = os.environ.get("NUMBA_CACHE_DIR", "")
     folder = cache_folder(version, source_digest(root, folders))
@@ -70,7 +73,7 @@ def configure(version: str | None = None, root: Path = PACKAGE,
     except OSError:
         return None
     os.environ["NUMBA_CACHE_DIR"] = str(folder)
-    config = sys.modules.get("numba.core.config")
+    config: Any = sys.modules.get("numba.core.config")  # numba's settings, set by name
     if config is not None:  # numba loaded before us: its config read the environment already
         config.CACHE_DIR = str(folder)
     return folder

@@ -28,11 +28,17 @@ import shutil
 import signal
 import sys
 import threading
+from collections.abc import Callable
 from pathlib import Path
+from types import FrameType
+from typing import Any, TypeAlias
 
 _SCRATCH: set[str] = set()
 _QUIET = False  # a pool's worker ends without a word: its parent speaks
 SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
+# what signal.signal installs and returns: a function, SIG_DFL / SIG_IGN, or None (not set from
+# Python)
+Handler: TypeAlias = Callable[[int, FrameType | None], Any] | int | signal.Handlers | None
 PR_SET_PDEATHSIG = 1
 
 
@@ -91,10 +97,10 @@ def _end(signum: int, frame) -> None:
     os._exit(128 + signum)
 
 
-def install() -> dict[int, object]:
+def install() -> dict[int, Handler]:
     """Install the command line's handlers (main thread only; a no-op elsewhere); the handlers
     they replace, for ``restore``."""
-    previous: dict[int, object] = {}
+    previous: dict[int, Handler] = {}
     if threading.current_thread() is not threading.main_thread():
         return previous
     for name in SIGNALS:
@@ -105,7 +111,7 @@ def install() -> dict[int, object]:
     return previous
 
 
-def restore(previous: dict[int, object]) -> None:
+def restore(previous: dict[int, Handler]) -> None:
     """Put back the handlers ``install`` replaced (a test's process keeps its own)."""
     for number, handler in previous.items():
         signal.signal(number, handler)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import re
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -63,7 +64,7 @@ def take(value, part: slice, n: int, name: str = ""):
     return value
 
 
-def merged(parts: Sequence[tuple[slice, object]], n: int, like_time: np.ndarray | None = None):
+def merged(parts: Sequence[tuple[slice, Any]], n: int, like_time: np.ndarray | None = None):
     """Per-frame values of stretch results put back on the trial's ``n`` frames (the inverse of
     :func:`take`): arrays NaN (False, 0, '') outside the parts; fields that are not per frame
     from the first part; ``like_time`` replaces an array field named ``time``."""
@@ -84,10 +85,10 @@ def merged(parts: Sequence[tuple[slice, object]], n: int, like_time: np.ndarray 
                 out[part] = v
             return out
         if name in PER_FRAME_TUPLES and isinstance(head, tuple) and len(head) == length:
-            out = [""] * n
+            texts = [""] * n
             for (part, _), v in zip(parts, values, strict=True):
-                out[part] = list(v)
-            return tuple(out)
+                texts[part] = list(v)
+            return tuple(texts)
         if isinstance(head, tuple) and head and all(_dataclass(v) for v in head):
             return tuple(merged([(p, v[k]) for (p, _), v in zip(parts, values, strict=True)],
                                 n, like_time) for k in range(len(head)))

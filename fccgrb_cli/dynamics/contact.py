@@ -38,7 +38,7 @@ def assign(loaded: np.ndarray, cop: np.ndarray, bodies: dict[str, np.ndarray],
     for start, stop in contacts(loaded):
         c = cop[start:stop, None, :]
         distance = {name: _mean_nearest(p[start:stop], c) for name, p in bodies.items()}
-        best = min(distance, key=distance.get)
+        best = min(distance, key=distance.__getitem__)
         near = distance[best] <= max_distance
         out.append(Contact(start, stop, best if near else None, distance[best]))
     return out

@@ -151,7 +151,11 @@ def fit_inertia(model: Model, motion: BodyMotion, loads: Sequence[ExternalLoad],
 
     frames = np.flatnonzero(frames) if np.asarray(frames).dtype == bool else np.asarray(frames)
     names = motion.names
-    inertias = [model.body(n).inertia for n in names]
+    inertias = []
+    for name in names:
+        inertia = model.body(name).inertia
+        assert inertia is not None  # the residual's mass matrices required it
+        inertias.append(inertia)
     mass0 = np.array([i.mass for i in inertias])
     com0 = np.array([i.com for i in inertias], dtype=float)
     tensors = np.array([i.tensor for i in inertias], dtype=float)

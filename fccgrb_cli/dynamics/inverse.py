@@ -142,9 +142,9 @@ def _stacked(system: System, M: np.ndarray, g: np.ndarray, motion: KinematicResu
 
         some, misfit = np.empty((len(frames), system.n_rows)), np.empty(len(frames))
         args = (np.ascontiguousarray(q), np.ascontiguousarray(rhs), some, misfit)
-        s = sparse_of(system)
-        ready(multipliers_frames, s, *(a[:0] for a in args))
-        multipliers_frames(s, *args)
+        sparse = sparse_of(system)
+        ready(multipliers_frames, sparse, *(a[:0] for a in args))
+        multipliers_frames(sparse, *args)
         lam[frames], residual[frames] = some, misfit
         return lam, residual, x, xd, power
     for block in blocks(len(frames)):

@@ -33,7 +33,7 @@ def _inertias(model: Model) -> list[Inertia]:
     if missing:
         raise InputError(f"{model.source}: bodies.{missing[0]}: expected mass and inertia for "
                          f"inverse dynamics (missing for {', '.join(missing)})")
-    return [b.inertia for b in model.bodies]
+    return [b.inertia for b in model.bodies if b.inertia is not None]  # every one, as checked
 
 
 def mass_blocks(model: Model) -> np.ndarray:

@@ -111,11 +111,17 @@ def adjusted_model(model: Model, fit: InertiaFit) -> Model:
     bodies = []
     for body in model.bodies:
         k = fit.names.index(body.name)
+        assert body.inertia is not None  # the fit's mass matrices required it
         tensor = fit.tensor(k, np.array(body.inertia.tensor))
         bodies.append(replace(body, inertia=Inertia(
-            float(fit.mass[k]), tuple(float(c) for c in fit.com[k]),
-            tuple(tuple(float(x) for x in row) for row in tensor))))
+            float(fit.mass[k]), _floats(fit.com[k]),
+            (_floats(tensor[0]), _floats(tensor[1]), _floats(tensor[2])))))
     return replace(model, bodies=tuple(bodies))
+
+
+def _floats(v: np.ndarray) -> tuple[float, float, float]:
+    """A 3-vector as a tuple of Python floats."""
+    return (float(v[0]), float(v[1]), float(v[2]))
 
 
 def adjusted_text(model: Model, fit: InertiaFit, trial: str) -> str:
@@ -123,7 +129,9 @@ def adjusted_text(model: Model, fit: InertiaFit, trial: str) -> str:
     doc = yaml.safe_load(model.text)
     for k, name in enumerate(fit.names):
         spec = doc["bodies"][name]
-        tensor = fit.tensor(k, np.array(model.body(name).inertia.tensor))
+        inertia = model.body(name).inertia
+        assert inertia is not None  # the fit's mass matrices required it
+        tensor = fit.tensor(k, np.array(inertia.tensor))
         spec.update(mass=float(f"{fit.mass[k]:.6g}"),
                     com=np.round(fit.com[k], 6).tolist(),
                     inertia=np.round(tensor, 8).tolist())
@@ -182,6 +190,7 @@ def reduce_residuals(run: RunData, stage: Stage) -> Reduced:
     motion, states = states_of(model, run.dynamics, run.stance, stage)
     before = residual_report(model, motion, mass_blocks(model), loads, states,
                              trusted=run.result.trusted)
+    assert before is not None  # one floating base, checked above
     if not before.measured.any():
         raise InputError(f"{run.trial}: --reduce-residuals: expected frames where every "
                          "contact with the ground is measured by a force plate; there are none")
@@ -209,6 +218,7 @@ def reduce_residuals(run: RunData, stage: Stage) -> Reduced:
     motion = BodyMotion.of(system, k.q, k.qd, k.qdd)
     after = residual_report(adjusted, motion, mass_blocks(adjusted), loads, states,
                             before.over_measured.weight, run.result.trusted)
+    assert after is not None  # the adjusted model keeps its one floating base
     markers_after = _marker_rms(adjusted, motion, run.markers, before.measured)[:2]
     reduction = Reduction(adjusted_text(model, fit, run.trial), fit,
                           RigidCorrection(total[:, :3], total[:, 3:], step.centre), before,

@@ -313,7 +313,8 @@ def residual_report(model: Model, motion: BodyMotion, K: np.ndarray,
     if weight is None:
         weight = plate_weight(model, motion, K, loads, measured) if loaded else \
             mass * float(np.linalg.norm(model.gravity))
-    summaries = [summarize(force[:, 0], moment[:, 0], frames, single & frames, weight, mass)
-                 for frames in (measured, single)]
+    over_measured, over_single = (
+        summarize(force[:, 0], moment[:, 0], frames, single & frames, weight, mass)
+        for frames in (measured, single))
     return ResidualReport(bases[0], states, measured, single, force[:, 0], moment[:, 0],
-                          *summaries, weighed=loaded)
+                          over_measured, over_single, weighed=loaded)

@@ -5,6 +5,7 @@ parameters. Runs where the model reports clinical curves of both sides (lower-li
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TypeGuard
 
 import numpy as np
 
@@ -124,7 +125,8 @@ class FoundEvents:
     walking: np.ndarray | None = None
 
 
-def _has_both_sides(clinical: ClinicalResults | None) -> bool:
+def _has_both_sides(clinical: ClinicalResults | None) -> TypeGuard[ClinicalResults]:
+    """True when ``clinical`` is given and names angles of both legs."""
     return clinical is not None and all(any(n.endswith(SUFFIX[s]) for n in clinical.names)
                                         for s in SIDES)
 

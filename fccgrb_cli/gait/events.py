@@ -170,8 +170,8 @@ def plate_events(path: str | Path, rate: float, stance: dict[str, np.ndarray],
     (the first and last above the noise floor, the crossing interpolated between samples: a
     frame's mean would put an onset inside the frame up to a frame early). A contact already
     under way at the first frame, or not ended at the last, gives no event there."""
-    sides = {body: side_of(body) for body in stance}
-    if not stance or any(s is None for s in sides.values()):
+    sides = {body: side for body in stance if (side := side_of(body)) is not None}
+    if not stance or len(sides) < len(stance):  # a body on no side
         return None
     n_frames = len(next(iter(stance.values())))
     items: list[tuple[float, str, str]] = []

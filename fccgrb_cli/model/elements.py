@@ -75,6 +75,7 @@ class FrozenMap(Mapping):
     """A read-only mapping that pickles (a model travels to worker processes once each)."""
 
     __slots__ = ("_items",)
+    _items: dict
 
     def __init__(self, items: Mapping | None = None):
         object.__setattr__(self, "_items", dict(items or {}))

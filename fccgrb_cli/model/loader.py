@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 import yaml
@@ -86,7 +86,7 @@ class _Reader:
     def __init__(self, source: str):
         self.source = source
 
-    def fail(self, path: str, expected: str, got: Any = None, *, show_got: bool = True) -> None:
+    def fail(self, path: str, expected: str, got: Any = None, *, show_got: bool = True) -> NoReturn:
         tail = f", got {shown(got)}" if show_got else ""
         raise InputError(f"{self.source}: {path or '(top level)'}: expected {expected}{tail}")
 
@@ -211,7 +211,8 @@ def _inertia(r: _Reader, spec: dict, path: str) -> Inertia | None:
         r.fail(ipath, "principal moments satisfying the triangle inequality "
                f"(largest ≤ sum of the other two), got {np.round(moments, 9).tolist()}", None,
                show_got=False)
-    return Inertia(mass, com, tuple(tuple(row) for row in tensor.tolist()))
+    rows = tensor.tolist()
+    return Inertia(mass, com, (tuple(rows[0]), tuple(rows[1]), tuple(rows[2])))
 
 
 def _named_vectors(r: _Reader, value: Any, path: str, builtin: dict) -> dict:
@@ -264,15 +265,16 @@ def _base_motion(r: _Reader, value: Any, path: str, scale: float) -> BaseMotion:
     """A floating base's motion: ``translation`` (m) and ``rotation`` (the file's angle unit),
     each a list of 3 motions along / about the ground's x, y, z; either may be left out."""
     spec = r.mapping(value, path, allowed={"translation", "rotation"})
-    parts = {}
+    parts: dict[str, tuple[Motion, Motion, Motion]] = {}
     for key, size in (("translation", 1.0), ("rotation", scale)):
         if key not in spec:
             continue
         items = spec[key]
         if not isinstance(items, list) or len(items) != 3:
             r.fail(f"{path}.{key}", "a list of 3 motions (x, y, z)", items)
-        parts[key] = tuple(_motion(r, item, f"{path}.{key}[{k}]", size, scale)
-                           for k, item in enumerate(items))
+        x, y, z = (_motion(r, item, f"{path}.{key}[{k}]", size, scale)
+                   for k, item in enumerate(items))
+        parts[key] = (x, y, z)
     return BaseMotion(**parts)
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from fccgrb_cli.model.elements import Model
-from fccgrb_cli.model.spatial import Coupling
+from fccgrb_cli.model.spatial import Coupling, JointCoordinate
 
 __all__ = ["Fixed", "holding_unobserved", "unobserved"]
 
@@ -40,7 +40,7 @@ def unobserved(model: Model) -> list[str]:
         return body in tracked or any(seen_beyond(c) for c in children.get(body, []))
 
     held = {c.dependent for c in model.couplings}  # locked, held or coupled: already set
-    moving = set()
+    moving: set[str | None] = set()  # a coupling's independent may be None (held)
     for joint in model.moving_joints:
         if seen_beyond(joint.child):
             moving.update(joint.transform.coordinates)
@@ -54,6 +54,6 @@ def holding_unobserved(model: Model) -> tuple[Model, list[str]]:
     unseen = unobserved(model)
     if not unseen:
         return model, []
-    defaults = {c.name: c.default for c in model.angles}
+    defaults = {c.name: c.default for c in model.angles if isinstance(c, JointCoordinate)}
     held = tuple(Coupling(f"{name} held", name, None, Fixed(defaults[name])) for name in unseen)
     return replace(model, couplings=model.couplings + held), unseen

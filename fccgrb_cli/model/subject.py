@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, NoReturn
 
 from fccgrb_cli.core.errors import InputError
 
@@ -286,7 +286,7 @@ def from_flags(flags: dict[str, str | None]) -> SubjectMeasurements:
         else:
             values[q.vicon] = numbers[0]
 
-    def fail(key: str, expected: str, got: float) -> None:
+    def fail(key: str, expected: str, got: float) -> NoReturn:
         name = next(n for n, q in PIG_KEYS.items() if key.endswith(q.vicon))
         raise InputError(f"--{name.replace('_', '-')}: expected {expected}, got {got:g}")
 

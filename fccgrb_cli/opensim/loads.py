@@ -144,6 +144,7 @@ def read_external_loads(path: str | Path) -> LoadSet:
     objects = loads.find("objects")
     forces = []
     for element in (objects if objects is not None else ()):
+        assert objects is not None  # the elements come from it
         here = element_path([*parents, loads, objects], element)
         if element.tag != "ExternalForce":
             raise InputError(f"{source}: {here}: expected an ExternalForce (fccgrb reads no "

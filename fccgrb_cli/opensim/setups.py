@@ -317,6 +317,7 @@ def _task_set(element: ET.Element, parents: list[ET.Element], source: str) -> Ta
     coordinates: list[CoordinateTask] = []
     seen: set[tuple[str, str]] = set()
     for task in (objects if objects is not None else ()):
+        assert objects is not None  # the tasks come from it
         here = f"{source}: {element_path([*parents, element, objects], task)}"
         if task.tag not in ("IKMarkerTask", "IKCoordinateTask"):
             raise InputError(f"{here}: expected an IKMarkerTask or IKCoordinateTask, got an "

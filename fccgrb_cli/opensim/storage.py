@@ -227,10 +227,10 @@ def _block(rows: list[tuple[int, str]], width: int, source: str,
     if missing:
         bad[:, 1:] &= ~np.isnan(table[:, 1:])
     if bad.any():
-        row, column = map(int, np.argwhere(bad)[0])
-        raise InputError(f"{source}: line {rows[row][0]}, column {column + 1}: expected a "
+        at, column = map(int, np.argwhere(bad)[0])
+        raise InputError(f"{source}: line {rows[at][0]}, column {column + 1}: expected a "
                          f"finite number of magnitude at most {MAX_MAGNITUDE:g}, got "
-                         f"{words[row][column]!r:.40}")
+                         f"{words[at][column]!r:.40}")
     return table
 
 

@@ -19,12 +19,13 @@ from itertools import pairwise
 
 import numpy as np
 
-from fccgrb_cli.anatomy.clinical import distal_contact
+from fccgrb_cli.anatomy.clinical import clinical_series, distal_contact
 from fccgrb_cli.dynamics.convert import Dynamics
 from fccgrb_cli.gait.analysis import FoundEvents
 from fccgrb_cli.gait.events import Events, side_of
 from fccgrb_cli.model import Model
-from fccgrb_cli.model.elements import in_metres
+from fccgrb_cli.model.elements import AngularCoordinate, Coordinate, in_metres
+from fccgrb_cli.model.spatial import JointCoordinate
 from fccgrb_cli.pipeline.options import SolveOptions
 from fccgrb_cli.signals.butterworth import NOISE_BAND_HZ, noise_share
 from fccgrb_cli.solvers.conditioning import conditioning
@@ -83,6 +84,12 @@ def calibration_finding(model: Model, n: int, synthesized: bool) -> Finding:
 CLAMP_MARGIN = 1.0  # ° or mm beyond a clamped coordinate's range before a frame is flagged
 
 
+def _clamped_range(coordinate: Coordinate) -> tuple[float, float]:
+    """The range of a coordinate OpenSim clamps: only an imported joint's coordinate is."""
+    assert isinstance(coordinate, JointCoordinate)
+    return coordinate.range
+
+
 def clamped_range(model: Model, theta: np.ndarray, clamped: list[int]) -> Finding:
     """Frames where an imported coordinate OpenSim clamps (``clamped``: its IK keeps it inside
     its range) lies more than ``CLAMP_MARGIN`` (° or mm) outside that range: the solve found
@@ -90,8 +97,8 @@ def clamped_range(model: Model, theta: np.ndarray, clamped: list[int]) -> Findin
     answer is not the one OpenSim gives."""
     scale = [1e3 if in_metres(model.angles[k]) else np.degrees(1.0) for k in clamped]
     values = np.column_stack([theta[:, k] * f for k, f in zip(clamped, scale, strict=True)])
-    ranges = tuple((model.angles[k].range[0] * f, model.angles[k].range[1] * f)
-                   for k, f in zip(clamped, scale, strict=True))
+    bounds = [_clamped_range(model.angles[k]) for k in clamped]
+    ranges = tuple((low * f, high * f) for (low, high), f in zip(bounds, scale, strict=True))
     units = tuple("mm" if in_metres(model.angles[k]) else "°" for k in clamped)
     return out_of_range(values, tuple(model.angles[k].name for k in clamped), ranges,
                         CLAMP_MARGIN, units)
@@ -116,7 +123,7 @@ def kinematic_findings(model: Model, result: KinematicResult, fit: np.ndarray,
                                    record.fit_mm if record is not None else None)
     clinical = [k for k, a in enumerate(model.angles) if a.clinical_sign is not None]
     if clinical:
-        values = np.column_stack([model.angles[k].clinical(result.theta[:, k])
+        values = np.column_stack([clinical_series(model.angles[k], result.theta[:, k])
                                   for k in clinical])
         found[ANGLE_RANGE] = out_of_range(values, tuple(model.angles[k].name for k in clinical),
                                           tuple(model.angles[k].clinical_range
@@ -124,7 +131,8 @@ def kinematic_findings(model: Model, result: KinematicResult, fit: np.ndarray,
     clamped = [k for k, a in enumerate(model.angles) if getattr(a, "clamped", False)]
     if clamped and not clinical:
         found[ANGLE_RANGE] = clamped_range(model, result.theta, clamped)
-    half = np.array([a.kind == "angle" and not a.full for a in model.angles], dtype=bool)
+    half = np.array([isinstance(a, AngularCoordinate) and not a.full for a in model.angles],
+                    dtype=bool)
     found[SINGULAR], found[BRANCH] = flat_or_mirrored(result.theta, result.angle_names, half)
     found[CALIBRATION] = calibration_finding(model, n, synthesized)
     return found

@@ -135,15 +135,18 @@ def _plugin_gait(template: Model, trial: Trial, subject: Subject, choices: Choic
     result = calibrate_plugin_gait(template, trial, measured,
                                    Options(choices.frames, choices.foot_flat), labels)
     m = result.measurements
+    flexion, rotation = m.static_plantar_flexion, m.static_rotation_offset
+    assert flexion.left is not None and flexion.right is not None  # the calibration sets them
+    assert rotation.left is not None and rotation.right is not None
     report = [f"measurements from {m.source or 'nowhere'}",
               *(f"  {note}" for note in result.notes),
               "segment lengths (mm): " + ", ".join(
                   f"{k} {1e3 * v:.0f}" for k, v in result.lengths.items()),
               "static foot offsets (deg): plantarflexion L/R "
-              f"{np.degrees(m.static_plantar_flexion.left):.2f} / "
-              f"{np.degrees(m.static_plantar_flexion.right):.2f}, rotation L/R "
-              f"{np.degrees(m.static_rotation_offset.left):.2f} / "
-              f"{np.degrees(m.static_rotation_offset.right):.2f}"
+              f"{np.degrees(flexion.left):.2f} / "
+              f"{np.degrees(flexion.right):.2f}, rotation L/R "
+              f"{np.degrees(rotation.left):.2f} / "
+              f"{np.degrees(rotation.right):.2f}"
               f" ({'foot flat' if choices.foot_flat else 'foot not flat'})"]
     warnings = list(result.warnings)
     if m.body_mass is None:

@@ -23,6 +23,7 @@ from fccgrb_cli.dynamics.convert import Dynamics
 from fccgrb_cli.dynamics.moving import coordinate_inverse, coordinate_rates
 from fccgrb_cli.model import Model
 from fccgrb_cli.model.elements import in_metres
+from fccgrb_cli.model.spatial import JointCoordinate
 from fccgrb_cli.opensim.loads import external_loads, read_external_loads
 from fccgrb_cli.opensim.storage import UNIFORM, Storage
 from fccgrb_cli.pipeline.options import SolveOptions
@@ -88,8 +89,8 @@ def coordinates_run(model: Model, coordinates: Storage, options: SolveOptions | 
     if options.loads is not None:
         found = read_external_loads(options.loads)
         loads = external_loads(found, time, [body.name for body in model.bodies])
-        said = ", ".join(f"{force.name} → {force.body}" for force in found.forces)
-        notes += [f"external loads from {options.loads} ({found.datafile.name}): {said}; "
+        applied = ", ".join(f"{force.name} → {force.body}" for force in found.forces)
+        notes += [f"external loads from {options.loads} ({found.datafile.name}): {applied}; "
                   "applied at the coordinates' times, not filtered (as OpenSim's tool does)",
                   *found.data.notes]
     started = time_module.perf_counter()
@@ -140,6 +141,7 @@ def _columns(model: Model, coordinates: Storage) -> tuple[np.ndarray, list[str]]
     missing = []
     for k, coordinate in enumerate(model.angles):
         if not coordinates.has(coordinate.name):
+            assert isinstance(coordinate, JointCoordinate)  # an imported model's are all
             theta[:, k] = coordinate.default
             missing.append(coordinate.name)
             continue

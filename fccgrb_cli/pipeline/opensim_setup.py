@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.opensim.setups import IDSetup, read_setup
@@ -39,7 +40,7 @@ def setup_inputs(path: str, model: str | None, trials: tuple[str, ...],
     """The setup ``path`` merged under what the command line gave (module docstring)."""
     setup = read_setup(path)
     chosen_model = model or _named(setup.model_file, path, "model_file")
-    window = {}
+    window: dict[str, Any] = {}  # SolveOptions fields
     if setup.time_range is not None:
         if options.time_from is None:
             window["time_from"] = setup.time_range[0]
@@ -48,7 +49,7 @@ def setup_inputs(path: str, model: str | None, trials: tuple[str, ...],
     notes = []
     if isinstance(setup, IDSetup):
         given = coordinates or _named(setup.coordinates_file, path, "coordinates_file")
-        extra = dict(window)
+        extra: dict[str, Any] = dict(window)
         if options.loads is None and setup.external_loads_file is not None:
             extra["loads"] = str(setup.external_loads_file)
         if options.filter_cutoff is None and setup.lowpass_cutoff is not None:

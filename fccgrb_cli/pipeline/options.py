@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import Field, dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -379,7 +379,7 @@ def _check(name: str, value: Any, meta: Mapping[str, Any]) -> None:
         raise InputError(f"{name}: expected {expected}, got {shown(value)}")
 
 
-def _help(meta: Mapping[str, Any], spell: Callable[[str], str]) -> str:
+def _help(meta: Mapping[str, Any], spell: Callable[[Field[Any]], str]) -> str:
     """A field's help with its references to other options ({name}) spelt for the reader."""
     return meta["help"].format(**{f.name: spell(f) for f in fields(SolveOptions)})
 
@@ -526,7 +526,7 @@ def _held(model: Model, items: tuple[str, ...]) -> Model:
     """The model with each ``--hold`` coordinate fixed (a coupling to a constant)."""
     from fccgrb_cli.model.elements import in_metres
     from fccgrb_cli.model.observed import Fixed
-    from fccgrb_cli.model.spatial import Coupling
+    from fccgrb_cli.model.spatial import Coupling, JointCoordinate
 
     if not model.moving_joints:
         raise InputError(f"--hold: {model.source}: expected an imported OpenSim model (a YAML "
@@ -541,6 +541,7 @@ def _held(model: Model, items: tuple[str, ...]) -> Model:
                              f"({', '.join(coordinates)[:200]})")
         text = text.strip()
         if text == "default":
+            assert isinstance(coordinate, JointCoordinate)  # an imported model's are all
             value = coordinate.default
         else:
             try:
@@ -564,7 +565,8 @@ def prepared(model: Model, options: SolveOptions) -> Model:
     """The model as the options ask: every body in one form, only some markers tracked (and
     weighted, ``--tasks``), the force plates on the bodies ``--plate`` names."""
     if options.form != "model":
-        model = model.with_form(options.form)
+        assert options.form in ("full", "reduced")  # the option's choices, checked
+        model = model.with_form("full" if options.form == "full" else "reduced")
     if options.track:
         unknown = sorted(set(options.track) - set(model.marker_labels))
         if unknown:

@@ -10,6 +10,7 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from fccgrb_cli.model import parse_model
 from fccgrb_cli.pipeline.options import SolveOptions
@@ -60,8 +61,9 @@ tracking:
 # every compiled loop: NRM (with the rates and the classical model's drive and multipliers),
 # the structured optimizers (CNO-SQP's loop holds the interior point's and goal attainment's
 # kernels too), and the whole-trial smoother's (--smooth auto) after NRM
-PASSES = {"nrm-wls": {"method": "nrm-wls"}, "cno-sqp": {"method": "cno-sqp"},
-          "nrm-wls --smooth auto": {"method": "nrm-wls", "smooth": "auto"}}
+PASSES: dict[str, dict[str, Any]] = {  # pass name -> SolveOptions fields
+    "nrm-wls": {"method": "nrm-wls"}, "cno-sqp": {"method": "cno-sqp"},
+    "nrm-wls --smooth auto": {"method": "nrm-wls", "smooth": "auto"}}
 
 
 def precompile(report: Callable[[str, float], None] | None = None) -> float:

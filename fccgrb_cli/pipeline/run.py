@@ -369,6 +369,7 @@ def summary(run: Run) -> dict[str, float | str | int]:
         row["residual M N·m"] = over.moment_rms
     if run.dynamics is not None:  # over the trusted moments only
         trusted = run.moments_trusted
+        assert trusted is not None  # given with the dynamics
         loads = np.where(trusted, np.abs(run.dynamics.inverse.joint_moments), np.nan)
         distance = np.array(run._angle_units) == "m"
         for key, columns in (("max |τ| N·m", ~distance), ("max |F| N", distance)):

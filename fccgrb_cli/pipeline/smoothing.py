@@ -28,6 +28,7 @@ from __future__ import annotations
 import time as clock
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from functools import partial
 from itertools import pairwise
 from typing import TYPE_CHECKING
 
@@ -36,6 +37,7 @@ import numpy as np
 from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.dynamics.loads import ExternalLoad
 from fccgrb_cli.model import Model
+from fccgrb_cli.model.spatial import JointCoordinate
 from fccgrb_cli.solvers.batched import Drives, Stacked, blocks
 from fccgrb_cli.solvers.methods import Method
 from fccgrb_cli.solvers.rates import consistent_rates
@@ -104,7 +106,7 @@ class Smoothing:
         out = []
         for load in loads:
             cutoff = self.plate_cutoff(load.body)
-            out.append(load.filtered(lambda s, c=cutoff: smoothed_signal(s, rate, c)))
+            out.append(load.filtered(partial(smoothed_signal, rate=rate, cutoff_hz=cutoff)))
         return out
 
     def uncertainty(self, q: np.ndarray | None, loads: Sequence[ExternalLoad]) -> Uncertainty:
@@ -139,7 +141,11 @@ def chain_coordinates(model: Model, body: str, names: tuple[str, ...]) -> np.nda
             path = found
             break
     pairs = {frozenset(p) for p in pairwise(path)}
-    picked = [k for k, a in enumerate(model.angles) if frozenset((a.body1, a.body2)) in pairs]
+    picked = []
+    for k, a in enumerate(model.angles):
+        assert not isinstance(a, JointCoordinate)  # the smoother takes no moving joints
+        if frozenset((a.body1, a.body2)) in pairs:
+            picked.append(k)
     if path and path[0] != "ground":
         picked += [k for k, name in enumerate(names) if name.startswith(f"{path[0]}.")]
     return np.array(picked if picked else range(len(names)), dtype=int)

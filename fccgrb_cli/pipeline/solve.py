@@ -539,6 +539,7 @@ def _check_length(trial: Trial, options: SolveOptions) -> None:
 
 def _quality_advice(result: KinematicResult) -> list[str]:
     """What to do about flagged frames, where the method is known to cause them."""
+    assert result.flags is not None  # advice follows the assessment that sets them
     jumps = int((result.converged & (result.flags & JUMP > 0)).sum())
     if not jumps or not result.method.startswith("mo-"):
         return []

@@ -56,8 +56,9 @@ def prescribed(model: Model, time: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
         raise InputError(f"{model.source}: {section}: expected a motion for every angle"
                          f"{' and distance' if distances else ''} to synthesize a trial, "
                          f"missing for {', '.join(a.name for a in missing)}")
-    values = [a.motion.evaluate(time) for a in model.angles]
-    return tuple(np.column_stack([v[k] for v in values]) for k in range(3))
+    values = [a.motion.evaluate(time) for a in model.angles if a.motion is not None]  # all
+    theta, rate, acceleration = (np.column_stack([v[k] for v in values]) for k in range(3))
+    return theta, rate, acceleration
 
 
 def base_trajectory(model: Model, time: np.ndarray
@@ -71,7 +72,8 @@ def base_trajectory(model: Model, time: np.ndarray
         for k in range(3):
             parts[k].append(frames[k][:, : 4 if body.form == "full" else 3])
     n = len(time)
-    return tuple(np.concatenate(p, axis=1) if p else np.zeros((n, 0, 3)) for p in parts)
+    x, xd, xdd = (np.concatenate(p, axis=1) if p else np.zeros((n, 0, 3)) for p in parts)
+    return x, xd, xdd
 
 
 def start_pose(system: System) -> np.ndarray:

@@ -97,12 +97,13 @@ def _continuous(degrees: np.ndarray) -> np.ndarray:
     out = np.array(degrees, dtype=float)
     previous = np.zeros(3)
     for f in np.flatnonzero(np.isfinite(out).all(axis=1)):
-        best = None
+        best: tuple[float, np.ndarray] | None = None
         for reading in (out[f], out[f] * [1.0, -1.0, 1.0] + 180.0):
             shifted = reading + 360.0 * np.floor((previous - reading + 180.0) / 360.0)
             distance = np.max(np.abs(shifted - previous))
             if best is None or distance < best[0]:
                 best = (distance, shifted)
+        assert best is not None  # two readings were compared
         out[f] = previous = best[1]
     return out
 

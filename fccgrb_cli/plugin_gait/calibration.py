@@ -114,7 +114,7 @@ def resolve(measured: SubjectMeasurements, lm: dict[str, np.ndarray]
     sided = {}
     for s, side in SIDES.items():
         if at.side(s) is None:
-            sided[side] = pg.asis_trochanter_distance(measured.leg_length.side(s))
+            sided[side] = pg.asis_trochanter_distance(_resolved(measured.leg_length.side(s)))
             notes.append(f"{side} AsisTrocanterDistance {1e3 * sided[side]:.1f} mm from the "
                          "leg length (0.1288 L − 48.56 mm)")
     if sided:
@@ -127,17 +127,25 @@ def resolve(measured: SubjectMeasurements, lm: dict[str, np.ndarray]
     return replace(measured, **values), tuple(notes)
 
 
+def _resolved(value: float | None) -> float:
+    """A measurement :func:`resolve` guarantees (required, measured or defaulted)."""
+    assert value is not None
+    return value
+
+
 def side_geometry(m: SubjectMeasurements, offsets: dict[str, tuple[float, float]] | None = None
               ) -> dict[str, pg.SideGeometry]:
-    leg = 0.5 * (m.leg_length.left + m.leg_length.right)
+    leg = 0.5 * (_resolved(m.leg_length.left) + _resolved(m.leg_length.right))
+    marker = _resolved(m.marker_diameter)
     out = {}
     for s in SIDES:
-        hip = pg.davis_hip_centre(leg, m.asis_trochanter_distance.side(s),
-                                  m.inter_asis_distance, m.marker_diameter, s)
+        hip = pg.davis_hip_centre(leg, _resolved(m.asis_trochanter_distance.side(s)),
+                                  _resolved(m.inter_asis_distance), marker, s)
         out[s] = pg.SideGeometry(
-            hip, 0.5 * (m.knee_width.side(s) + m.marker_diameter),
-            0.5 * (m.ankle_width.side(s) + m.marker_diameter), m.thigh_rotation.side(s),
-            m.shank_rotation.side(s), m.tibial_torsion.side(s),
+            hip, 0.5 * (_resolved(m.knee_width.side(s)) + marker),
+            0.5 * (_resolved(m.ankle_width.side(s)) + marker),
+            _resolved(m.thigh_rotation.side(s)), _resolved(m.shank_rotation.side(s)),
+            _resolved(m.tibial_torsion.side(s)),
             None if offsets is None else offsets[s])
     return out
 
@@ -199,7 +207,7 @@ def calibrate_plugin_gait(model: Model, trial: Trial, measured: SubjectMeasureme
     up = -np.asarray(model.gravity) / np.linalg.norm(model.gravity)
     offsets = {s: pg.foot_offsets(uncorrected[f"foot_{s}"], lm[f"{side}_heel"],
                                   lm[f"{side}_toe"], up, options.foot_flat,
-                                  m.sole_delta.side(s))
+                                  _resolved(m.sole_delta.side(s)))
                for s, side in SIDES.items()}
     m = replace(m, static_plantar_flexion=Sided(offsets["l"][0], offsets["r"][0]),
                 static_rotation_offset=Sided(offsets["l"][1], -offsets["r"][1]))

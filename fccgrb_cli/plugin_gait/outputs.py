@@ -77,11 +77,11 @@ def plugin_gait_results(model: Model, q: np.ndarray, trusted: np.ndarray,
     moments: dict[str, np.ndarray] = {}
     powers: dict[str, np.ndarray] = {}
     if dynamics is not None and model.subject_mass is not None:
-        moments, powers = _kinetics(model, dynamics)
+        moments, powers = _kinetics(model, dynamics, model.subject_mass)
     return PluginGaitResults(angles, moments, powers, lab)
 
 
-def _kinetics(model: Model, dynamics: Dynamics
+def _kinetics(model: Model, dynamics: Dynamics, body_mass: float
               ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     kin = dynamics.kinematics
     x, xd, xdd = (_body_coordinates(model, np.asarray(values))
@@ -89,6 +89,7 @@ def _kinetics(model: Model, dynamics: Dynamics
     segments = {}
     for body in model.bodies:
         inertia = body.inertia
+        assert inertia is not None  # the inverse dynamics that gave ``dynamics`` required it
         segments[body.name] = segment_motion(x[body.name], xd[body.name], xdd[body.name],
                                              np.array(inertia.com), np.array(inertia.tensor),
                                              inertia.mass)
@@ -102,7 +103,7 @@ def _kinetics(model: Model, dynamics: Dynamics
                    for joint, (seg, point) in JOINT_POINTS.items()}
         loads = [(load.force, load.point, load.moment) for load in dynamics.loads
                  if load.body == f"foot_{s}"]
-        leg = leg_kinetics(chain, centres, s, loads, (gravity, model.subject_mass))
+        leg = leg_kinetics(chain, centres, s, loads, (gravity, body_mass))
         for joint in ("Hip", "Knee", "Ankle"):
             moments[f"{prefix}{joint}Moment"] = leg.moments[joint]
             powers[f"{prefix}{joint}Power"] = leg.powers[joint]

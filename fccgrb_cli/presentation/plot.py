@@ -143,10 +143,11 @@ def draw_clinical(series: list[Series], wanted: tuple[str, ...] = ()):
     import matplotlib.pyplot as plt
 
     runs = [s for s in series if s.clinical is not None]
+    clinicals = [s.clinical for s in series if s.clinical is not None]  # runs' own, in order
     if not runs:
         raise InputError("--kind clinical: expected runs of a model whose angles declare a "
                          "clinical sign (e.g. configs/models/lower_limb.yaml)")
-    c0 = runs[0].clinical
+    c0 = clinicals[0]
     stems = _sided(c0.names, wanted)
     if not stems:
         raise InputError(f"--angle: expected parts of the clinical angle names "
@@ -166,11 +167,11 @@ def draw_clinical(series: list[Series], wanted: tuple[str, ...] = ()):
                 if stance is not None and stance.any():
                     ax.fill_between(time, 0, 1, where=stance, color=colour, alpha=0.08,
                                     transform=ax.get_xaxis_transform(), lw=0)
-            for i, s in enumerate(runs):
+            for i, (s, c) in enumerate(zip(runs, clinicals, strict=True)):
                 label = f"{word} ({s.name})" if len(runs) > 1 else word
-                c = s.clinical
                 curves = [(c.angles, c.angles_sd)]
                 if columns == 2:
+                    assert c.moments is not None  # runs compared all have moments, as the first
                     moment = c.moments[:, k]
                     trusted = np.ones(len(moment), dtype=bool) if c.trusted is None \
                         else c.trusted[:, k]
@@ -196,7 +197,7 @@ def draw_clinical(series: list[Series], wanted: tuple[str, ...] = ()):
     if columns == 2:
         axes[0, 1].set_title("internal joint moment (positive towards a positive angle)",
                              fontsize=10)
-    banded = any(s.clinical.angles_sd is not None for s in runs)
+    banded = any(c.angles_sd is not None for c in clinicals)
     fig.suptitle("Shaded: a force plate loads that side's foot"
                  + ("; bands: the smoother's 95 % (±1.96 SD)" if banded else ""), fontsize=9)
     fig.tight_layout()

@@ -24,7 +24,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -85,13 +85,20 @@ def write_residuals(g, report: ResidualReport, reduction: Reduction | None) -> N
         put(r, key, values)
 
 
+def _summary(attrs) -> ResidualSummary:
+    """A summary from its group's attributes: the frame counts int, the rest float."""
+    values: dict[str, Any] = {f: (int if f in ("frames", "single") else float)(attrs[f])
+                              for f in SUMMARY_FIELDS}
+    return ResidualSummary(**values)
+
+
 def _read_report(out, force: np.ndarray, moment: np.ndarray) -> ResidualReport:
-    summaries = [ResidualSummary(**{f: (int if f in ("frames", "single") else float)(
-        out[key].attrs[f]) for f in SUMMARY_FIELDS}) for key in ("over_measured", "over_single")]
+    over_measured, over_single = (_summary(out[key].attrs)
+                                  for key in ("over_measured", "over_single"))
     return ResidualReport(str(out.attrs["base"]),
                           {body: state[()] for body, state in out["states"].items()},
-                          out["measured"][()], out["single"][()], force, moment, *summaries,
-                          weighed=bool(out.attrs["weighed"]))
+                          out["measured"][()], out["single"][()], force, moment, over_measured,
+                          over_single, weighed=bool(out.attrs["weighed"]))
 
 
 def read_residuals(g) -> tuple[ResidualReport | None, Reduction | None]:
@@ -115,9 +122,14 @@ def read_residuals(g) -> tuple[ResidualReport | None, Reduction | None]:
     reduction = Reduction(str(r.attrs["adjusted_model"]), fit,
                           RigidCorrection(r["translation"][()], r["rotation"][()],
                                           r["centre"][()]), before,
-                          tuple(float(x) for x in r.attrs["markers_before"]),
-                          tuple(float(x) for x in r.attrs["markers_after"]))
+                          _pair(r.attrs["markers_before"]), _pair(r.attrs["markers_after"]))
     return report, reduction
+
+
+def _pair(values) -> tuple[float, float]:
+    """Two numbers written as an attribute (the markers' RMS and maximum, mm)."""
+    first, second = (float(x) for x in values)
+    return first, second
 
 
 def read_all_residuals(path) -> dict[str, tuple[ResidualReport, Reduction | None]]:
@@ -125,5 +137,10 @@ def read_all_residuals(path) -> dict[str, tuple[ResidualReport, Reduction | None
     import h5py
 
     with h5py.File(path, "r") as h5:
-        return {name: read_residuals(g) for name, g in h5.get("runs", {}).items()
-                if "residuals" in g}
+        out = {}
+        for name, g in h5.get("runs", {}).items():
+            if "residuals" in g:
+                report, reduction = read_residuals(g)
+                assert report is not None  # the group holds residuals
+                out[name] = (report, reduction)
+        return out

@@ -88,8 +88,9 @@ def _read_axes(a: dict) -> LabAxes | None:
     if "vertical" not in a:
         return None
     walking = np.asarray(a["walking"], dtype=float)
-    return LabAxes(str(a["vertical"]), np.asarray(a["up"], dtype=float),
-                   tuple(float(x) for x in a["gravity"]), str(a["vertical_chosen_by"]),
+    gx, gy, gz = (float(x) for x in a["gravity"])
+    return LabAxes(str(a["vertical"]), np.asarray(a["up"], dtype=float), (gx, gy, gz),
+                   str(a["vertical_chosen_by"]),
                    str(a["vertical_why"]), None if np.isnan(walking).any() else walking)
 
 

@@ -108,7 +108,9 @@ from fccgrb_cli.results.residuals import write_residuals
 from fccgrb_cli.solvers.quality import BITS, FLAG_DTYPE, FRAME_BITS, MOMENT_BITS, bit_summary
 
 if TYPE_CHECKING:
+    from fccgrb_cli.dynamics.convert import Dynamics
     from fccgrb_cli.pipeline.run import Run
+    from fccgrb_cli.pipeline.smoothing import Uncertainty
 
 PACKAGES = {"fccgrb-cli": "fccgrb_cli", "numpy": "numpy", "scipy": "scipy", "h5py": "h5py",
             "ezc3d": "ezc3d", "click": "click", "pyyaml": "yaml"}
@@ -141,10 +143,11 @@ def _installed_version(name: str, module: str) -> str:
             dist, _, version = stem.rpartition("-")
             if dist.lower().replace("-", "_") == prefix.lower():
                 return version
-    from importlib.metadata import PackageNotFoundError, version
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as installed
 
     try:
-        return version(name)
+        return installed(name)
     except PackageNotFoundError:
         return "unknown"
 
@@ -292,11 +295,11 @@ def _write_run(h5, run: Run, command: str, cell: dict | None) -> None:
         g.create_dataset("status", data=list(r.status),
                          dtype=h5py.string_dtype(encoding="utf-8"))
     if run.dynamics is not None:
-        _write_dynamics(g, run)
+        _write_dynamics(g, run, run.dynamics)
     if run.clinical is not None:
         _write_clinical(g, run.clinical)
     if run.uncertainty is not None:
-        _write_uncertainty(g, run)
+        _write_uncertainty(g, run, run.uncertainty)
     if run.gait is not None:
         write_gait(g, run.gait)
     if run.plugin_gait is not None:  # its module loads with a Plug-in Gait run only
@@ -351,12 +354,11 @@ def _write_clinical(g, c: ClinicalResults) -> None:
         put(stance, body, frames)
 
 
-def _write_uncertainty(g, run: Run) -> None:
+def _write_uncertainty(g, run: Run, u: Uncertainty) -> None:
     """/runs/<name>/uncertainty: the standard deviations of every angle, its rate and
     acceleration and its joint moment (frames × angles), and how the smoother was set."""
     import h5py
 
-    u = run.uncertainty
     text = h5py.string_dtype(encoding="utf-8")
     out = g.create_group("uncertainty")
     out.attrs.update({"noise_m": u.noise_m, "estimated": u.estimated,
@@ -375,10 +377,9 @@ def _write_uncertainty(g, run: Run) -> None:
         out[key].attrs.create("units", per, dtype=text)
 
 
-def _write_dynamics(g, run: Run) -> None:
+def _write_dynamics(g, run: Run, d: Dynamics) -> None:
     import h5py
 
-    d = run.dynamics
     inverse, kin = d.inverse, d.kinematics
     put(g, "joint_moments", inverse.joint_moments)
     g["joint_moments"].attrs["names"] = list(inverse.angle_names)

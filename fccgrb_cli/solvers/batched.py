@@ -56,7 +56,7 @@ class Drives:
         return Drives(*(a[frames] for a in (self.theta, self.theta_d, self.theta_dd,
                                             self.ref, self.ref_d, self.ref_dd)))
 
-    def frame(self, f: int) -> Drive:
+    def frame(self, f: int | np.integer) -> Drive:
         """One frame's ``Drive``."""
         return Drive(self.theta[f], self.theta_d[f], self.theta_dd[f], self.ref[f],
                      self.ref_d[f], self.ref_dd[f])
@@ -245,6 +245,7 @@ class Factored:
         """x with J x = b, frame by frame (frames × n)."""
         out = np.empty((len(self.J), self.J.shape[2]))
         if self.q is not None:
+            assert self.r is not None  # factored with q
             qtb = _matvec(self.q.transpose(0, 2, 1), b[self.batched])
             out[self.batched] = _solve(self.r, qtb)
         elif len(self.batched):
@@ -257,6 +258,7 @@ class Factored:
         """y with Jᵀ y = c (minimum norm where J has more rows than columns)."""
         out = np.empty((len(self.J), self.J.shape[1]))
         if self.q is not None:
+            assert self.r is not None  # factored with q
             z = _solve(self.r.transpose(0, 2, 1), c[self.batched])
             out[self.batched] = _matvec(self.q, z)
         elif len(self.batched):

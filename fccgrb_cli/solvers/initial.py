@@ -183,6 +183,7 @@ def initial_guess(system: System, targets: np.ndarray) -> np.ndarray:
                 k = j.bodies.index(other)
                 neighbour = j.bodies[1 - k]
                 if neighbour in placed:
+                    assert j.points is not None  # a coincident joint's two points
                     pairs.append((model.body(other).points[j.points[k]].local,
                                   _global_point(model, placed, neighbour, j.points[1 - k])))
         pose = model.body(other).pose

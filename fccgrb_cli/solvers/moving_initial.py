@@ -25,6 +25,7 @@ def moving_initial_guess(system: System, targets: np.ndarray) -> np.ndarray:
     from scipy.optimize import least_squares
 
     model, functions = system.model, system.functions
+    assert functions is not None  # a system with moving joints has their function rows
     n_points = len(model.tracked_points)
     seen = np.all(np.isfinite(targets[:n_points]), axis=1)
     which = [(tp.body, tp.point) for tp, ok in zip(model.tracked_points, seen, strict=True) if ok]
@@ -46,7 +47,7 @@ def moving_initial_guess(system: System, targets: np.ndarray) -> np.ndarray:
     nb = system.layout.n_body_q
     top = np.flatnonzero(system.kinds == 0)
     first = 3 * len(system.lin_a)
-    tracked = (first + 3 * np.flatnonzero(seen)[:, None] + np.arange(3)).ravel()
+    tracked = (3 * np.flatnonzero(seen)[:, None] + (first + np.arange(3))).ravel()
     others = np.concatenate([np.arange(nb), nb + np.array(sorted(dependent), dtype=int)])
 
     def jacobian(values: np.ndarray) -> np.ndarray:

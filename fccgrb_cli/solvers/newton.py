@@ -96,6 +96,7 @@ def gauss_newton(system: System, q0: np.ndarray, drive: Drive, weights: np.ndarr
     size = previous = np.inf
     full = True
     exact = hessian == "exact"
+    trial_J: np.ndarray | None  # None after a shortened step: evaluated where it lands
     for k in range(1, max_iter + 1):
         near = size < NEAR and np.abs(weights * phi).max() > LARGE
         exact = exact or (hessian == "auto" and (near or size > SLOW * previous))

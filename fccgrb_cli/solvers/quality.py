@@ -263,7 +263,7 @@ def flat_or_mirrored(theta: np.ndarray, names: tuple[str, ...], half: np.ndarray
     half_names = [name for name, h in zip(names, half, strict=True) if h]
 
     def finding(mask: np.ndarray, what: str) -> Finding:
-        frames = mask.any(axis=1)
+        frames = np.asarray(mask.any(axis=1))
         if not frames.any():
             return Finding(frames)
         k = int(np.argmax(mask.sum(axis=0)))

@@ -15,6 +15,8 @@ import numpy as np
 
 from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model import GROUND, Joint, Model
+from fccgrb_cli.model.elements import DistanceCoordinate
+from fccgrb_cli.model.spatial import JointCoordinate
 from fccgrb_cli.system.features import FeatureTable, perpendiculars
 
 AXES = ("x", "y", "z")
@@ -52,6 +54,7 @@ def rigid_body(features: FeatureTable, out: ConstraintList, model: Model) -> Non
 
 def _axis_parallel(features: FeatureTable, out: ConstraintList, joint: Joint, label: str) -> None:
     """s_i · a_j = 0 and s_i · b_j = 0 with a_j, b_j ⟂ s_j fixed in body j: s_i ∥ s_j."""
+    assert joint.axes is not None  # declared by every joint type that keeps axes parallel
     (bi, bj), (si, sj) = joint.bodies, joint.axes
     a_local, b_local = perpendiculars(features.local_of(bj, sj))
     axis_i = features.vector(bi, si)
@@ -63,6 +66,7 @@ def _on_axis(features: FeatureTable, out: ConstraintList, joint: Joint, label: s
              axis: str) -> None:
     """(P_j − P_i) · a_i = 0 and (P_j − P_i) · b_i = 0 with a_i, b_i ⟂ body i's ``axis``: P_j
     stays on body i's axis line through P_i (cylindrical, prismatic and line joints)."""
+    assert joint.points is not None  # declared by every joint type with a point on a line
     (bi, bj), (pi, pj) = joint.bodies, joint.points
     d = features.difference(features.point(bj, pj), features.point(bi, pi))
     a_local, b_local = perpendiculars(features.local_of(bi, axis))
@@ -75,18 +79,23 @@ def joint(features: FeatureTable, out: ConstraintList, joint: Joint) -> None:
     label = f"joint {joint.name} ({joint.type})"
     (bi, bj) = joint.bodies
     if joint.type in ("spherical", "revolute", "universal"):
+        assert joint.points is not None  # the model's loader requires them for these types
         pi, pj = joint.points
         out.linear.append((features.point(bi, pi), features.point(bj, pj), label))
     if joint.type in ("revolute", "cylindrical", "prismatic", "parallel"):
         _axis_parallel(features, out, joint, label)
     if joint.type in ("cylindrical", "prismatic"):
+        assert joint.axes is not None  # the model's loader requires them for these types
         _on_axis(features, out, joint, label, joint.axes[0])
     if joint.type == "line":
+        assert joint.axis is not None  # the model's loader requires it for a line joint
         _on_axis(features, out, joint, label, joint.axis)
     if joint.type == "universal":
+        assert joint.axes is not None  # the model's loader requires them for this type
         si, sj = joint.axes
         out.dot(features.vector(bi, si), features.vector(bj, sj), 0.0, f"{label}: arms ⟂")
     if joint.type == "prismatic":
+        assert joint.lock is not None  # the model's loader requires it for this type
         li, lj = joint.lock
         out.dot(features.vector(bi, li), features.vector(bj, lj), 0.0, f"{label}: lock ⟂")
 
@@ -97,9 +106,9 @@ def angular(features: FeatureTable, out: ConstraintList, model: Model, kind: str
     Eq. 10). ``out.distance_dots`` marks the distance rows (g(d) = d)."""
     tag = "AR" if kind == "driver" else "MCR"
     for coord in model.angles:
-        if coord.kind == "joint":  # held by its moving joint's rows (system/moving.py)
+        if isinstance(coord, JointCoordinate):  # held by its moving joint's rows (moving.py)
             continue
-        if coord.kind == "distance":
+        if isinstance(coord, DistanceCoordinate):
             offset = features.difference(features.point(coord.body2, coord.point2),
                                          features.point(coord.body1, coord.point1))
             row = out.dot(offset, features.vector(coord.body1, coord.axis), 0.0,

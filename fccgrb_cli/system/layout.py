@@ -103,7 +103,12 @@ def skew(a: np.ndarray) -> np.ndarray:
 
 def build_layout(model: Model, angle_names: tuple[str, ...]) -> Layout:
     """Index maps for the model's bodies followed by the given mixed coordinates."""
-    offsets, copy_x, copy_q, red_u, red_v, red_w = [], [], [], [], [], []
+    offsets: list[int] = []
+    copy_x: list[int] = []
+    copy_q: list[int] = []
+    red_u: list[range] = []
+    red_v: list[range] = []
+    red_w: list[range] = []
     q = 0
     for k, body in enumerate(model.bodies):
         offsets.append(q)

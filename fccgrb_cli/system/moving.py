@@ -25,6 +25,7 @@ from functools import cached_property
 import numpy as np
 
 from fccgrb_cli.model import GROUND, Model
+from fccgrb_cli.model.spatial import JointCoordinate
 from fccgrb_cli.system.features import FeatureTable
 from fccgrb_cli.system.moving_batch import StackedTransforms
 
@@ -112,7 +113,8 @@ def collect_function_rows(features: FeatureTable, out, model: Model,
                           position[coupling.independent] if coupling.independent else -1,
                           coupling.function))
         rows.append(out.dot(zero, zero, 0.0, f"coupling {coupling.name}"))
-    coordinates = [c for c in model.angles if c.name in position]
+    # the coordinates of the moving joints, every one a JointCoordinate
+    coordinates = [c for c in model.angles if isinstance(c, JointCoordinate) and c.name in position]
     return FunctionRows(
         rows=np.array(rows, dtype=int),
         joints=tuple(joints),

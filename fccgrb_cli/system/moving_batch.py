@@ -66,7 +66,8 @@ class StackedTransforms:
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         x = np.where(slots >= 0, theta[np.maximum(slots, 0)], 0.0).ravel()
         values = np.array([f.terms(float(v)) for f, v in zip(functions, x, strict=True)])
-        return tuple(values[:, i].reshape(slots.shape) for i in range(3))
+        value, first, second = (values[:, i].reshape(slots.shape) for i in range(3))
+        return value, first, second
 
     def add(self, theta: np.ndarray, second: bool, h: np.ndarray, h1: np.ndarray,
             h2: np.ndarray) -> None:

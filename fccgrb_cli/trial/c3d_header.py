@@ -27,6 +27,7 @@ import math
 import struct
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
@@ -208,7 +209,7 @@ def _check_records(section: bytes, processor: str, path: Path) -> None:
     endian = ">" if processor == "MIPS" else "<"
     pos, end = 4, len(section)
 
-    def fail(what: str) -> None:
+    def fail(what: str) -> NoReturn:
         raise InputError(f"{path}: not a readable C3D file (the parameter record at byte "
                          f"{pos} of the parameter section {what})")
 
@@ -367,6 +368,7 @@ def read_points(path: str | Path, layout: C3DLayout, frames: int,
     out = np.empty((frames, layout.points, 3))
     for start in range(0, frames, chunk):
         block = np.asarray(raw[start:start + chunk, :4 * layout.points])
+        values: np.ndarray
         if layout.processor == "DEC" and layout.float_data:
             values = decode_floats(block.tobytes(), "DEC").reshape(block.shape)
         else:

@@ -223,10 +223,7 @@ def _read_plate_file(real: str, identity: tuple[int, int, int], shown: str) -> P
     except Exception as exc:  # ezc3d raises plain RuntimeErrors for unreadable platform data
         reason = str(exc).strip() or exc.__class__.__name__
         raise InputError(f"{shown}: cannot read the force platforms ({reason})") from None
-    plates = tuple(RawPlate(*(_frozen(np.asarray(raw[key], dtype=float)) for key in
-                              ("corners", "force", "center_of_pressure", "Tz")),
-                            str(raw["unit_position"]), str(raw["unit_moment"]))
-                   for raw in c3d["data"].get("platform", []))
+    plates = tuple(_raw_plate(raw) for raw in c3d["data"].get("platform", []))
     point = c3d["parameters"]["POINT"]
     unit = str(point["UNITS"]["value"][0]).strip() if point.get("UNITS", {}).get("value") \
         else "mm"
@@ -235,6 +232,14 @@ def _read_plate_file(real: str, identity: tuple[int, int, int], shown: str) -> P
     xyz[(xyz == 0).all(axis=2)] = np.nan
     labels = [str(x).strip() for x in point["LABELS"]["value"]]
     return PlateFile(plates, _frozen(xyz), labels, float(point["RATE"]["value"][0]))
+
+
+def _raw_plate(raw: dict) -> RawPlate:
+    """One platform of ezc3d's extraction, its arrays read-only."""
+    corners, force, cop, free = (_frozen(np.asarray(raw[key], dtype=float)) for key in
+                                 ("corners", "force", "center_of_pressure", "Tz"))
+    return RawPlate(corners, force, cop, free, str(raw["unit_position"]),
+                    str(raw["unit_moment"]))
 
 
 def _frozen(values: np.ndarray) -> np.ndarray:

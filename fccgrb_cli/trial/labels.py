@@ -20,7 +20,8 @@ def match_labels(model: Model, trial: Trial, mapping: dict[str, str]) -> list[st
         raise InputError(f"--map: expected marker names of the model "
                          f"({', '.join(model.marker_labels)}), got "
                          f"{_with_closest(unknown, model.marker_labels)}")
-    out, missing = [], []
+    out: list[str | None] = []
+    missing: list[str] = []
     for name in model.marker_labels:
         wanted = mapping.get(name, name)
         label = trial.find(wanted)
@@ -38,8 +39,9 @@ def match_labels(model: Model, trial: Trial, mapping: dict[str, str]) -> list[st
                          f"found: {_with_closest(missing, free)}; the file's labels no marker "
                          f"follows: {shown or 'none'} (map names with --map NAME=LABEL or "
                          "--map FILE.yaml)")
-    one_label_each(dict(zip(model.marker_labels, out, strict=True)), "marker")
-    return out
+    labels = [label for label in out if label is not None]  # all: none is missing
+    one_label_each(dict(zip(model.marker_labels, labels, strict=True)), "marker")
+    return labels
 
 
 def _with_closest(names: list[str], known: tuple[str, ...] | list[str]) -> str:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -119,7 +120,7 @@ def _bits(path: str | Path, names: list[str]) -> dict[str, tuple[Bit, ...]]:
         for name in names:
             with reading(path, f"/runs/{name}/flags"):
                 text = h5["runs"][name]["flags"].attrs.get("bits")
-                described = json.loads(text) if text is not None else \
+                described: list[dict[str, Any]] = json.loads(text) if text is not None else \
                     [{"value": b.value, "name": b.name, "meaning": b.meaning}
                      for b in FRAME_BITS]
                 out[name] = tuple(Bit(int(b["value"]), str(b["name"]), str(b["meaning"]),

@@ -39,7 +39,8 @@ class Skeleton:
         self.labels.append(label)
         self.kinds.append(kind)
         self.body.append(body)
-        self.coeff.append(tuple(float(c) for c in coeff))
+        a, b, c = (float(x) for x in coeff)
+        self.coeff.append((a, b, c))
         return len(self.labels) - 1
 
     def line(self, i: int, j: int, kind: str, label: str = "") -> None:
@@ -158,6 +159,7 @@ def _joints(model: Model, s: Skeleton, where: dict[tuple[str, str], int]) -> Non
         reach = 2 * max(arrow_length(b) for b in model.bodies
                         if b.name in (first, second))
         if joint.type == "universal":
+            assert joint.points is not None  # a universal joint has its centre on each body
             arms = [(first, centre, joint.axes[0], 0.0),
                     (second, np.asarray(s.coeff[where[second, joint.points[1]]]),
                      joint.axes[1], 0.0)]

@@ -2,8 +2,18 @@
 
 from __future__ import annotations
 
-# kind → colour, line width (px), dot radius (px; 0: not drawn as a dot)
-STYLES: dict[str, dict[str, object]] = {
+from typing import TypedDict
+
+
+class Style(TypedDict):
+    """A kind's colour, line width (px) and dot radius (px; 0: not drawn as a dot)."""
+
+    color: str
+    width: float
+    radius: float
+
+
+STYLES: dict[str, Style] = {
     "segment": {"color": "#3c3c3c", "width": 3.0, "radius": 0},
     "u": {"color": "#d62728", "width": 2.0, "radius": 0},
     "v": {"color": "#2ca02c", "width": 2.0, "radius": 0},

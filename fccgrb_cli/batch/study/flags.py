@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -49,13 +50,13 @@ def _descriptions(dataset) -> dict[str, dict]:
 
 def _is_bit(value) -> bool:
     return isinstance(value, int | np.integer) and not isinstance(value, bool | np.bool_) \
-        and value > 0
+        and bool(value > 0)
 
 
 def run_flags(group) -> tuple[tuple[Flag, ...], tuple[tuple[str, str], ...]]:
     """Every bit of every flag dataset of a run group (the frame flags first, then the others
     by path; bits in order), and the datasets' other attributes as (dataset:attribute, text)."""
-    datasets: list[tuple[str, object]] = []
+    datasets: list[tuple[str, Any]] = []  # (path, h5py dataset)
 
     def visit(name: str, obj) -> None:
         stem = name.rsplit("/", 1)[-1]

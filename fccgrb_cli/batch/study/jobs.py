@@ -13,6 +13,7 @@ import json
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 from fccgrb_cli.batch.study.spec import SubjectSpec
 from fccgrb_cli.core.atomic import atomic_path
@@ -92,7 +93,7 @@ def calibrate_job(job: CalibrationJob) -> None:
     s = job.subject
     template = load_model(s.template)
     static = read_trial(s.static, job.accept_truncated)
-    given = dict(s.measurements) if isinstance(s.measurements, tuple) else {}
+    given: dict[str, Any] = dict(s.measurements) if isinstance(s.measurements, tuple) else {}
     subject = Subject.from_mm(s.mass, **given)
     done = calibrate_subject(template, static, subject,
                              Choices(s.frames, mapping=dict(s.mapping)),

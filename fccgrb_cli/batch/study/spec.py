@@ -32,7 +32,7 @@ import re
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.core.inputs import load_yaml, read_text
@@ -101,7 +101,7 @@ class _Reader:
         self.source = source
         self.folder = source.parent
 
-    def fail(self, where: str, expected: str, got: Any = None) -> None:
+    def fail(self, where: str, expected: str, got: Any = None) -> NoReturn:
         raise InputError(f"{self.source}: {where}: expected {expected}"
                          + ("" if got is None else f", got {got!r}"))
 

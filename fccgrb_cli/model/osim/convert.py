@@ -126,9 +126,11 @@ def model_from_osim(osim: OsimModel, text: str = "") -> Model:
         moving.append(MovingJoint(
             name=joint.name, parent=joint.parent.body, child=joint.child.body,
             parent_origin=_origin(joint, "parent"),
-            parent_axes=tuple(_axis(joint, "parent", k) for k in range(3)),
+            parent_axes=(_axis(joint, "parent", 0), _axis(joint, "parent", 1),
+                         _axis(joint, "parent", 2)),
             child_origin=_origin(joint, "child"),
-            child_axes=tuple(_axis(joint, "child", k) for k in range(3)),
+            child_axes=(_axis(joint, "child", 0), _axis(joint, "child", 1),
+                        _axis(joint, "child", 2)),
             transform=SpatialTransform(joint.axes)))
     for marker in osim.markers:
         points[marker.body][marker.name] = Point(marker.name, marker.location)

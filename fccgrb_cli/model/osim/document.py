@@ -16,6 +16,7 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
@@ -38,6 +39,7 @@ __all__ = ["Coupler", "OsimBody", "OsimCoordinate", "OsimFrame", "OsimJoint", "O
            "OsimModel", "parse_osim", "read_osim", "rotation_xyz"]
 
 Vec3 = tuple[float, float, float]
+Mat3 = tuple[Vec3, Vec3, Vec3]
 GROUND = "ground"
 
 # Elements that carry nothing the kinematics and inverse dynamics use: ignored with one note.
@@ -80,7 +82,7 @@ class OsimFrame:
 
     body: str
     translation: Vec3
-    rotation: tuple[Vec3, Vec3, Vec3]
+    rotation: Mat3
 
 
 @dataclass(frozen=True)
@@ -157,7 +159,7 @@ class _Reader:
         self.source = source
         self.ignored: set[str] = set()
 
-    def fail(self, where: str, what: str) -> None:
+    def fail(self, where: str, what: str) -> NoReturn:
         raise InputError(f"{self.source}: {where}: {what}")
 
     def where(self, parents: list[ET.Element], element: ET.Element) -> str:
@@ -194,7 +196,9 @@ class _Reader:
     def flag(self, element: ET.Element, tag: str, parents: list[ET.Element]) -> bool:
         value = self.text(element, tag, parents, "false").lower()
         if value not in ("true", "false"):
-            self.fail(self.where([*parents, element], element.find(tag)),
+            found = element.find(tag)
+            assert found is not None  # the default, "false", is valid: the value is the tag's
+            self.fail(self.where([*parents, element], found),
                       f"expected true or false, got {value!r:.40}")
         return value == "true"
 
@@ -278,7 +282,6 @@ def _function_element(r: _Reader, element: ET.Element, parents: list[ET.Element]
             r.fail(where, f"expected at least {(degree + 1) // 2} points for degree {degree}")
         return NaturalSpline(x, y, degree)
     r.fail(where, f"unknown function type {tag} (known: {', '.join(FUNCTION_TAGS)})")
-    raise AssertionError  # unreachable: fail raises
 
 
 # --- bodies, frames, coordinates -----------------------------------------------------------------
@@ -313,7 +316,7 @@ def _coordinate(r: _Reader, element: ET.Element, parents: list[ET.Element], join
 
 def _frame(body: str, translation: Vec3, orientation: Vec3) -> OsimFrame:
     R = rotation_xyz(orientation)
-    return OsimFrame(body, translation, tuple(tuple(float(v) for v in row) for row in R))
+    return OsimFrame(body, translation, _mat3(R))
 
 
 def _compose(outer: OsimFrame, translation: Vec3, orientation: Vec3) -> OsimFrame:
@@ -321,8 +324,17 @@ def _compose(outer: OsimFrame, translation: Vec3, orientation: Vec3) -> OsimFram
     R0 = np.asarray(outer.rotation)
     R = R0 @ rotation_xyz(orientation)
     p = np.asarray(outer.translation) + R0 @ np.asarray(translation)
-    return OsimFrame(outer.body, tuple(float(v) for v in p),
-                     tuple(tuple(float(v) for v in row) for row in R))
+    return OsimFrame(outer.body, _vec3(p), _mat3(R))
+
+
+def _vec3(p: np.ndarray) -> Vec3:
+    """A 3-vector as a tuple of Python floats."""
+    return (float(p[0]), float(p[1]), float(p[2]))
+
+
+def _mat3(R: np.ndarray) -> Mat3:
+    """A 3 × 3 matrix as a tuple of rows of Python floats."""
+    return (_vec3(R[0]), _vec3(R[1]), _vec3(R[2]))
 
 
 # --- joints ------------------------------------------------------------------------------------
@@ -386,19 +398,21 @@ def _joint_axes(r: _Reader, element: ET.Element, parents: list[ET.Element],
         return _standard_axes(r, element.tag, r.where(parents, element), names)
     r.fail(r.where(parents, element), f"unknown joint type {element.tag} (known: CustomJoint, "
                                       f"{', '.join(STANDARD_JOINTS)})")
-    raise AssertionError  # unreachable: fail raises
 
 
 def _coordinates_of(r: _Reader, element: ET.Element, parents: list[ET.Element]
                     ) -> list[OsimCoordinate]:
     """A joint's coordinates: 3.x ``CoordinateSet/objects/Coordinate``, 4.x ``coordinates``."""
     holder = element.find("CoordinateSet/objects")
-    inside = [*parents, element, element.find("CoordinateSet"), holder]
-    if holder is None:
+    if holder is not None:
+        coordinate_set = element.find("CoordinateSet")
+        assert coordinate_set is not None  # it holds the <objects> found
+        inside = [*parents, element, coordinate_set, holder]
+    else:
         holder = element.find("coordinates")
+        if holder is None:
+            return []
         inside = [*parents, element, holder]
-    if holder is None:
-        return []
     plan = STANDARD_JOINTS.get(element.tag, ())
     drives = _custom_motions(element)
     out = []
@@ -437,7 +451,7 @@ def _read_3x(r: _Reader, model: ET.Element, top: list[ET.Element], bodies: list[
     """3.x: each Body holds its Joint (``parent_body``, ``location_in_parent`` …)."""
     body_set = model.find("BodySet")
     objects = body_set.find("objects") if body_set is not None else None
-    if objects is None:
+    if body_set is None or objects is None:
         r.fail(element_path(top[:-1], model), "expected a <BodySet> with <objects>")
     parents = [*top, body_set, objects]
     for element in objects:
@@ -454,6 +468,7 @@ def _read_3x(r: _Reader, model: ET.Element, top: list[ET.Element], bodies: list[
         if len(kids) != 1:
             r.fail(r.where(parents, element), f"expected one joint inside <Joint>, got "
                                               f"{len(kids)}")
+        assert holder is not None  # it holds the one joint
         inside = [*parents, element, holder]
         joint = kids[0]
         _check_reverse(r, joint, inside)
@@ -500,7 +515,6 @@ def _resolve(r: _Reader, path: str, frames: dict, known: set[str], where: str,
     if name in known:
         return OsimFrame(name, (0.0, 0.0, 0.0), ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)))
     r.fail(where, f"frame {path!r} is neither one of the joint's frames, a body nor the ground")
-    raise AssertionError  # unreachable: fail raises
 
 
 def _read_4x(r: _Reader, model: ET.Element, top: list[ET.Element], bodies: list[OsimBody],
@@ -508,7 +522,9 @@ def _read_4x(r: _Reader, model: ET.Element, top: list[ET.Element], bodies: list[
     """4.x: BodySet and JointSet apart; joints connect offset frames by socket paths."""
     body_set = model.find("BodySet/objects")
     if body_set is not None:
-        parents = [*top, model.find("BodySet"), body_set]
+        set_element = model.find("BodySet")
+        assert set_element is not None  # it holds the <objects> found
+        parents = [*top, set_element, body_set]
         for element in body_set:
             if element.tag != "Body":
                 r.fail(r.where(parents, element), f"expected a Body, got {element.tag}")
@@ -518,7 +534,9 @@ def _read_4x(r: _Reader, model: ET.Element, top: list[ET.Element], bodies: list[
     joint_set = model.find("JointSet/objects")
     if joint_set is None:
         return
-    parents = [*top, model.find("JointSet"), joint_set]
+    set_element = model.find("JointSet")
+    assert set_element is not None  # it holds the <objects> found
+    parents = [*top, set_element, joint_set]
     for joint in joint_set:
         where = r.where(parents, joint)
         _check_reverse(r, joint, parents)
@@ -550,7 +568,9 @@ def _markers(r: _Reader, model: ET.Element, top: list[ET.Element], known: set[st
     holder = model.find("MarkerSet/objects")
     if holder is None:
         return []
-    parents = [*top, model.find("MarkerSet"), holder]
+    set_element = model.find("MarkerSet")
+    assert set_element is not None  # it holds the <objects> found
+    parents = [*top, set_element, holder]
     out = []
     for element in holder:
         where = r.where(parents, element)
@@ -569,7 +589,9 @@ def _couplers(r: _Reader, model: ET.Element, top: list[ET.Element]) -> list[Coup
     holder = model.find("ConstraintSet/objects")
     if holder is None:
         return []
-    parents = [*top, model.find("ConstraintSet"), holder]
+    set_element = model.find("ConstraintSet")
+    assert set_element is not None  # it holds the <objects> found
+    parents = [*top, set_element, holder]
     out = []
     for element in holder:
         where = r.where(parents, element)

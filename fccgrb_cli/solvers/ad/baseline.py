@@ -50,11 +50,13 @@ def drivers_from(system: System, time: np.ndarray, theta: np.ndarray, base: np.n
     theta_d, theta_dd = central_derivatives(theta, 1.0 / rate)
     base_rates = None
     if system.n_base_slots:
+        assert base is not None  # a system with a floating base is driven along it
         flat = base.reshape(len(time), -1)
         if cutoff is not None:
             flat = lowpass(flat, rate, cutoff, order)
         d1, d2 = central_derivatives(flat, 1.0 / rate)
-        base_rates = tuple(a.reshape(base.shape) for a in (flat, d1, d2))
+        r, r_d, r_dd = (a.reshape(base.shape) for a in (flat, d1, d2))
+        base_rates = (r, r_d, r_dd)
     return stacked_drives(system, theta, theta_d, theta_dd, base_rates)
 
 

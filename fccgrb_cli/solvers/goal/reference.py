@@ -54,7 +54,7 @@ def kkt_satisfied(grad: np.ndarray, eq_jac: np.ndarray, eq: np.ndarray,
     lower = np.concatenate([np.full(n_eq, -np.inf), np.zeros(len(A) - n_eq)])
     fit = lsq_linear(A.T, grad, bounds=(lower, np.inf), method="bvls", tol=1e-14)
     residual = np.linalg.norm(A.T @ fit.x - grad)
-    return bool(residual <= KKT_TOL * max(1.0, np.linalg.norm(grad)))
+    return bool(residual <= KKT_TOL * max(1.0, float(np.linalg.norm(grad))))
 
 
 def judged(res, nq: int, grad: Callable, eq: Callable, eq_jac: Callable,

@@ -118,6 +118,7 @@ def _curvature(problem: FrameProblem, q: np.ndarray, shift: np.ndarray, g: Goals
         half = len(zeta) // 2
         c[rows] = zeta[:half] - zeta[half:]
         return system.residual_hessian(q, c)
+    assert g.rows_c is not None and g.point_blocks is not None  # goals() gives them for 'ed'
     c[rows] = (zeta[:, None] * g.rows_c).ravel()
     return system.residual_hessian(q, c) + np.einsum("p,pqr->qr", zeta, g.point_blocks)
 

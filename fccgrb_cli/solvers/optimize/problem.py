@@ -32,7 +32,8 @@ class FrameProblem:
         self.point_weights = np.where(missing, 0.0, weights)
         self.drive = Drive(ref=np.where(missing[:, None], 0.0, targets))
         self._q: np.ndarray | None = None
-        self._phi = self._J = None
+        self._phi: np.ndarray | None = None
+        self._J: np.ndarray | None = None
 
     def keep_independent(self, q: np.ndarray) -> None:
         """Keep as many topological rows as they have rank (``System.topology_rank``), the best
@@ -53,6 +54,7 @@ class FrameProblem:
         if self._q is None or not np.array_equal(q, self._q):
             self._phi, self._J = self.system.evaluate(q, self.drive)
             self._q = q.copy()
+        assert self._phi is not None and self._J is not None  # evaluated with self._q
         return self._phi, self._J
 
     def residuals(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

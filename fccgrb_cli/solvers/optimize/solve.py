@@ -174,7 +174,8 @@ def _parallel(system: System, time: np.ndarray, targets: np.ndarray, settings: S
             done += len(frames)
             if progress is not None:
                 progress(done, n)
-    return records
+    assert all(record is not None for record in records)  # the tasks cover every frame
+    return [record for record in records if record is not None]
 
 
 def tracked_points(system: System, q: np.ndarray) -> np.ndarray:

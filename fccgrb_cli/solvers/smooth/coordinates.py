@@ -289,6 +289,7 @@ def solve_many(J: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     f = factor(J)
     out = np.empty((n_frames, n, rhs.shape[2]))
     if f.q is not None and len(f.batched):
+        assert f.r is not None  # factored with q
         qtb = np.matmul(f.q.transpose(0, 2, 1), rhs[f.batched])
         out[f.batched] = np.linalg.solve(f.r, qtb)
     for k in f.fallback:

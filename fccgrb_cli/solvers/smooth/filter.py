@@ -168,6 +168,7 @@ def smooth(chains: Chains, A: np.ndarray, b: np.ndarray, *, covariance: bool = T
         values[f] = (x_pred[f] - P_pred[f] @ lam_t)[out]
         Prow = P_pred[f][out]
         if posterior:
+            assert post is not None  # made when posterior
             post[f] = P_pred[f][np.ix_(out, out)] - Prow @ Om @ Prow.T
         if covariance:
             a = C.T @ Lam @ U - E.T
@@ -183,6 +184,7 @@ def smooth(chains: Chains, A: np.ndarray, b: np.ndarray, *, covariance: bool = T
             if f:
                 Pi = F @ Pi @ F.T
             T, tail = kept[f]
+            assert cov is not None  # made when covariance
             cov[f] = T @ Pi @ T.T + tail
             U = P_pred[f] @ E.T
             C = np.eye(n * p) - U @ M[f] @ E

@@ -167,7 +167,8 @@ def strength(time: np.ndarray, z: np.ndarray, variance: np.ndarray, likelihood: 
     log_l = _Likelihood(time, z, variance, likelihood, order)
     low, high = np.log(LOWEST), np.log(HIGHEST / log_l.dt)
     fixed = cutoff_hz is not None
-    cutoffs = np.array([np.log(cutoff_hz)]) if fixed else np.linspace(low, high, COARSE)
+    cutoffs = np.array([np.log(cutoff_hz)]) if cutoff_hz is not None else \
+        np.linspace(low, high, COARSE)
     ratios = np.arange(-3.0, 6.0, 2.0)  # log(τ²/r)
     step = (high - low) / (COARSE - 1)
 

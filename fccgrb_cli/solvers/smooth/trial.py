@@ -23,6 +23,7 @@ states), the covariance the marker noise gives them, and q with the topology to 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -176,12 +177,14 @@ def smooth_motion(system: System, time: np.ndarray, markers: np.ndarray, use: np
     parts = []
     for start in range(0, n, span):
         stop = min(n, start + span)
-        part = slice(max(0, start - overlap), min(n, stop + overlap))
-        keep = slice(start - part.start, stop - part.start)
-        parts.append((_span(data, part, d[part], q[part], strength), keep))
-    joined = (np.concatenate([getattr(m, key)[keep] for m, keep in parts])
-              for key in ("d", "d_d", "d_dd", "covariance", "q"))
-    return SmoothedMotion(coordinates, *joined, usable, strength.noise, strength.strengths,
+        window = slice(max(0, start - overlap), min(n, stop + overlap))
+        keep = slice(start - window.start, stop - window.start)
+        parts.append((_span(data, window, d[window], q[window], strength), keep))
+    joined_d, joined_d_d, joined_d_dd, joined_covariance, joined_q = (
+        np.concatenate([getattr(m, key)[keep] for m, keep in parts])
+        for key in ("d", "d_d", "d_dd", "covariance", "q"))
+    return SmoothedMotion(coordinates, joined_d, joined_d_d, joined_d_dd, joined_covariance,
+                          joined_q, usable, strength.noise, strength.strengths,
                           settings.cutoff is None, max(m.iterations for m, _ in parts))
 
 
@@ -295,6 +298,7 @@ def _gauss_newton(data: _Data, part: slice, d: np.ndarray, q: np.ndarray,
         if steps[-1] < STEP or iteration == ITERATIONS:
             break
     q = data.coordinates.linearize(d, q, data.compiled).q
+    assert cov is not None  # the last pass asked for it (the docstring's rule)
     return SmoothedMotion(data.coordinates, d, values[:, 1], values[:, 2], cov, q,
                   np.ones(len(d), bool), strength.noise, strength.strengths, True,
                   iteration + 1)
@@ -344,8 +348,8 @@ def _chains(time: np.ndarray, A: np.ndarray, b: np.ndarray, strengths: tuple[Str
     means, covs = zip(*(initial_state(time, np.where(seen[:, k], est.z[:, k], 0.0),
                                       variance[:, k], ORDER, scale[k]) for k in range(n)),
                       strict=True)
-    return reference.Chains.build(ORDER, dt, scale, density(cutoffs, r, dt, ORDER), np.array(means),
-                                  np.array(covs))
+    return reference.Chains.build(ORDER, dt, scale, np.asarray(density(cutoffs, r, dt, ORDER)),
+                                  np.array(means), np.array(covs))
 
 
 class _Passes:
@@ -353,6 +357,7 @@ class _Passes:
 
     def __init__(self, compiled: bool) -> None:
         self.compiled = compiled
+        self.log_likelihood: Callable[..., float]  # the kernel or its reference, one signature
         if compiled:
             from fccgrb_cli.solvers.smooth import kernels
 
