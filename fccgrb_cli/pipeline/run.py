@@ -162,25 +162,27 @@ class Run:
         return NamedArray(values, names, units, self.result.time + self.start_time)
 
     @property
-    def _angle_units(self) -> tuple[str, ...]:
+    def angle_units(self) -> tuple[str, ...]:
+        """Each coordinate's unit in the model's order: 'rad', or 'm' for a distance or a
+        moving joint's translation (what storage writes beside the angles)."""
         return tuple("m" if in_metres(a) else "rad" for a in self.model.angles)
 
     @property
     def angles(self) -> NamedArray:
         """Every joint angle (rad; a distance coordinate in m) per frame."""
-        return self._named(self.result.theta, self.result.angle_names, self._angle_units)
+        return self._named(self.result.theta, self.result.angle_names, self.angle_units)
 
     @property
     def angular_velocities(self) -> NamedArray:
         """θ̇ (rad/s; m/s for distances), by central differences of the solved θ."""
         return self._named(self.result.theta_d, self.result.angle_names,
-                           tuple(f"{u}/s" for u in self._angle_units))
+                           tuple(f"{u}/s" for u in self.angle_units))
 
     @property
     def angular_accelerations(self) -> NamedArray:
         """θ̈ (rad/s²; m/s² for distances)."""
         return self._named(self.result.theta_dd, self.result.angle_names,
-                           tuple(f"{u}/s²" for u in self._angle_units))
+                           tuple(f"{u}/s²" for u in self.angle_units))
 
     def _coordinates(self, values: np.ndarray, per: str) -> NamedArray:
         names, units = [], []
@@ -190,7 +192,7 @@ class Run:
                 units += [("m" if vector == "r" else "1") + per] * 3
         if values.shape[1] > len(names):  # mixed coordinates: the angles follow
             names += list(self.result.angle_names)
-            units += [u + per for u in self._angle_units]
+            units += [u + per for u in self.angle_units]
         return self._named(values, tuple(names), tuple(units))
 
     @property
@@ -216,7 +218,7 @@ class Run:
         if self.dynamics is None:
             return None
         return self._named(self.dynamics.inverse.joint_moments, self.result.angle_names,
-                           tuple("N" if u == "m" else "N·m" for u in self._angle_units))
+                           tuple("N" if u == "m" else "N·m" for u in self.angle_units))
 
     @property
     def clinical_angles(self) -> NamedArray | None:
@@ -240,7 +242,7 @@ class Run:
         without ``--smooth auto``."""
         u = self.uncertainty
         return None if u is None else self._named(u.theta_sd, self.result.angle_names,
-                                                  self._angle_units)
+                                                  self.angle_units)
 
     @property
     def moment_sd(self) -> NamedArray | None:
@@ -250,7 +252,7 @@ class Run:
         if u is None or u.moments_sd is None:
             return None
         return self._named(u.moments_sd, self.result.angle_names,
-                           tuple("N" if unit == "m" else "N·m" for unit in self._angle_units))
+                           tuple("N" if unit == "m" else "N·m" for unit in self.angle_units))
 
     @property
     def clinical_sd(self) -> tuple[NamedArray, NamedArray | None] | None:
@@ -358,7 +360,7 @@ def summary(run: Run) -> dict[str, float | str | int]:
             del row[key]
     if run.truth_theta is not None:
         err = np.abs(r.theta - run.truth_theta)[ok]
-        distance = np.array(run._angle_units) == "m"
+        distance = np.array(run.angle_units) == "m"
         angle_err = err[:, ~distance]
         row["max |dθ| deg"] = float(np.degrees(angle_err.max())) if angle_err.size else float("nan")
         if distance.any():
@@ -371,7 +373,7 @@ def summary(run: Run) -> dict[str, float | str | int]:
         trusted = run.moments_trusted
         assert trusted is not None  # given with the dynamics
         loads = np.where(trusted, np.abs(run.dynamics.inverse.joint_moments), np.nan)
-        distance = np.array(run._angle_units) == "m"
+        distance = np.array(run.angle_units) == "m"
         for key, columns in (("max |τ| N·m", ~distance), ("max |F| N", distance)):
             if columns.any() and (key == "max |τ| N·m" or distance.any()):
                 some = loads[:, columns]

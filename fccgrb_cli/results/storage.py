@@ -288,7 +288,7 @@ def _write_run(h5, run: Run, command: str, cell: dict | None) -> None:
     for key, per in (("theta", ""), ("theta_d", "/s"), ("theta_dd", "/s²")):
         put(g, key, getattr(r, key))
         g[key].attrs["names"] = list(r.angle_names)
-        g[key].attrs.create("units", [u + per for u in run._angle_units], dtype=text)
+        g[key].attrs.create("units", [u + per for u in run.angle_units], dtype=text)
     for key in ("model_points", "markers_input", "ed", "ed_input"):
         put(g, key, getattr(run, key))
     if r.status:
@@ -365,7 +365,7 @@ def _write_uncertainty(g, run: Run, u: Uncertainty) -> None:
                       "seconds": u.seconds, "cutoffs_hz": u.cutoffs_hz,
                       "extra_sd": u.extra_sd})
     out.attrs.create("coordinates", list(u.coordinates), dtype=text)
-    units = run._angle_units
+    units = run.angle_units
     forces = ["N" if unit == "m" else "N·m" for unit in units]
     for key, per in (("theta_sd", list(units)), ("theta_d_sd", [f"{u_}/s" for u_ in units]),
                      ("theta_dd_sd", [f"{u_}/s²" for u_ in units]), ("moments_sd", forces)):
@@ -389,7 +389,7 @@ def _write_dynamics(g, run: Run, d: Dynamics) -> None:
         g["moment_flags"].attrs["bits"] = bit_summary(MOMENT_BITS, run.moment_flags)
         g["moment_flags"].attrs["names"] = list(inverse.angle_names)
     g["joint_moments"].attrs.create(
-        "units", ["N" if u == "m" else "N·m" for u in run._angle_units],
+        "units", ["N" if u == "m" else "N·m" for u in run.angle_units],
         dtype=h5py.string_dtype(encoding="utf-8"))
     put(g, "lambda", inverse.lam)
     g["lambda"].attrs["labels"] = list(inverse.row_labels)
