@@ -105,6 +105,19 @@ def merged(parts: Sequence[tuple[slice, Any]], n: int, like_time: np.ndarray | N
 _FRAME = re.compile(r"(frame index |first frame index |frame indices )(\d+)")
 
 
+def window(times: np.ndarray, start: float | None, stop: float | None) -> np.ndarray:
+    """The samples whose ``times`` (s, evenly spaced) lie in [start, stop] (None: unbounded),
+    each end widened by a millionth of a step for times printed rounded: OpenSim's time_range,
+    ``--from``/``--to``."""
+    keep = np.ones(len(times), dtype=bool)
+    slack = 1e-6 * float(np.mean(np.diff(times))) if len(times) > 1 else 0.0
+    if start is not None:
+        keep &= times >= start - slack
+    if stop is not None:
+        keep &= times <= stop + slack
+    return keep
+
+
 _TIME = re.compile(r"\bt = (-?\d+\.\d+)(?:–(-?\d+\.\d+))? s\b")
 
 

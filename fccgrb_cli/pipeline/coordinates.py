@@ -19,6 +19,7 @@ import time as time_module
 import numpy as np
 
 from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.core.stretches import window
 from fccgrb_cli.dynamics.convert import Dynamics
 from fccgrb_cli.dynamics.moving import coordinate_inverse, coordinate_rates
 from fccgrb_cli.model import Model
@@ -161,12 +162,7 @@ def _columns(model: Model, coordinates: Storage) -> tuple[np.ndarray, list[str]]
 def _rows(time: np.ndarray, options: SolveOptions, source: str) -> np.ndarray:
     """The rows within ``--from``/``--to`` (OpenSim's time_range: from the later of the first
     row and the range's start to the earlier of the last row and its end)."""
-    keep = np.ones(len(time), dtype=bool)
-    slack = 1e-6 * float(np.mean(np.diff(time)))
-    if options.time_from is not None:
-        keep &= time >= options.time_from - slack
-    if options.time_to is not None:
-        keep &= time <= options.time_to + slack
+    keep = window(time, options.time_from, options.time_to)
     if keep.sum() < 2:
         raise InputError(f"{source}: --from/--to: expected at least 2 rows within the range, "
                          f"got {int(keep.sum())} (the file covers {time[0]:.6g}–"

@@ -340,17 +340,15 @@ def mean_jump(points: np.ndarray) -> float:
 def summary(run: Run) -> dict[str, float | str | int]:
     """The one-row summary: method, ms/frame, iterations/frame, ‖Φ‖, topology, ED (mm)."""
     r = run.result
-    ok = np.isfinite(run.ed).all(axis=1) & r.converged
+    ok = np.isfinite(run.ed).all(axis=1) & r.converged & bool(run.labels)  # markers solved
     per_frame = r.wall_s / r.n_frames if np.isfinite(r.wall_s) else float(np.nanmean(r.time_s))
     row: dict[str, float | str | int] = {
         "run": run.name, "method": r.method, "ms/frame": 1e3 * per_frame,
         "iter/frame": float(np.mean(r.iterations)),
         "mean |Phi|": float(np.nanmean(r.phi_norm)),
         "max |Phi_top|": float(np.nanmax(r.phi_top_max)),
-        "mean ED mm": 1e3 * float(np.nanmean(run.ed[ok])) if ok.any() and run.labels else
-        float("nan"),
-        "max ED mm": 1e3 * float(np.nanmax(run.ed[ok])) if ok.any() and run.labels else
-        float("nan"),
+        "mean ED mm": 1e3 * float(np.nanmean(run.ed[ok])) if ok.any() else float("nan"),
+        "max ED mm": 1e3 * float(np.nanmax(run.ed[ok])) if ok.any() else float("nan"),
         "jump mm": 1e3 * mean_jump(run.model_points),
         "failed": int((~r.converged).sum()),
         "flagged": int((r.converged & ~r.trusted).sum()),

@@ -19,6 +19,7 @@ import numpy as np
 from fccgrb_cli.core.atomic import atomic_path
 from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.core.inputs import decode, read_bytes, regular_file
+from fccgrb_cli.core.stretches import window
 from fccgrb_cli.trial.c3d import ARTEFACT_PARAMETER, ARTEFACT_TRC_KEY, UNIT_SCALE, write_markers
 from fccgrb_cli.trial.c3d_header import (
     TRUNCATED,
@@ -71,12 +72,7 @@ class Trial:
         if start is None and stop is None:
             return self
         clock = self.start + self.time
-        slack = 1e-6 / self.rate
-        keep = np.ones(self.n_frames, dtype=bool)
-        if start is not None:
-            keep &= clock >= start - slack
-        if stop is not None:
-            keep &= clock <= stop + slack
+        keep = window(clock, start, stop)
         if not keep.any():
             raise InputError(f"{self.path}: --from/--to: expected a time range within the "
                              f"trial's {clock[0]:.6g}–{clock[-1]:.6g} s, got "
