@@ -18,8 +18,9 @@ package index) put it, each tool in a fresh process as ``opensim-cmd run-tool`` 
 * **IK + ID wall**: the two tools' processes, start-up included, one after the other, as a user
   runs them; and, the stricter peer, both tools in one process.
 
-fccgrb runs ``fccgrb solve --opensim-setup SETUP.xml -o out.h5`` in a fresh process (start-up,
-the kernels' load, the solve, the rates, the inverse dynamics, the results file): its wall, and
+fccgrb runs ``fccgrb solve --opensim-setup SETUP.xml --filter-cutoff 6 -o out.h5`` in a fresh
+process (start-up, the kernels' load, the solve, the angles low-passed at 6 Hz as OpenSim's ID
+tool does, the rates, the inverse dynamics, the results file): its wall, and
 its per-frame kinematic solve as its own summary prints it (``ms/frame``), for NRM-WLS and
 CNO-SQP, and with ``--no-dynamics`` (the IK alone, against OpenSim's IK tool).
 
@@ -121,7 +122,8 @@ def _fccgrb(folder: Path, method: str, dynamics: bool) -> tuple[float, float]:
     results = folder / "out.h5"
     results.unlink(missing_ok=True)
     command = [shutil.which("fccgrb") or "fccgrb", "solve", "--opensim-setup", SETUP,
-               "--method", method, "-o", str(results)] + ([] if dynamics else ["--no-dynamics"])
+               "--method", method, "-o", str(results)]
+    command += ["--filter-cutoff", "6"] if dynamics else ["--no-dynamics"]
     wall, out = _wall(command, folder)
     lines = out.splitlines()
     header = next(k for k, line in enumerate(lines) if "ms/frame" in line)

@@ -7,12 +7,30 @@ local axes A (columns) and origin c in the body, R_body = R_C Aᵀ and r_body = 
 
 from __future__ import annotations
 
+import weakref
+from typing import NamedTuple
+
 import numpy as np
 
 from fccgrb_cli.model import GROUND, Model
 from fccgrb_cli.system.compiled import System
 
 __all__ = ["pose_from_coordinates"]
+
+
+class _Step(NamedTuple):
+    """One joint of the walk down the tree: its index among the function rows' joints, its
+    parent and child, the parent frame's and child frame's local origin and axes (columns), and
+    the child's slice of q."""
+
+    joint: int
+    parent: str
+    child: str
+    parent_origin: np.ndarray
+    parent_axes: np.ndarray
+    child_origin: np.ndarray
+    child_axes: np.ndarray
+    block: slice
 
 
 def _frame(model: Model, body: str, origin: str, axes: tuple[str, str, str]
@@ -23,6 +41,33 @@ def _frame(model: Model, body: str, origin: str, axes: tuple[str, str, str]
     vectors = model.ground.vectors if body == GROUND else model.body(body).vectors
     return (np.asarray(points[origin].local, dtype=float),
             np.column_stack([vectors[a].local for a in axes]).astype(float))
+
+
+def _walk(system: System) -> tuple[_Step, ...]:
+    """The moving joints in an order that places each parent before its child (joints no walk
+    from the ground reaches left out: their bodies keep their stated pose); built once per
+    system."""
+    if system in _WALKS:
+        return _WALKS[system]
+    model, layout = system.model, system.layout
+    placed, steps = {GROUND}, []
+    pending = list(enumerate(model.moving_joints))
+    while pending:
+        found = next(((k, j) for k, j in pending if j.parent in placed), None)
+        if found is None:
+            break
+        pending.remove(found)
+        k, joint = found
+        placed.add(joint.child)
+        steps.append(_Step(k, joint.parent, joint.child,
+                           *_frame(model, joint.parent, joint.parent_origin, joint.parent_axes),
+                           *_frame(model, joint.child, joint.child_origin, joint.child_axes),
+                           layout.q_slice(joint.child)))
+    _WALKS[system] = tuple(steps)
+    return _WALKS[system]
+
+
+_WALKS: weakref.WeakKeyDictionary[System, tuple[_Step, ...]] = weakref.WeakKeyDictionary()
 
 
 def pose_from_coordinates(system: System, theta: np.ndarray) -> np.ndarray:
@@ -41,29 +86,23 @@ def pose_from_coordinates(system: System, theta: np.ndarray) -> np.ndarray:
     numpy.ndarray
         The system coordinates q: [r, u, v, w] per body, then θ when mixed.
     """
-    model, layout = system.model, system.layout
+    functions = system.functions
+    assert functions is not None  # a model with moving joints has their function rows
+    theta = np.asarray(theta, dtype=float)
+    # every joint's transform at once: rows first..first+8 hold R_PC, the next three p_PC
+    h = functions.terms(theta, second=False)[0]
     placed = {GROUND: (np.eye(3), np.zeros(3))}
-    names = [a.name for a in model.angles]
-    pending = list(model.moving_joints)
-    q = layout.pose_q(model)
-    while pending:
-        joint = next((j for j in pending if j.parent in placed), None)
-        if joint is None:
-            break  # bodies no moving joint reaches keep their stated pose
-        pending.remove(joint)
-        R_body, r_body = placed[joint.parent]
-        p_local, A_P = _frame(model, joint.parent, joint.parent_origin, joint.parent_axes)
-        R_P, o_P = R_body @ A_P, r_body + R_body @ p_local
-        index = [names.index(c) for c in joint.transform.coordinates]
-        h = joint.transform.terms(np.asarray(theta, dtype=float)[index], second=False)[0]
-        R_C, o_C = R_P @ h[:9].reshape(3, 3), o_P + R_P @ h[9:]
-        c_local, A_C = _frame(model, joint.child, joint.child_origin, joint.child_axes)
-        R_child = R_C @ A_C.T
-        r_child = o_C - R_child @ c_local
-        placed[joint.child] = (R_child, r_child)
-        block = layout.q_slice(joint.child)
+    q = system.layout.pose_q(system.model)
+    for step in _walk(system):
+        first = functions.joints[step.joint][0]
+        R_body, r_body = placed[step.parent]
+        R_P, o_P = R_body @ step.parent_axes, r_body + R_body @ step.parent_origin
+        R_C, o_C = R_P @ h[first:first + 9].reshape(3, 3), o_P + R_P @ h[first + 9:first + 12]
+        R_child = R_C @ step.child_axes.T
+        r_child = o_C - R_child @ step.child_origin
+        placed[step.child] = (R_child, r_child)
         full = np.concatenate([r_child, R_child[:, 0], R_child[:, 1], R_child[:, 2]])
-        q[block] = full[: block.stop - block.start]
+        q[step.block] = full[: step.block.stop - step.block.start]
     if system.mixed:
-        q[layout.n_body_q:] = theta
+        q[system.layout.n_body_q:] = theta
     return q
