@@ -16,11 +16,19 @@ perturb`` writes the markers alone). Options as the README's gait example (NRM-W
 'per trial' is the whole batch's wall time over the trials; 'solve s' each trial's own solve in
 its worker (the study file's /timings), mean and range. Run it on a quiet machine: the figures
 are wall clock. Speed goals live here, never in tests.
+
+Then where a trial's time goes (``--no-breakdown`` leaves it out): one adult's and one child's
+trial solved again in this process as a worker solves them (``solve_trial_cell``: read the
+model and the trial, solve, write the cell), a first time untimed (a worker's kernels are
+loaded once, for all its trials), a second time timed, a third under cProfile; each stage's
+share of the profiled time (its functions' cumulative time), scaled to the timed wall.
 """
 
 from __future__ import annotations
 
 import argparse
+import cProfile
+import pstats
 import shutil
 import subprocess
 import sys
@@ -96,6 +104,8 @@ def main() -> None:
     parser.add_argument("--trials", type=int, default=50)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--keep", action="store_true", help="Keep the temporary folder.")
+    parser.add_argument("--no-breakdown", action="store_true",
+                        help="Leave out where a trial's time goes.")
     args = parser.parse_args()
     for path in (ADULT, CHILD, CHILD_STATIC):
         if not path.exists():
@@ -125,11 +135,76 @@ def main() -> None:
               f"{'solve s min':>12} {'solve s max':>12} {'trials/min':>11}")
         print(f"{wall:13.1f} {wall / n:12.2f} {solve.mean():13.2f} {solve.min():12.2f} "
               f"{solve.max():12.2f} {60 * n / wall:11.1f}")
+        if not args.no_breakdown:
+            breakdown(study, out)
         if args.keep:
             print(f"kept {folder}")
     finally:
         if not args.keep:
             shutil.rmtree(folder, ignore_errors=True)
+
+
+# A trial's stages in a worker: (label, the functions whose cumulative time is the stage's)
+STAGES = (
+    ("read model", ("load_model",)),
+    ("read trial", ("read_trial",)),
+    ("lab axes", ("lab_axes",)),
+    ("kinematics (solve, rates)", ("_kinematics",)),
+    ("fit checks", ("points_along", "distances", "kinematic_findings", "assessed")),
+    ("inverse dynamics", ("dynamics_stage",)),
+    ("Plug-in Gait outputs", ("plugin_gait_results",)),
+    ("gait cycles", ("analyse_gait",)),
+    ("write the cell", ("write_run",)),
+)
+
+
+def breakdown(study_file: Path, out: Path) -> None:
+    """Where one adult's and one child's trial spend their time in a worker (see the module's
+    docstring)."""
+    from dataclasses import replace
+
+    from fccgrb_cli.batch.cells import cells_folder
+    from fccgrb_cli.batch.study.jobs import TrialSolve, calibration_file, solve_trial_cell
+    from fccgrb_cli.batch.study.spec import load_study
+
+    study = load_study(study_file)
+    rows = []
+    for subject in study.subjects[:2]:
+        model = calibration_file(subject, cells_folder(out), False)
+        trial = subject.trials[-1]
+        job = TrialSolve(subject.name, "bench", model, trial,
+                         study.options.with_(mapping=subject.mapping),
+                         out.parent / f"breakdown-{subject.name}.h5", "bench")
+        solve_trial_cell(job)
+        job.target.unlink()
+        started = time.perf_counter()
+        solve_trial_cell(job)
+        wall = time.perf_counter() - started
+        job.target.unlink()
+        profile = cProfile.Profile()
+        profile.runcall(solve_trial_cell, replace(job))
+        job.target.unlink()
+        stats = pstats.Stats(profile).stats  # type: ignore[attr-defined]
+        total = max(v[3] for k, v in stats.items() if k[2] == "solve_trial_cell")
+        shares = []
+        for _, names in STAGES:
+            # a function called inside another of the same stage would count twice: the
+            # stages' functions are siblings in solve_trial's body
+            spent = sum(max((v[3] for k, v in stats.items() if k[2] == name), default=0.0)
+                        for name in names)
+            shares.append(spent / total)
+        rows.append((subject.name, trial.name, wall, shares))
+    print("\nwhere a trial's time goes in a worker (s, the timed wall split by the profiled "
+          "shares)")
+    width = max(len(label) for label, _ in STAGES) + 2
+    print(f"{'stage':<{width}}" + "".join(f"{name + ' ' + trial:>26}"
+                                          for name, trial, _, _ in rows))
+    for k, (label, _) in enumerate(STAGES):
+        print(f"{label:<{width}}" + "".join(f"{wall * shares[k]:26.3f}"
+                                            for _, _, wall, shares in rows))
+    print(f"{'other':<{width}}" + "".join(f"{wall * (1 - sum(shares)):26.3f}"
+                                          for _, _, wall, shares in rows))
+    print(f"{'whole trial':<{width}}" + "".join(f"{wall:26.3f}" for _, _, wall, _ in rows))
 
 
 def _cpus() -> int:

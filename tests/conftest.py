@@ -34,6 +34,10 @@ settings.load_profile("ci")
 # them (cli.main._first_run_engine): a suite's runs must all use one engine, so they compile in
 # the foreground as before (tests/test_first_run.py sees the background path)
 os.environ["FCCGRB_BACKGROUND_COMPILE"] = "0"
+# a short trial's arrays stay in memory by default (pipeline.solve.SPILL_MB): the suite's short
+# trials spill them all the same, so that they take the path a long trial takes (test_spill
+# checks the default apart)
+os.environ["FCCGRB_SPILL_MB"] = "0"
 
 
 # whole modules, or single tests (their node id without parameters)

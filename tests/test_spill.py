@@ -243,3 +243,22 @@ def test_the_dynamics_stage_by_blocks_of_frames(monkeypatch) -> None:
     assert topology.any()
     assert np.array_equal(result.phi_norm, np.linalg.norm(phi, axis=1))
     assert np.array_equal(result.phi_top_max, np.abs(phi[:, topology]).max(axis=1))
+
+
+def test_only_a_long_trial_spills_by_default(monkeypatch) -> None:
+    """Below FCCGRB_SPILL_MB (64 MiB of estimated arrays by default) a run stays in memory: the
+    five-bar's 300 frames do; an hour at 1 kHz does not; 0 spills every run."""
+    from fccgrb_cli.core.errors import InputError
+    from fccgrb_cli.pipeline import solve as stage
+
+    model, trial, _ = _inputs("five_bar")
+    monkeypatch.delenv(stage.SPILL_SETTING, raising=False)
+    assert not stage._worth_spilling(model, trial)
+    hour = trial.__class__(trial.path, trial.labels, np.zeros((3_600_000, 1, 3)), 1000.0,
+                           trial.warnings, trial.start)
+    assert stage._worth_spilling(model, hour)
+    monkeypatch.setenv(stage.SPILL_SETTING, "0")
+    assert stage._worth_spilling(model, trial)
+    monkeypatch.setenv(stage.SPILL_SETTING, "lots")
+    with pytest.raises(InputError, match="FCCGRB_SPILL_MB"):
+        stage._worth_spilling(model, trial)

@@ -8,6 +8,7 @@ What the stages use lives in their layers: the trial's labels each marker follow
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
@@ -65,7 +66,9 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
     results' own, as ``fccgrb solve`` gives it) where the largest per-frame arrays wait on disk
     from the moment the later stages no longer need them (``core.spill``: the Run holds a
     StoredArray in their place, which ``write_run`` copies into the results as stored), so that
-    a long trial's memory stays at the markers, q and the dynamics stage's working arrays."""
+    a long trial's memory stays at the markers, q and the dynamics stage's working arrays. A
+    trial whose arrays are small (below ``SPILL_MB``) stays in memory: writing and reading
+    them back would cost a short trial a tenth of its solve for no memory worth saving."""
     options = options or SolveOptions()
     trial = _window(trial, options)
     _check_length(trial, options)
@@ -102,7 +105,8 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
     inputs = perturb(measured, model.marker_labels, trial.rate, options.perturb_level_m,
                      options.seed, only=options.perturb_markers or None)
     del measured  # the reference itself, or no longer needed
-    with _Store(spill) as store:  # a failing stage leaves no scratch file
+    with _Store(spill if _worth_spilling(model, trial) else None) as store:  # a failing
+        # stage leaves no scratch file
         trial = store.trial(trial, model)
         system, result, no_data = _kinematics(model, trial, inputs, options, truth, progress)
         result = store.rates(result)
@@ -193,6 +197,25 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
             clinical=clinical, gait=gait, moment_flags=moments, axes=axes,
             uncertainty=uncertainty, plugin_gait=pig, start_time=trial.start,
             residuals=residuals.report, reduction=residuals.reduction)
+
+
+# A run's per-frame arrays are spilled when they would hold more than this many MiB (estimated
+# as 12 arrays of the frames × the model's coordinates, float64): a 10-minute trial's ~1 GB,
+# not a walk's few MB. The environment's FCCGRB_SPILL_MB sets another (0: always, as the test
+# suite runs, so that its short trials take the path a long one takes).
+SPILL_MB = 64.0
+SPILL_SETTING = "FCCGRB_SPILL_MB"
+
+
+def _worth_spilling(model: Model, trial: Trial) -> bool:
+    """Whether the trial's arrays are large enough to be kept on disk (``SPILL_MB``)."""
+    try:
+        limit = float(os.environ.get(SPILL_SETTING, SPILL_MB))
+    except ValueError:
+        raise InputError(f"{SPILL_SETTING}: expected a size in MiB, got "
+                         f"{os.environ[SPILL_SETTING]!r}") from None
+    coordinates = 12 * len(model.bodies) + len(model.angles)
+    return 12 * 8 * coordinates * trial.n_frames > limit * 2**20
 
 
 class _Store:
