@@ -2,12 +2,14 @@
 ``IKTaskSet`` inline or in a file) and the inverse dynamics' (``InverseDynamicsTool``).
 
 Files named in a setup are resolved as OpenSim resolves them: a relative path against the
-setup's folder, an output file against the ``results_directory`` (itself against the setup's
-folder). OpenSim reads a setup's one tool element whatever its tag (opensim-core's own IK test
-setup spells it ``InverseKinemtaticsTool``); so does this reader, and the properties decide:
-an element that is not a property of the tool is refused in one line naming it, as are a
-number that is not finite, a flag that is not true or false, a time range that is not two
-increasing times and a task weight below zero."""
+setup's folder, the ID tool's output file against the ``results_directory`` (itself against the
+setup's folder), the IK tool's ``output_motion_file`` against the setup's folder (OpenSim 4.6
+writes it there and puts only its marker reports in the results directory). OpenSim reads a
+setup's one tool element whatever its tag (opensim-core's own IK test setup spells it
+``InverseKinemtaticsTool``); so does this reader, and the properties decide: an element that is
+not a property of the tool is refused in one line naming it, as are a number that is not
+finite, a flag that is not true or false, a time range that is not two increasing times and a
+task weight below zero."""
 
 from __future__ import annotations
 
@@ -242,7 +244,7 @@ def read_ik_setup(path: str | Path) -> IKSetup:
                          f"0, got {weight:g}")
     return IKSetup(tool.name, tool.source, tool.file("model_file"), tool.file("marker_file"),
                    tool.file("coordinate_file"), tool.time_range(), tasks, accuracy, weight,
-                   tool.output("output_motion_file"))
+                   tool.file("output_motion_file"))
 
 
 def read_id_setup(path: str | Path) -> IDSetup:
