@@ -456,8 +456,8 @@ def sweeps(ws: Workspace) -> list[Artifact]:
     out.append(ReadmeBlock("sweep-times", (
         f"The full grids: `fccgrb sweep configs/sweeps/table1.yaml --workers 2` ({c1} cells, "
         f"{s1} s) and `configs/sweeps/table2.yaml` ({c2} cells, {s2} s); their tables, ours "
-        f"beside the paper's, are in [docs/table1.md](docs/table1.md) and "
-        f"[docs/table2.md](docs/table2.md).")))
+        f"beside the paper's, are in [docs/table1.md](table1.md) and "
+        f"[docs/table2.md](table2.md).")))
     return out
 
 
