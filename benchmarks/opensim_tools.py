@@ -182,7 +182,7 @@ def main() -> None:
     two = best["os ik wall"] + best["os id wall"]
     print(f"OpenSim {check.stdout.strip()} and fccgrb on {TRIAL.name} ({frames} frames), "
           f"best of {args.repeat}\n")
-    print("| what | OpenSim wall (s) | fccgrb wall (s) | OpenSim / fccgrb |")
+    print("| what | OpenSim wall (s) | fccgrb wall (s) | timing ratio OpenSim / fccgrb |")
     print("|---|---|---|---|")
     for method in METHODS:
         ik, both = best[f"{method} False wall"], best[f"{method} True wall"]
@@ -192,7 +192,7 @@ def main() -> None:
               f"{two / both:.2f} |")
         print(f"| IK + ID, one OpenSim process, {method} | {best['os both wall']:.2f} | "
               f"{both:.2f} | {best['os both wall'] / both:.2f} |")
-    print("\n| IK per frame | ms/frame | OpenSim's solver / this |")
+    print("\n| IK per frame | ms/frame | timing ratio OpenSim's solver / this |")
     print("|---|---|---|")
     print(f"| OpenSim InverseKinematicsSolver (assemble, track) | {solver_ms:.2f} | 1.00 |")
     print(f"| OpenSim InverseKinematicsTool.run() (model and markers read) | {tool_ms:.2f} | "

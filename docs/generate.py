@@ -30,6 +30,8 @@ Parts and their blocks:
   ``bench-dynamics``, ``bench-peers`` (OpenSim's IK beside ours where ``opensim`` is
   installed), ``bench-long`` (a 10-minute trial under /usr/bin/time -v), ``bench-startup``
   (whole commands in fresh processes), ``bench-batch`` (a 50-trial study on this machine),
+  ``bench-opensim-tools`` (the whole command beside OpenSim 4.6's IK and ID tools on OpenSim's
+  own trial, where a Python with ``opensim`` is given by FCCGRB_OPENSIM_PYTHON),
   ``bench-smoothing`` (the smoother's table; its longer checks and figure are run by hand):
   the performance tables from benchmarks/*.py.
 * ``study`` (a minute; the shared data and a chromium binary): ``study`` (``fccgrb batch
@@ -652,6 +654,20 @@ def opensim_agreement(ws: Workspace) -> list[Artifact]:
     return [ReadmeBlock("opensim-agreement", out)]
 
 
+def bench_opensim_tools(ws: Workspace) -> list[Artifact]:
+    """fccgrb's whole command beside OpenSim 4.6's IK and ID tools on OpenSim's own trial
+    (``benchmarks/opensim_tools.py``; OpenSim from the Python that FCCGRB_OPENSIM_PYTHON names,
+    by default this one). Skipped without the shared OpenSim data or without opensim there."""
+    if not (SHARED / "data" / "opensim").is_dir():
+        raise Skip("../shared/data/opensim is absent")
+    python = os.environ.get("FCCGRB_OPENSIM_PYTHON", sys.executable)
+    if subprocess.run([python, "-c", "import opensim"], capture_output=True).returncode:
+        raise Skip(f"{python}: no opensim (set FCCGRB_OPENSIM_PYTHON to a Python that has it)")
+    out = ws.run(f"python {ROOT / 'benchmarks' / 'opensim_tools.py'} --opensim-python {python}",
+                 stderr=False)
+    return [ReadmeBlock("bench-opensim-tools", out)]
+
+
 def cli_reference(ws: Workspace) -> list[Artifact]:
     """docs/cli.md: every command's own ``--help``, as the installed ``fccgrb`` prints it."""
     top = ws.run("fccgrb --help")
@@ -696,6 +712,8 @@ BLOCKS = {b.name: b for b in (
     Block("bench-long", "benchmarks", bench_long, "docs: a 10-minute trial"),
     Block("bench-startup", "benchmarks", bench_startup, "docs: whole commands' wall time"),
     Block("bench-batch", "benchmarks", bench_batch, "docs: a 50-trial study"),
+    Block("bench-opensim-tools", "benchmarks", bench_opensim_tools,
+          "docs: the whole command beside OpenSim's IK and ID tools"),
     Block("study", "study", study, "docs/report_subject.png: a study, its report"),
     Block("bench-smoothing", "benchmarks", bench_smoothing,
           "docs: the smoother's table"),
@@ -712,7 +730,7 @@ T = "‹t›"
 NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 FREE_TIMING = re.compile(rf"(?<![\w.]){NUMBER}(?=\s*(?:ms/frame|ms|s|min|frames/s)\b)")
 CONSOLE_TIMING = ("ms/frame", "frames/s", "x real time")
-MARKDOWN_TIMING = ("ms/frame", "frames/s", "real time", "total ms")
+MARKDOWN_TIMING = ("ms/frame", "frames/s", "real time", "total ms", "wall (s)", "timing ratio")
 EPS = "‹ε›"
 ROUNDING = re.compile(r"(?<![\w.])[-+]?(?:\d+\.?\d*|\.\d+)[eE]-(?:1[3-9]|[2-9]\d|\d{3})\b")
 """Numbers below 1e-12: rounding residues (‖Φ‖ of an exact solve, max |Φ_top| of a method that
