@@ -319,8 +319,10 @@ def _controls_norms(ws: Workspace) -> None:
         names = [str(n)[:-2] for n in sides[0].attrs["names"]]
         mean = np.mean([s["mean"][()] for s in sides], axis=0)
         sd = np.mean([s["sd"][()] for s in sides], axis=0)
-        for j, name in enumerate(names):
-            lines += [f"{name},{p},{mean[p, j]:.4g},{sd[p, j]:.3g}" for p in range(0, 101, 2)]
+        for j, name in enumerate(names):  # a curve no control has a trusted stride of (its
+            # moments on a foot no plate measures) has no norm
+            lines += [f"{name},{p},{mean[p, j]:.4g},{sd[p, j]:.3g}" for p in range(0, 101, 2)
+                      if np.isfinite(mean[p, j]) and np.isfinite(sd[p, j])]
         table = group["spatiotemporal"]
         means = np.mean([table[s]["mean"][()] for s in ("left", "right")], axis=0)
         sds = np.mean([table[s]["sd"][()] for s in ("left", "right")], axis=0)
