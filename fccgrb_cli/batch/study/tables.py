@@ -36,9 +36,14 @@ def _any(tables: dict[str, Table]) -> bool:
 
 def trials_table(study: StudyResults) -> str:
     """One row per solved trial: method, frames, trusted frames, frames carrying each flag the
-    file declares, mean distance of the model points to the markers, strides (trusted)."""
+    file declares that some trial carries, mean distance of the model points to the markers,
+    strides (trusted); then the line naming the declared flags no frame of any trial carries
+    (a column of zeros each, left out so that the table stays readable)."""
     trials = [t for s in study.subjects for t in s.solved]
-    names = list(dict.fromkeys(f.label for t in trials for f in t.flags))
+    declared = list(dict.fromkeys(f.label for t in trials for f in t.flags))
+    carried = {f.label for t in trials for f in t.flags if f.frames}
+    names = [n for n in declared if n in carried]
+    clear = [n for n in declared if n not in carried]
     head = ["trial", "method", "frames", "trusted", *names, "mean ED mm", "strides L", "R"]
     rows = [head]
     for t in trials:
@@ -49,9 +54,10 @@ def trials_table(study: StudyResults) -> str:
                      *(str(counts.get(n, 0)) for n in names), f"{t.mean_ed_mm:.3g}",
                      strides.get("left", "–"), strides.get("right", "–")])
     widths = [max(len(r[k]) for r in rows) for k in range(len(head))]
-    return "\n".join("  ".join(c.ljust(w) if k == 0 else c.rjust(w)
-                               for k, (c, w) in enumerate(zip(r, widths, strict=True)))
-                     for r in rows)
+    table = "\n".join("  ".join(c.ljust(w) if k == 0 else c.rjust(w)
+                                for k, (c, w) in enumerate(zip(r, widths, strict=True)))
+                      for r in rows)
+    return table + (f"\nno frame of any trial flagged by: {', '.join(clear)}" if clear else "")
 
 
 def study_tables(study: StudyResults) -> str:
