@@ -197,7 +197,7 @@ def breakdown(study_file: Path, out: Path) -> None:
     print("\nwhere a trial's time goes in a worker (s, the timed wall split by the profiled "
           "shares)")
     width = max(len(label) for label, _ in STAGES) + 2
-    print(f"{'stage':<{width}}" + "".join(f"{name + ' ' + trial:>26}"
+    print(f"{'stage':<{width}}" + "".join(f"{name + ' ' + trial + ' s':>26}"
                                           for name, trial, _, _ in rows))
     for k, (label, _) in enumerate(STAGES):
         print(f"{label:<{width}}" + "".join(f"{wall * shares[k]:26.3f}"

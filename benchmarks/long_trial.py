@@ -133,13 +133,16 @@ def main() -> None:
         write_walk(long_c3d, trial.labels, walk, trial.rate)
         del walk
         results, report = folder / "long.h5", folder / "time.txt"
+        # run in the folder with its files' own names, so that what it prints is the same
+        # from run to run (docs/generate.py compares it)
         command = ["/usr/bin/time", "-v", "-o", str(report), str(FCCGRB), "solve",
-                   str(personal), str(long_c3d), "--method", args.method, "-o", str(results),
+                   personal.name, long_c3d.name, "--method", args.method, "-o", results.name,
                    *args.extra]
         print(f"{args.frames} frames ({args.frames / trial.rate / 60:.1f} min at "
               f"{trial.rate:g} Hz), C3D {long_c3d.stat().st_size / 2**20:.0f} MiB; "
               f"running: fccgrb solve {' '.join(command[6:])}", flush=True)
-        done = subprocess.run(command, stdout=subprocess.PIPE, text=True, check=False)
+        done = subprocess.run(command, stdout=subprocess.PIPE, text=True, check=False,
+                              cwd=folder)
         lines = done.stdout.rstrip().splitlines()
         print("\n".join([*lines[:2], "…", lines[-1]] if len(lines) > 3 else lines))
         measured = time_report(report.read_text(encoding="utf-8"))

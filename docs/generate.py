@@ -45,7 +45,9 @@ Parts and their blocks:
 ``--check`` writes nothing: it compares and exits with status 1 naming the blocks that differ.
 Timing figures change from run to run, so the comparison replaces them by a placeholder first:
 a number followed by ``ms/frame``, ``ms``, ``s``, ``min`` or ``frames/s`` in running text; in a
-console table, the values under a ``ms/frame``, ``frames/s`` or ``x real time`` header; in a
+console table, the values under a ``ms/frame``, ``frames/s``, ``x real time``, seconds
+(``wall s``, ``CPU s``, ``per trial s``, ``solve s``, ``kernels s``, a trial's ``.c3d s``),
+``trials/min`` or ``peak RSS MiB`` header; in a
 markdown table, the cells of a column whose header names ``ms/frame``, ``frames/s``, ``real
 time`` or ``total ms`` (not the paper's column), and the level columns of a table whose caption
 names ``ms/frame`` (there only our figure; the paper's, in brackets, is kept). Spacing is
@@ -731,7 +733,8 @@ PARTS = ("cheap", "tables", "benchmarks", "figures", "study")
 T = "‹t›"
 NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 FREE_TIMING = re.compile(rf"(?<![\w.]){NUMBER}(?=\s*(?:ms/frame|ms|s|min|frames/s)\b)")
-CONSOLE_TIMING = ("ms/frame", "frames/s", "x real time")
+CONSOLE_TIMING = ("ms/frame", "frames/s", "x real time", "wall s", "CPU s", "per trial s",
+                  "solve s", "kernels s", "trials/min", ".c3d s", "peak RSS MiB")
 MARKDOWN_TIMING = ("ms/frame", "frames/s", "real time", "total ms", "wall (s)", "timing ratio")
 EPS = "‹ε›"
 ROUNDING = re.compile(r"(?<![\w.])[-+]?(?:\d+\.?\d*|\.\d+)[eE]-(?:1[3-9]|[2-9]\d|\d{3})\b")
