@@ -151,6 +151,7 @@ STAGES = (
     ("lab axes", ("lab_axes",)),
     ("kinematics (solve, rates)", ("_kinematics",)),
     ("fit checks", ("points_along", "distances", "kinematic_findings", "assessed")),
+    ("conditioning check (σ_min/σ_max, every frame)", ("dynamic_findings",)),
     ("inverse dynamics", ("dynamics_stage",)),
     ("Plug-in Gait outputs", ("plugin_gait_results",)),
     ("gait cycles", ("analyse_gait",)),
