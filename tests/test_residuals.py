@@ -305,3 +305,32 @@ def test_residual_options_refuse_what_they_cannot_do(args, message, tmp_path: Pa
     assert result.exit_code == 2
     one_error_line(result, message)
     assert not (tmp_path / "r.h5").exists() and not (tmp_path / "m.yaml").exists()
+
+
+def _weighed(model_mass: float, plates_kg: float) -> R.ResidualReport:
+    """A residual report whose plates weighed ``plates_kg`` and whose model's segments hold
+    ``model_mass`` (nothing else of it is read by the weight check)."""
+    summary = R.ResidualSummary(frames=100, single=40, force_peak=0.0, force_rms=0.0,
+                                moment_peak=0.0, moment_rms=0.0,
+                                weight=plates_kg * R.STANDARD_GRAVITY, model_mass=model_mass)
+    empty = np.zeros(0)
+    return R.ResidualReport("pelvis", {}, empty, empty, empty, empty, summary, summary,
+                            weighed=True)
+
+
+@pytest.mark.parametrize("plates", [50.0, 64.0, 67.0, 70.0, 90.0])
+def test_the_weight_check_weighs_the_subject_not_a_partial_models_segments(plates) -> None:
+    """A calibrated lower-limb model's segments hold half the subject (34 of 67 kg): the plates
+    are compared with the subject's mass it records, within 5 %; without one, with the
+    segments' sum, which then names what the model leaves out."""
+    report = _weighed(34.1, plates)
+    with_subject = report.weight_mismatch(subject_mass=67.0)
+    assert (with_subject is None) == (abs(67.0 / plates - 1.0) <= R.WEIGHT_TOLERANCE)
+    if with_subject is not None:
+        assert "subject's mass (67.0 kg)" in with_subject
+        assert f"{plates:.1f} kg" in with_subject
+        assert "leaves out" not in with_subject
+    alone = report.weight_mismatch()
+    assert alone is not None and "model's mass (34.1 kg)" in alone and "leaves out" in alone
+    whole = _weighed(67.0, plates).weight_mismatch()  # a whole body's segments: the subject
+    assert (whole is None) == (abs(67.0 / plates - 1.0) <= R.WEIGHT_TOLERANCE)

@@ -271,21 +271,27 @@ class ResidualReport:
     over_single: ResidualSummary
     weighed: bool = False
 
-    def weight_mismatch(self, tolerance: float = WEIGHT_TOLERANCE) -> str | None:
-        """A warning when the plates' body weight and the model's mass disagree by more than
-        ``tolerance`` (a wrong --mass, a plate's calibration, or a model that leaves out part
-        of the body), else None."""
+    def weight_mismatch(self, tolerance: float = WEIGHT_TOLERANCE,
+                        subject_mass: float | None = None) -> str | None:
+        """A warning when the plates' body weight and the subject's mass disagree by more than
+        ``tolerance`` (a wrong --mass, a plate's calibration), else None. The subject's mass is
+        ``subject_mass`` where the model records it (a calibrated model: a lower-limb model's
+        segments hold about half of it, which is no fault), else the model's segments' sum (a
+        model that leaves out part of the body then shows here)."""
         s = self.over_measured
         if not self.weighed:
             return None
         plates = s.weight / STANDARD_GRAVITY
-        off = s.model_mass / plates - 1.0
+        mass, whose = ((subject_mass, "subject's") if subject_mass is not None
+                       else (s.model_mass, "model's"))
+        off = mass / plates - 1.0
         if abs(off) <= tolerance:
             return None
-        return (f"the model's mass ({s.model_mass:.1f} kg) is {100 * off:+.0f} % off the body "
+        return (f"the {whose} mass ({mass:.1f} kg) is {100 * off:+.0f} % off the body "
                 f"weight the force plates measure over the {s.frames} frames where every "
                 f"contact is measured ({s.weight:.0f} N, {plates:.1f} kg): check --mass, the "
-                "plates' calibration, or what of the body the model leaves out")
+                "plates' calibration" + ("" if subject_mass is not None else
+                                         ", or what of the body the model leaves out"))
 
 
 def residual_report(model: Model, motion: BodyMotion, K: np.ndarray,

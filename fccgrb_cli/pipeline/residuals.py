@@ -55,19 +55,21 @@ def residual_stage(model: Model, trial: Trial, result: KinematicResult,
                   options.engine)
     if not options.reduce_residuals:
         report = report_of(model, dynamics, stance, stage, result.trusted)
-        _check_weight(report, warnings)
+        _check_weight(report, warnings, model.subject_mass)
         return ResidualStage(report, None, dynamics)
     reduced = reduce_residuals(RunData(model, result, dynamics, stance, np.asarray(markers),
                                        trial.path), stage)
-    _check_weight(reduced.reduction.before, warnings)
+    _check_weight(reduced.reduction.before, warnings, model.subject_mass)
     if not reduced.reduction.fit.success:
         warnings.append(f"--reduce-residuals: the inertia fit stopped without converging "
                         f"({reduced.reduction.fit.message})")
     return ResidualStage(reduced.after, reduced.reduction, reduced.dynamics)
 
 
-def _check_weight(report: ResidualReport | None, warnings: list[str]) -> None:
-    """The plates' body weight against the model's mass, a warning where they disagree."""
-    message = None if report is None else report.weight_mismatch()
+def _check_weight(report: ResidualReport | None, warnings: list[str],
+                  subject_mass: float | None) -> None:
+    """The plates' body weight against the subject's mass (the model's where it records none),
+    a warning where they disagree."""
+    message = None if report is None else report.weight_mismatch(subject_mass=subject_mass)
     if message is not None:
         warnings.append(message)
