@@ -334,3 +334,25 @@ def test_the_weight_check_weighs_the_subject_not_a_partial_models_segments(plate
     assert alone is not None and "model's mass (34.1 kg)" in alone and "leaves out" in alone
     whole = _weighed(67.0, plates).weight_mismatch()  # a whole body's segments: the subject
     assert (whole is None) == (abs(67.0 / plates - 1.0) <= R.WEIGHT_TOLERANCE)
+
+
+def test_an_implausible_plate_weight_is_not_used_and_the_table_says_why(body: Case) -> None:
+    """The synthesized motion's own ground reaction weighs the model (its plates' estimate is
+    the model's weight); the same reaction turned upside down gives a negative 'weight', which
+    is refused: the model's weight is used, unweighed, and the residual table says so."""
+    from fccgrb_cli.dynamics.loads import ExternalLoad
+    from fccgrb_cli.presentation.residual_table import residual_table
+
+    K = mass_blocks(body.model)
+    states = {"foot_r": np.full(len(body.motion.X), R.PLATE)}
+    g = float(np.linalg.norm(body.model.gravity))
+    mass = float(K[:, 0, 0].sum())
+    right = R.residual_report(body.model, body.motion, K, [body.load], states)
+    assert right.weighed and right.over_measured.weight == pytest.approx(mass * g, rel=1e-6)
+    flipped = ExternalLoad(body.load.name, body.load.body, -body.load.force, body.load.point,
+                           -body.load.moment)
+    wrong = R.residual_report(body.model, body.motion, K, [flipped], states)
+    assert not wrong.weighed and wrong.plates_estimate < 0
+    assert wrong.over_measured.weight == pytest.approx(mass * g)
+    assert "is not a body weight" in residual_table(wrong)
+    assert "is not a body weight" not in residual_table(right)

@@ -41,6 +41,9 @@ CONTACT_HEIGHT = 0.03  # m above the lowest height a contact body's point reache
 CONTACT_SPEED = 1.0  # m/s: a point moving faster is not resting on the ground
 CONTACT_MARGIN = 0.01  # s either side of a frame on the ground counted as on the ground
 WEIGHT_TOLERANCE = 0.05  # the plates' body weight and the model's mass agree within 5 %
+# The plates' weight estimate is taken between these multiples of the model's own weight (a
+# lower-limb model holds half the body; a whole body, all of it): outside, it is not a weight.
+PLAUSIBLE_WEIGHT = (0.5, 4.0)
 STANDARD_GRAVITY = 9.81  # m/s²: a weight shown as a mass
 
 AIR, PLATE, UNMEASURED = 0, 1, 2
@@ -270,6 +273,7 @@ class ResidualReport:
     over_measured: ResidualSummary
     over_single: ResidualSummary
     weighed: bool = False
+    plates_estimate: float = float("nan")
 
     def weight_mismatch(self, tolerance: float = WEIGHT_TOLERANCE,
                         subject_mass: float | None = None) -> str | None:
@@ -316,11 +320,20 @@ def residual_report(model: Model, motion: BodyMotion, K: np.ndarray,
     single = single_support(states, n) & ran
     mass = float(K[:, 0, 0].sum())
     loaded = any(np.abs(load.force[measured]).any() for load in loads)
+    estimate = float("nan")
     if weight is None:
-        weight = plate_weight(model, motion, K, loads, measured) if loaded else \
-            mass * float(np.linalg.norm(model.gravity))
+        model_weight = mass * float(np.linalg.norm(model.gravity))
+        weight = model_weight
+        if loaded:
+            estimate = plate_weight(model, motion, K, loads, measured)
+            # a negative or absurd estimate (the measured frames' vertical accelerations as
+            # large as gravity: differentiated noise, or a model far from the body) is not a
+            # weight: the model's is used, and the report says why
+            loaded = bool(np.isfinite(estimate)) and PLAUSIBLE_WEIGHT[0] * model_weight \
+                <= estimate <= PLAUSIBLE_WEIGHT[1] * model_weight
+            weight = estimate if loaded else model_weight
     over_measured, over_single = (
         summarize(force[:, 0], moment[:, 0], frames, single & frames, weight, mass)
         for frames in (measured, single))
     return ResidualReport(bases[0], states, measured, single, force[:, 0], moment[:, 0],
-                          over_measured, over_single, weighed=loaded)
+                          over_measured, over_single, weighed=loaded, plates_estimate=estimate)

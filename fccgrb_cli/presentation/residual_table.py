@@ -34,7 +34,10 @@ def residual_table(report: ResidualReport, reduction: Reduction | None = None) -
     s = report.over_measured
     weight = (f"body weight from the plates {s.weight:.0f} N "
               f"({s.weight / STANDARD_GRAVITY:.1f} kg)" if report.weighed
-              else f"body weight (the model's) {s.weight:.0f} N")
+              else f"body weight (the model's) {s.weight:.0f} N"
+              + ("" if not np.isfinite(report.plates_estimate) else
+                 f": the plates' estimate, {report.plates_estimate:.0f} N, is not a body weight"
+                 " (the measured frames' vertical accelerations: noise without a low-pass?)"))
     lines = [f"residual of {report.base} over the {s.frames} frames where every ground contact "
              f"is measured ({s.single} in single support on a plate; not reported elsewhere); "
              f"{weight}, model {s.model_mass:.2f} kg"]
