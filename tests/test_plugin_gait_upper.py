@@ -3,16 +3,24 @@
 Independent references: rotations built here from elementary ones with known angles, the
 expected outputs derived by hand from Vicon's definitions (each output's Cardan sequence, the
 segments it relates and its per-side signs), scipy's Euler angles for the Cardan
-decomposition, and mirror symmetry (Vicon's per-side signs read a mirrored motion alike).
+decomposition, mirror symmetry (Vicon's per-side signs read a mirrored motion alike), and
+Vicon's own upper-body outputs in the shared Nexus trial HC030A05 (skipped without
+../shared/data).
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+
+import ezc3d
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from fccgrb_cli.anatomy.frames import pelvis_frames
+from fccgrb_cli.plugin_gait.angles import pig_axes, progression_frame
 from fccgrb_cli.plugin_gait.upper import (
+    MARKERS,
     UpperGeometry,
     cardan,
     output_names,
@@ -128,7 +136,7 @@ def test_shoulder_continuity_turns_about_its_middle_angle() -> None:
     np.testing.assert_allclose(out[:, 0], -lift, atol=1e-9)
 
 
-MARKERS = {  # one side's arm (the left) and a thorax and head in the sagittal plane, metres
+GENERATED = {  # one side's arm (the left) and a thorax and head in the sagittal plane, metres
     "CLAV": [0.06, 0.0, 1.42], "C7": [-0.08, 0.0, 1.47], "STRN": [0.09, 0.0, 1.25],
     "T10": [-0.1, 0.0, 1.22], "LFHD": [0.08, 0.07, 1.66], "RFHD": [0.08, -0.07, 1.66],
     "LBHD": [-0.1, 0.07, 1.68], "RBHD": [-0.1, -0.07, 1.68],
@@ -140,8 +148,8 @@ GEOMETRY = UpperGeometry(0.007, 0.0, {"l": 0.05, "r": 0.05}, {"l": 0.08, "r": 0.
 
 
 def mirrored_markers() -> dict[str, np.ndarray]:
-    out = {k: np.array(v)[None] for k, v in MARKERS.items()}
-    for k in [k for k in MARKERS if k.startswith("L") and k[1:] in
+    out = {k: np.array(v)[None] for k, v in GENERATED.items()}
+    for k in [k for k in GENERATED if k.startswith("L") and k[1:] in
               ("SHO", "ELB", "WRA", "WRB", "FIN")]:
         out["R" + k[1:]] = out[k] * [1.0, -1.0, 1.0]
     return out
@@ -179,3 +187,31 @@ def test_segment_axes_follow_the_markers() -> None:
     np.testing.assert_allclose(humerus[:, 2], (shoulder - elbow) / np.linalg.norm(
         shoulder - elbow), atol=1e-12)
     np.testing.assert_allclose(axes["radius_l"][0][:, 1], humerus[:, 1], atol=1e-12)
+
+
+WALK = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d" / "plugin_gait" / \
+    "HC030A05.c3d"
+
+
+@pytest.mark.skipif(not WALK.exists(), reason="shared Plug-in Gait data absent")
+def test_construction_equals_vicons_upper_body_outputs_on_the_shared_trial() -> None:
+    """HC030A05 holds Vicon's upper-body angles: built here from its markers with its
+    PROCESSING measurements and the 14 mm marker diameter Vicon used (its PROCESSING says 10;
+    its lower-body outputs need 14 too, test_plugin_gait.py), every one equals Vicon's."""
+    c3d = ezc3d.c3d(str(WALK))
+    point = c3d["parameters"]["POINT"]
+    labels = [s.strip() for key in ("LABELS", "LABELS2") if key in point
+              for s in point[key]["value"]]
+    xyz = c3d["data"]["points"][:3]
+    points = {label: xyz[:, k, :].T for k, label in enumerate(labels)}
+    proc = {k: float(v["value"][0]) for k, v in c3d["parameters"]["PROCESSING"].items()
+            if isinstance(v, dict) and "value" in v}
+    geometry = UpperGeometry(0.007, proc["HeadOffset"], *(
+        {s: proc[f"{s.upper()}{key}"] / 1e3 for s in "lr"}
+        for key in ("ShoulderOffset", "ElbowWidth", "WristWidth", "HandThickness")))
+    axes, _ = segments({k: points[k] / 1e3 for k in MARKERS}, geometry)
+    pelvis = pelvis_frames(*(points[k] / 1e3 for k in ("RASI", "LASI", "SACR", "SACR")))
+    lab = progression_frame(pelvis.origin, pelvis.axes[:, :, 0], np.array([0.0, 0.0, 1.0]))
+    out = upper_angles({**axes, "pelvis": pig_axes(pelvis.axes)}, lab)
+    for name in output_names():
+        np.testing.assert_allclose(out[name], points[name], atol=2e-3, err_msg=name)

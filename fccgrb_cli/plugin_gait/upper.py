@@ -60,6 +60,8 @@ SIDES = {"l": "L", "r": "R"}
 SIDE_SIGN = {"r": 1.0, "l": -1.0}
 UPPER_JOINTS = ("Thorax", "Spine", "Neck", "Head", "Shoulder", "Elbow", "Wrist")
 AXES = {"x": 0, "y": 1, "z": 2}
+MARKERS = ("CLAV", "STRN", "C7", "T10", "LFHD", "RFHD", "LBHD", "RBHD",
+           *(p + k for p in "LR" for k in ("SHO", "ELB", "WRA", "WRB", "FIN")))
 
 
 @dataclass(frozen=True)
