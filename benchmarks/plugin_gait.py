@@ -11,10 +11,10 @@ the run computes with the one Vicon's Plug-in Gait stored in the same C3D file.
 static), the walking trial the ``--reference`` CSV was exported from (the CSV's name with
 ``.c3d``), and the subject's ``.vsk``; the CSV is Nexus's export of its model outputs (``Model
 Outputs``, the rate, the ``Subject:Output`` names, components, units, then one row per frame
-numbered as the C3D's frames). Printed: the lower-body angles, moments and powers of the run
-(calibrated with nothing typed but the ``.vsk``) and of the direct construction, and the
-upper-body angles built frame by frame from the markers (plugin_gait/upper.py) with the
-``.vsk``'s arm and head measurements, each as RMS per joint and component against the CSV.
+numbered as the C3D's frames). Printed: the angles (lower and upper body), moments and powers
+of the run (calibrated with nothing typed but the ``.vsk``), and the angles of the direct
+construction (the upper body's from the ``.vsk``'s arm and head measurements read here), each
+as RMS per joint and component against the CSV.
 
 A folder's trials are grouped by subject (the file name without its last two digits); a
 subject's static trial is the one whose PROCESSING group says ``Static``, else its first.
@@ -328,15 +328,13 @@ def session(folder: Path, reference: Path) -> list[str]:
     values = vsk_values(vsks[0]) if vsks else {}
     axes, _ = upper.segments(mark, upper_geometry(values, diameter))
     lab = progression_frame(seg["pelvis"].origin, seg["pelvis"].axes[:, :, 0], up)
-    for kind, pelvis in (("direct", seg["pelvis"].axes), ("solve pelvis", np.stack(
-            [np.column_stack([run.q[f"pelvis.{e}.{c}"] for c in "xyz"]) for e in "uvw"],
-            axis=2))):
-        out = upper.upper_angles({**axes, "pelvis": pig_axes(pelvis)}, lab)
-        for joint in upper.UPPER_JOINTS:
-            if kind == "direct" or joint == "Spine":
-                for side in "LR":
-                    name = f"{side}{joint}Angles"
-                    row(name, kind, out[name], np.ones(len(index), dtype=bool))
+    direct_upper = upper.upper_angles({**axes, "pelvis": pig_axes(seg["pelvis"].axes)}, lab)
+    for joint in upper.UPPER_JOINTS:
+        for side in "LR":
+            name = f"{side}{joint}Angles"
+            if name in pig.angles:
+                row(name, "solve", pig.angles[name], trusted)
+            row(name, "direct", direct_upper[name], np.ones(len(index), dtype=bool))
     return lines
 
 
