@@ -53,6 +53,7 @@ from fccgrb_cli.plugin_gait import upper
 from fccgrb_cli.plugin_gait.calibration import side_geometry
 from fccgrb_cli.api import calibrate
 from fccgrb_cli.plugin_gait.angles import JOINTS, pig_angles, pig_axes, progression_frame
+from fccgrb_cli.trial.forceplates import read_force_plates
 from fccgrb_cli.trial.record import read_trial
 from fccgrb_cli.model import load_model, parse_model
 from fccgrb_cli.pipeline.options import SolveOptions
@@ -304,11 +305,13 @@ def session(folder: Path, reference: Path) -> list[str]:
              f"run; static {statics[0].name}, subject {files[0] if files else 'none'}", "",
              "| output | side | kind | X | Y | Z |", "|---|---|---|---|---|---|"]
 
-    def row(name: str, kind: str, ours: np.ndarray, frames_ok: np.ndarray) -> None:
+    def row(name: str, kind: str, ours: np.ndarray, frames_ok: np.ndarray,
+            angle: bool = True) -> None:
         mine, ref = compared(ours, name)
         written = np.isfinite(ref).all(axis=1) & frames_ok
         if written.any():
-            value = rms(mine, ref, written)
+            value = rms(mine, ref, written) if angle else np.sqrt(np.nanmean(
+                (mine - ref)[written] ** 2, axis=0))
             lines.append(f"| {name[1:]} | {name[0]} | {kind} | "
                          + " | ".join(f"{v:.2f}" for v in value) + " |")
 
@@ -319,10 +322,21 @@ def session(folder: Path, reference: Path) -> list[str]:
             name = f"{side}{joint}Angles"
             row(name, "solve", pig.angles[name], trusted)
             row(name, "direct", direct[name], np.ones(len(index), dtype=bool))
+    # Where the plates' vertical loads (N) equal the ground reactions Nexus applied (its
+    # L/RGroundReactionForce, N/kg): Nexus leaves a plate out where it judges a foot not wholly
+    # on it, and its files do not record that choice.
+    plates = read_force_plates(walk, trial.n_frames)
+    loaded = np.nansum([np.abs(p.force[:, 2]) for p in plates], axis=0)
+    applied = sum(np.nan_to_num(np.abs(theirs.get(f"{side}GroundReactionForce", np.zeros(
+        (len(index), 3)))[:, 2])) for side in "LR") * (model.subject_mass or np.nan)
+    same, _ = compared(np.column_stack([loaded] * 3), "")
+    same_load = np.abs(same[:, 2] - applied) < 20.0
+    lines.insert(1, f"plates' vertical load equal to Nexus's applied ground reactions (20 N) "
+                    f"on {int((same_load & trusted).sum())} of the trusted frames")
     for kind, curves in (("moments", pig.moments), ("powers", pig.powers)):
         for name, curve in curves.items():
-            ours = curve if curve.ndim == 2 else np.column_stack([curve] * 3)
-            row(name, kind, ours, trusted)
+            row(name, kind, curve, trusted, angle=False)
+            row(name, f"{kind}, same plate loads", curve, trusted & same_load, angle=False)
     mark = {label: trial.markers[:, trial.labels.index(label)] for label in trial.labels}
     diameter = model.measurements.marker_diameter or 0.014
     values = vsk_values(vsks[0]) if vsks else {}
