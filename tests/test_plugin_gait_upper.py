@@ -10,6 +10,7 @@ Vicon's own upper-body outputs in the shared Nexus trial HC030A05 (skipped witho
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import ezc3d
@@ -18,7 +19,10 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from fccgrb_cli.anatomy.frames import pelvis_frames
+from fccgrb_cli.model import load_model
+from fccgrb_cli.model.subject import Sided
 from fccgrb_cli.plugin_gait.angles import pig_axes, progression_frame
+from fccgrb_cli.plugin_gait.outputs import upper_body_missing
 from fccgrb_cli.plugin_gait.upper import (
     MARKERS,
     UpperGeometry,
@@ -215,3 +219,22 @@ def test_construction_equals_vicons_upper_body_outputs_on_the_shared_trial() -> 
     out = upper_angles({**axes, "pelvis": pig_axes(pelvis.axes)}, lab)
     for name in output_names():
         np.testing.assert_allclose(out[name], points[name], atol=2e-3, err_msg=name)
+
+
+def test_a_full_body_trial_without_the_arms_measurements_is_told_why() -> None:
+    """The template gives no arm measurements: a trial with every upper-body marker is told
+    which ones the subject's files lack; one without them (a lower-body trial) is told
+    nothing, and neither is one whose subject gives them."""
+    template = load_model(Path(__file__).resolve().parents[1] / "configs" / "models" /
+                          "plugin_gait.yaml")
+    said = upper_body_missing(template, MARKERS)
+    assert said is not None and "no upper-body angles" in said
+    for key in ("LeftShoulderOffset", "RightElbowWidth", "LeftWristWidth",
+                "RightHandThickness"):
+        assert key in said
+    assert upper_body_missing(template, MARKERS[:-1]) is None
+    arms = {name: Sided(value, value) for name, value in (
+        ("shoulder_offset", 0.05), ("elbow_width", 0.08), ("wrist_width", 0.06),
+        ("hand_thickness", 0.03))}
+    measured = replace(template, measurements=replace(template.measurements, **arms))
+    assert upper_body_missing(measured, MARKERS) is None

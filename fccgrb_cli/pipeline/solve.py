@@ -161,10 +161,12 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
             result = with_findings(result, dynamic_findings(model, solved_dynamics))
         pig = None
         if model.calibration_method == "plugin-gait":
-            from fccgrb_cli.plugin_gait.outputs import plugin_gait_results
+            from fccgrb_cli.plugin_gait.outputs import plugin_gait_results, upper_body_missing
 
             pig = plugin_gait_results(model, result.q, result.trusted, solved_dynamics, {
                 label: trial.markers[:, k] for k, label in enumerate(trial.labels)})
+            missing = upper_body_missing(model, trial.labels)
+            warnings += [missing] if missing else []
         result = store.coordinates(result)
         solved_dynamics = store.dynamics(solved_dynamics)
         clinical = clinical_results(

@@ -18,6 +18,7 @@ import numpy as np
 
 from fccgrb_cli.dynamics.convert import Dynamics
 from fccgrb_cli.model import Model
+from fccgrb_cli.model.subject import PIG_KEYS
 from fccgrb_cli.plugin_gait.angles import pig_angles, pig_axes, progression_frame
 from fccgrb_cli.plugin_gait.kinetics import leg_kinetics, segment_motion
 from fccgrb_cli.plugin_gait.upper import MARKERS as UPPER_MARKERS
@@ -81,6 +82,21 @@ def upper_geometry(model: Model) -> UpperGeometry | None:
     shoulder, elbow, wrist, hand = ({s: float(v[s]) for s in "lr"} for v in values)
     diameter = m.marker_diameter if m.marker_diameter is not None else 0.014
     return UpperGeometry(diameter / 2.0, m.head_offset or 0.0, shoulder, elbow, wrist, hand)
+
+
+def upper_body_missing(model: Model, labels: tuple[str, ...]) -> str | None:
+    """Why a trial with Plug-in Gait's upper-body markers (all of ``UPPER_MARKERS`` among
+    ``labels``) gets no upper-body angles — the subject's measurements lacking an arm's — or
+    None (they are computed, or the trial is not a full-body one)."""
+    if any(label not in labels for label in UPPER_MARKERS) or upper_geometry(model):
+        return None
+    m = model.measurements
+    absent = [f"{side}{q.vicon}" for name, q in PIG_KEYS.items()
+              if name in ("shoulder_offset", "elbow_width", "wrist_width", "hand_thickness")
+              for s, side in (("l", "Left"), ("r", "Right")) if getattr(m, name).side(s) is None]
+    return (f"{model.source}: the trial has Plug-in Gait's upper-body markers but the subject's "
+            f"measurements lack {', '.join(absent)} (calibrate with --subject a .vsk or .mp that "
+            "gives them): no upper-body angles")
 
 
 def upper_angles(model: Model, markers: dict[str, np.ndarray], pelvis: np.ndarray,
