@@ -276,15 +276,16 @@ def _foot_flat(chosen: bool | None, measured: SubjectMeasurements,
     first; else foot flat, saying how far the recorded ones lie from either."""
     if chosen is not None:
         return chosen, []
-    recorded = (measured.static_plantar_flexion.left, measured.static_plantar_flexion.right,
-                measured.static_rotation_offset.left, measured.static_rotation_offset.right)
-    if any(v is None for v in recorded):
+    given = (measured.static_plantar_flexion.left, measured.static_plantar_flexion.right,
+             measured.static_rotation_offset.left, measured.static_rotation_offset.right)
+    recorded = [v for v in given if v is not None]
+    if len(recorded) < len(given):
         return True, []
 
     def gap(flat: bool) -> float:
         o = computed(flat)
         ours = (o["l"][0], o["r"][0], o["l"][1], -o["r"][1])  # Vicon's signs
-        return max(abs(a - float(b)) for a, b in zip(ours, recorded, strict=True))
+        return max(abs(a - b) for a, b in zip(ours, recorded, strict=True))
 
     gaps = {flat: gap(flat) for flat in (True, False)}
     source = measured.source or "the subject's files"

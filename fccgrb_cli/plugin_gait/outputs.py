@@ -76,10 +76,10 @@ def upper_geometry(model: Model) -> UpperGeometry | None:
     shoulder offset, elbow or wrist width or hand thickness is not given."""
     m = model.measurements
     sided = (m.shoulder_offset, m.elbow_width, m.wrist_width, m.hand_thickness)
-    values = [{s: q.side(s) for s in "lr"} for q in sided]
-    if any(v is None for side in values for v in side.values()):
+    values = [{s: v for s in "lr" if (v := q.side(s)) is not None} for q in sided]
+    if any(len(side) < 2 for side in values):
         return None
-    shoulder, elbow, wrist, hand = ({s: float(v[s]) for s in "lr"} for v in values)
+    shoulder, elbow, wrist, hand = values
     diameter = m.marker_diameter if m.marker_diameter is not None else 0.014
     return UpperGeometry(diameter / 2.0, m.head_offset or 0.0, shoulder, elbow, wrist, hand)
 
