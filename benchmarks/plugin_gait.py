@@ -5,6 +5,16 @@ the run computes with the one Vicon's Plug-in Gait stored in the same C3D file.
 
     python benchmarks/plugin_gait.py [--rigid-knees]        # the shared pair HC030A01/HC030A05
     python benchmarks/plugin_gait.py --trials DIR           # every subject of a folder
+    python benchmarks/plugin_gait.py --session DIR --reference CSV   # a full-body session
+
+``--session``: a folder with a static C3D (its PROCESSING says ``Static``, or its name says
+static), the walking trial the ``--reference`` CSV was exported from (the CSV's name with
+``.c3d``), and the subject's ``.vsk``; the CSV is Nexus's export of its model outputs (``Model
+Outputs``, the rate, the ``Subject:Output`` names, components, units, then one row per frame
+numbered as the C3D's frames). Printed: the angles (lower and upper body), moments and powers
+of the run (calibrated with nothing typed but the ``.vsk``), and the angles of the direct
+construction (the upper body's from the ``.vsk``'s arm and head measurements read here), each
+as RMS per joint and component against the CSV.
 
 A folder's trials are grouped by subject (the file name without its last two digits); a
 subject's static trial is the one whose PROCESSING group says ``Static``, else its first.
@@ -37,10 +47,13 @@ import ezc3d
 import numpy as np
 import yaml
 
+from fccgrb_cli.pipeline.calibration import Subject, calibrate_subject
 from fccgrb_cli.plugin_gait import segments as pg
+from fccgrb_cli.plugin_gait import upper
 from fccgrb_cli.plugin_gait.calibration import side_geometry
 from fccgrb_cli.api import calibrate
-from fccgrb_cli.plugin_gait.angles import JOINTS, pig_angles, progression_frame
+from fccgrb_cli.plugin_gait.angles import JOINTS, pig_angles, pig_axes, progression_frame
+from fccgrb_cli.trial.forceplates import read_force_plates
 from fccgrb_cli.trial.record import read_trial
 from fccgrb_cli.model import load_model, parse_model
 from fccgrb_cli.pipeline.options import SolveOptions
@@ -115,7 +128,8 @@ def direct_angles(model, trial, up: np.ndarray) -> tuple[dict, dict]:
     offsets = {"l": (m.static_plantar_flexion.left, m.static_rotation_offset.left),
                "r": (m.static_plantar_flexion.right, -m.static_rotation_offset.right)}
     mark = {label: trial.markers[:, trial.labels.index(label)] for label in trial.labels}
-    lm = {"pelvis": (mark["RASI"], mark["LASI"], mark["SACR"])}
+    sacrum = mark["SACR"] if "SACR" in mark else 0.5 * (mark["LPSI"] + mark["RPSI"])
+    lm = {"pelvis": (mark["RASI"], mark["LASI"], sacrum)}
     for s, p in (("l", "L"), ("r", "R")):
         lm[f"thigh_{s}"] = (mark[p + "THI"], mark[p + "KNE"])
         lm[f"shank_{s}"] = (mark[p + "TIB"], mark[p + "ANK"])
@@ -226,13 +240,138 @@ def summary(results: list[dict]) -> list[str]:
     return lines
 
 
+def reference_csv(path: Path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """A Nexus model-outputs CSV: its frame numbers and each output (name without the subject
+    prefix → frames × components, NaN where empty)."""
+    lines = path.read_text().splitlines()
+    names, rows = lines[2].split(","), [line.split(",") for line in lines[5:] if line.strip()]
+    values = np.array([[float(v) if v.strip() else np.nan for v in row[:len(names)]]
+                       + [np.nan] * (len(names) - len(row)) for row in rows])
+    starts = [k for k, name in enumerate(names) if name.strip()]
+    out = {}
+    for k, start in enumerate(starts):
+        stop = starts[k + 1] if k + 1 < len(starts) else len(names)
+        out[names[start].split(":")[-1].strip()] = values[:, start:stop]
+    return values[:, 0].astype(int), out
+
+
+def vsk_values(path: Path) -> dict[str, float]:
+    """A Vicon .vsk's static parameters (name → value as written) that have a value."""
+    import xml.etree.ElementTree as ET
+
+    return {e.get("NAME", ""): float(e.get("VALUE", "nan")) for e in
+            ET.parse(path).iter("StaticParameter") if e.get("VALUE") is not None}
+
+
+def upper_geometry(values: dict[str, float], marker_diameter: float) -> upper.UpperGeometry:
+    """Plug-in Gait's upper-body measurements (mm, the head offset in rad) from a .vsk."""
+    def sided(key: str) -> dict[str, float]:
+        return {s: 1e-3 * values[f"{side}{key}"] for s, side in (("l", "Left"), ("r", "Right"))}
+
+    return upper.UpperGeometry(marker_diameter / 2.0, values.get("HeadOffset", 0.0),
+                               sided("ShoulderOffset"), sided("ElbowWidth"),
+                               sided("WristWidth"), sided("HandThickness"))
+
+
+def session(folder: Path, reference: Path) -> list[str]:
+    """The held-out comparison of a full-body session (``--session``, ``--reference``)."""
+    walk = folder / f"{reference.stem}.c3d"
+    vsks = sorted(folder.glob("*.vsk"))
+    statics = [p for p in sorted(folder.glob("*.c3d")) if p != walk and (
+        vicon(p)[1].get("Static", 0) == 1 or "static" in p.stem.lower())]
+    if not walk.exists() or not statics:
+        raise SystemExit(f"{folder}: expected {walk.name} and a static trial beside it")
+    files = (str(vsks[0]),) if vsks else ()
+    model = calibrate_subject(load_model(TEMPLATE), read_trial(statics[0]),
+                              Subject(files=files)).model
+    trial = read_trial(walk)
+    run = solve_trial(model, trial, SolveOptions(events="none", skip_unsolvable=True))
+    frames, theirs = reference_csv(reference)
+    first = round(trial.start * trial.rate) + 1
+    index = frames - first
+    up = -np.asarray(model.gravity) / np.linalg.norm(model.gravity)
+    direct, seg = direct_angles(model, trial, up)
+
+    def compared(ours: np.ndarray, name: str) -> np.ndarray:
+        mine = np.full((len(index), 3), np.nan)
+        ok = (index >= 0) & (index < len(ours))
+        mine[ok] = ours[index[ok]]
+        return mine, theirs.get(name, np.full((len(index), 3), np.nan))[:, :3]
+
+    trusted = np.zeros(len(index), dtype=bool)
+    trusted[(index >= 0) & (index < len(run.trusted))] = run.trusted[index[
+        (index >= 0) & (index < len(run.trusted))]]
+    lines = [f"{walk.name}: {len(index)} frames in the CSV, {int(trusted.sum())} trusted by the "
+             f"run; static {statics[0].name}, subject {files[0] if files else 'none'}", "",
+             "| output | side | kind | X | Y | Z |", "|---|---|---|---|---|---|"]
+
+    def row(name: str, kind: str, ours: np.ndarray, frames_ok: np.ndarray,
+            angle: bool = True) -> None:
+        mine, ref = compared(ours, name)
+        written = np.isfinite(ref).all(axis=1) & frames_ok
+        if written.any():
+            value = rms(mine, ref, written) if angle else np.sqrt(np.nanmean(
+                (mine - ref)[written] ** 2, axis=0))
+            lines.append(f"| {name[1:]} | {name[0]} | {kind} | "
+                         + " | ".join(f"{v:.2f}" for v in value) + " |")
+
+    pig = run.plugin_gait
+    assert pig is not None  # a Plug-in Gait template's run
+    for joint in JOINTS:
+        for side in "LR":
+            name = f"{side}{joint}Angles"
+            row(name, "solve", pig.angles[name], trusted)
+            row(name, "direct", direct[name], np.ones(len(index), dtype=bool))
+    # Where the plates' vertical loads (N) equal the ground reactions Nexus applied (its
+    # L/RGroundReactionForce, N/kg): Nexus leaves a plate out where it judges a foot not wholly
+    # on it, and its files do not record that choice.
+    plates = read_force_plates(walk, trial.n_frames)
+    loaded = np.nansum([np.abs(p.force[:, 2]) for p in plates], axis=0)
+    applied = sum(np.nan_to_num(np.abs(theirs.get(f"{side}GroundReactionForce", np.zeros(
+        (len(index), 3)))[:, 2])) for side in "LR") * (model.subject_mass or np.nan)
+    same, _ = compared(np.column_stack([loaded] * 3), "")
+    same_load = np.abs(same[:, 2] - applied) < 20.0
+    lines.insert(1, f"plates' vertical load equal to Nexus's applied ground reactions (20 N) "
+                    f"on {int((same_load & trusted).sum())} of the trusted frames")
+    for kind, curves in (("moments", pig.moments), ("powers", pig.powers)):
+        for name, curve in curves.items():
+            row(name, kind, curve, trusted, angle=False)
+            row(name, f"{kind}, same plate loads", curve, trusted & same_load, angle=False)
+    mark = {label: trial.markers[:, trial.labels.index(label)] for label in trial.labels}
+    diameter = model.measurements.marker_diameter or 0.014
+    values = vsk_values(vsks[0]) if vsks else {}
+    axes, _ = upper.segments(mark, upper_geometry(values, diameter))
+    lab = progression_frame(seg["pelvis"].origin, seg["pelvis"].axes[:, :, 0], up)
+    direct_upper = upper.upper_angles({**axes, "pelvis": pig_axes(seg["pelvis"].axes)}, lab)
+    for joint in upper.UPPER_JOINTS:
+        for side in "LR":
+            name = f"{side}{joint}Angles"
+            if name in pig.angles:
+                row(name, "solve", pig.angles[name], trusted)
+            row(name, "direct", direct_upper[name], np.ones(len(index), dtype=bool))
+    return lines
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--trials", type=Path, default=None,
                         help="a folder of Nexus C3D files (default: the shared pair)")
     parser.add_argument("--rigid-knees", action="store_true",
                         help="also the template with spherical knees (no slide of the tibia)")
+    parser.add_argument("--session", type=Path, default=None,
+                        help="a full-body session's folder (static, walk, .vsk)")
+    parser.add_argument("--reference", type=Path, default=None,
+                        help="with --session: Nexus's model outputs CSV of its walk")
     args = parser.parse_args()
+    if args.session or args.reference:
+        if not (args.session and args.reference):
+            parser.error("--session and --reference go together")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            print("RMS difference to Vicon's Plug-in Gait outputs (deg; moments N.mm/kg; "
+                  "powers W/kg):")
+            print("\n".join(session(args.session, args.reference)))
+        return
     todo = pairs(args.trials) if args.trials else [(SHARED / "HC030A01.c3d",
                                                      [SHARED / "HC030A05.c3d"])]
     for rigid in (False, True) if args.rigid_knees else (False,):

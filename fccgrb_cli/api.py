@@ -161,8 +161,9 @@ def calibrate(template: Model, trial: Trial, *, mass: float | None = None,
     the measured ones); ``mapping``: the template's label → the trial's (a virtual marker
     ``mid(A,B)`` allowed). A Plug-in Gait template (``configs/models/plugin_gait.yaml``) takes
     the subject's measurements from the trial's PROCESSING group and the template's subject
-    section, the keywords (mm, kg) over both, with Plug-in Gait's foot-flat option
-    (``plugin_gait.calibration.calibrate_plugin_gait`` takes the other choices); any other
+    section, the keywords (mm, kg) over both, with Plug-in Gait's foot-flat option where the
+    recorded static offsets do not say otherwise (``plugin_gait.calibration.Options``;
+    ``plugin_gait.calibration.calibrate_plugin_gait`` takes the other choices); any other
     template reads its mass (and a Helen Hayes one its widths) from the same sources in the
     same order (``anatomy.davis_inputs``). The personal
     model's gravity points down the trial's vertical, found from its plates and markers

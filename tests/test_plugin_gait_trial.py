@@ -18,6 +18,8 @@ import pytest
 import yaml
 from cli_helpers import run_cli
 
+from fccgrb_cli.plugin_gait import upper
+from fccgrb_cli.plugin_gait.angles import output_names, pig_axes
 from fccgrb_cli.results.runs import read_runs
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -80,13 +82,45 @@ def test_walking_angles_match_vicons(solved):
     points, _ = vicon(WALK)
     pig = run.plugin_gait
     assert run.trusted.all()
-    assert len(pig.angles) == 10
-    for name, ours in pig.angles.items():
-        theirs = points[name]
+    assert set(pig.angles) == {*output_names(), *upper.output_names()}
+    for name in output_names():  # this file holds no upper-body outputs of Vicon's
+        ours, theirs = pig.angles[name], points[name]
         error = (ours - theirs + 180.0) % 360.0 - 180.0  # Vicon's angles run on past ±180
         rms = np.sqrt(np.mean(error ** 2, axis=0))
         assert rms[0] <= 1.0, (name, rms)
         assert rms[1] <= 2.0 and rms[2] <= 2.0, (name, rms)
+
+
+def test_full_body_trial_gives_the_upper_bodys_angles_from_its_markers(solved):
+    """The walking trial carries Plug-in Gait's full-body markers and its PROCESSING the arms'
+    measurements: the calibration keeps them (mm → m) and the run stores the upper body's
+    angles, equal to Plug-in Gait's construction applied here to the file's markers (read with
+    ezc3d, mm) with those measurements, the spine from the run's solved pelvis."""
+    personal, run = solved
+    subject = yaml.safe_load(personal.read_text())["subject"]
+    points, proc = vicon(WALK)
+    _, static = vicon(STATIC)
+    for key, vicon_key in (("shoulder_offset", "ShoulderOffset"), ("elbow_width", "ElbowWidth"),
+                           ("wrist_width", "WristWidth"), ("hand_thickness", "HandThickness")):
+        for side in ("left", "right"):
+            assert subject[key][side] == pytest.approx(static[side[0].upper() + vicon_key] / 1e3)
+    geometry = upper.UpperGeometry(
+        subject["marker_diameter"] / 2, 0.0,
+        *({s: proc[f"{s.upper()}{key}"] / 1e3 for s in "lr"}
+          for key in ("ShoulderOffset", "ElbowWidth", "WristWidth", "HandThickness")))
+    markers = {k: np.where(points[k] == 0, np.nan, points[k] / 1e3) for k in upper.MARKERS}
+    axes, _ = upper.segments(markers, geometry)
+    pelvis = np.stack([np.column_stack([run.q[f"pelvis.{e}.{c}"] for c in "xyz"])
+                       for e in "uvw"], axis=2)
+    expected = upper.upper_angles({**axes, "pelvis": pig_axes(pelvis)},
+                                  run.plugin_gait.progression)
+    for name in upper.output_names():
+        np.testing.assert_allclose(run.plugin_gait.angles[name], expected[name], atol=1e-6,
+                                   err_msg=name)
+        # Vicon's, computed with a 14 mm marker diameter where PROCESSING says 10 (measured
+        # worst: shoulder Z 1.17, elbow X 1.03 deg; 0 with 14 mm, test_plugin_gait_upper.py)
+        error = (expected[name] - points[name] + 180.0) % 360.0 - 180.0
+        assert np.sqrt(np.mean(error ** 2, axis=0)).max() <= 1.3, name
 
 
 # Per joint: RMS bounds for X, Y, Z (N·mm/kg) and the power (W/kg), over both sides
@@ -126,7 +160,7 @@ def test_plugin_gait_c3d_export_reads_back_in_plugin_gaits_layout(solved, tmp_pa
     out = run_cli("export", results, "--format", "c3d", "--convention", "plugin-gait",
                   "-o", target)
     assert out.exit_code == 0, out.stderr
-    assert "22 points of the trial with Plug-in Gait's names replaced" in out.stderr
+    assert "36 points of the trial with Plug-in Gait's names replaced" in out.stderr
     original, back = ezc3d.c3d(str(WALK)), ezc3d.c3d(str(target))
     point = back["parameters"]["POINT"]
     labels = [s.strip() for key in ("LABELS", "LABELS2") if key in point
@@ -141,7 +175,7 @@ def test_plugin_gait_c3d_export_reads_back_in_plugin_gaits_layout(solved, tmp_pa
             assert labels.count(name) == 1 and name in listed
             stored = xyz[:, labels.index(name), :].T
             np.testing.assert_allclose(stored, values, rtol=1e-6, atol=1e-3)
-    assert len(pig.angles) == 10 and len(pig.moments) == 6 and len(pig.powers) == 6
+    assert len(pig.angles) == 24 and len(pig.moments) == 6 and len(pig.powers) == 6
     theirs, _ = vicon(WALK)
     for name in ("LKneeAngles", "RHipAngles", "LKneeMoment", "RAnklePower"):  # Vicon's units
         stored, k = xyz[:, labels.index(name), :].T, 2 if name.endswith("Power") else 0

@@ -121,6 +121,42 @@ def test_nexus_static_without_foot_flat_matches_its_own_processing(tmp_path):
 
 
 @needs_nexus
+def test_foot_flat_option_read_from_the_offsets_the_static_records(tmp_path):
+    """With no --foot-flat/--no-foot-flat, the option is the one whose static offsets equal
+    the ones the subject's sources record: the session processed with foot flat off (its
+    PROCESSING's offsets) calibrates without it, said in one warning, and its offsets equal
+    Nexus's; the foot-flat session calibrates with it, saying nothing."""
+    static = NEXUS / "PiG_Calibration3_noFF.c3d"
+    model, stderr = calibrated(static, tmp_path / "p.yaml")
+    assert sum("foot not flat: the static foot offsets" in w
+               for w in stderr.splitlines()) == 1
+    proc = processing_of(static)
+    for side in ("left", "right"):
+        key = side[0].upper()
+        assert model["subject"]["static_plantar_flexion"][side] == pytest.approx(
+            np.degrees(proc[key + "StaticPlantFlex"]), abs=0.01)
+        assert model["subject"]["static_rotation_offset"][side] == pytest.approx(
+            np.degrees(proc[key + "StaticRotOff"]), abs=0.01)
+    _, stderr = calibrated(STATIC, tmp_path / "ff.yaml")
+    assert "foot offsets" not in stderr and "foot not flat" not in stderr
+
+
+@needs_nexus
+def test_recorded_offsets_matching_neither_option_keep_foot_flat_and_say_so(tmp_path):
+    """Recorded offsets 1° off both options' (another static's, say): foot flat, the default,
+    with one warning giving how far they lie from either."""
+    proc = processing_of(STATIC)
+    shifted = {key: proc[key] + np.radians(1.0) for key in (
+        "LStaticPlantFlex", "RStaticPlantFlex", "LStaticRotOff", "RStaticRotOff")}
+    static = rewritten(STATIC, tmp_path / "static.c3d", shifted)
+    model, stderr = calibrated(static, tmp_path / "p.yaml")
+    said = [w for w in stderr.splitlines() if "differ from this static's by up to" in w]
+    assert len(said) == 1 and "with foot flat (used)" in said[0]
+    assert model["subject"]["static_plantar_flexion"]["left"] == pytest.approx(
+        np.degrees(proc["LStaticPlantFlex"]), abs=0.01)
+
+
+@needs_nexus
 def test_nexus_walking_angles_match_vicons(nexus_run):
     """Every Plug-in Gait angle of the walking trial beside Vicon's (``LHipAnglesV`` ...):
     RMS over the trusted frames ≤ 1° in X and ≤ 2° in Y and Z (measured: ≤ 0.24° X, ≤ 1.3°

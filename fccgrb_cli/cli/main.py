@@ -572,10 +572,12 @@ def _frame_range(text: str | None) -> tuple[int, int] | None:
                    "group or a YAML subject: section (repeatable; later files and the width "
                    "options win). The static TRIAL's own PROCESSING group and the template's "
                    "subject: section are read first.")
-@click.option("--foot-flat/--no-foot-flat", default=True, show_default=True,
+@click.option("--foot-flat/--no-foot-flat", default=None,
               help="Plug-in Gait templates: the static's heel-to-toe line taken level (raised "
                    "at the heel by the sole delta) for the foot offsets, as Plug-in Gait's "
-                   "'foot flat' option does.")
+                   "'foot flat' option does.  [default: the option whose offsets equal the "
+                   "StaticPlantFlex and StaticRotOff the subject's files record, else foot "
+                   "flat]")
 @click.option("--map", "mapping", multiple=True, metavar="NAME=LABEL|FILE",
               help="The template's label → the trial's, where a lab spells them otherwise "
                    "(repeatable NAME=LABEL, comma-separated pairs, or a YAML file of NAME: "
@@ -587,7 +589,7 @@ def _frame_range(text: str | None) -> tuple[int, int] | None:
 @reports_input_errors
 def calibrate(model: str, trial: str, output: str, frames: str | None,
               mass: float | None, knee_width: str | None, ankle_width: str | None,
-              marker_diameter: str | None, subject_files: tuple[str, ...], foot_flat: bool,
+              marker_diameter: str | None, subject_files: tuple[str, ...], foot_flat: bool | None,
               mapping: tuple[str, ...], vertical: str, accept_truncated: bool) -> None:
     """Personalize MODEL (a lower-limb template such as configs/models/lower_limb.yaml or
     helen_hayes.yaml) from TRIAL's markers: ISB segment frames from the landmarks named in its

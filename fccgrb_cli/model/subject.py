@@ -80,6 +80,12 @@ PIG_KEYS: dict[str, Quantity] = {
                                        math.pi / 2, derived=True),
     "static_rotation_offset": Quantity("StaticRotOff", "angle", True, -math.pi / 2, math.pi / 2,
                                        derived=True),
+    # the full body's arms and head (plugin_gait/upper.py)
+    "shoulder_offset": Quantity("ShoulderOffset", "length", True, 5.0, 200.0, True),
+    "elbow_width": Quantity("ElbowWidth", "length", True, 20.0, 200.0, True),
+    "wrist_width": Quantity("WristWidth", "length", True, 10.0, 150.0, True),
+    "hand_thickness": Quantity("HandThickness", "length", True, 5.0, 100.0, True),
+    "head_offset": Quantity("HeadOffset", "angle", False, -math.pi / 2, math.pi / 2),
 }
 VICON_SCALE = {"length": 1e-3, "angle": 1.0, "mass": 1.0}  # Vicon's unit → SI
 
@@ -93,9 +99,11 @@ class SubjectMeasurements:
     rotation offsets (the thigh and shank wands' angles off the knee and ankle flexion axes) and
     tibial torsion, rad. ``static_plantar_flexion`` and ``static_rotation_offset`` are the foot
     offsets a static trial gave Vicon's Plug-in Gait (its results, stored for comparison:
-    calibration computes its own). ``source`` names where the values came from, ``present`` the
-    keys found there, ``notes`` what was read otherwise than written (an angle in degrees, a
-    derived value left out)."""
+    calibration computes its own). The full body's: shoulder offset (the shoulder marker to the
+    shoulder centre), elbow and wrist widths, hand thickness (m), head offset (rad; the
+    static's head tilt Plug-in Gait takes out). ``source`` names where the values came from,
+    ``present`` the keys found there, ``notes`` what was read otherwise than written (an angle
+    in degrees, a derived value left out)."""
 
     body_mass: float | None = None
     height: float | None = None
@@ -111,6 +119,11 @@ class SubjectMeasurements:
     tibial_torsion: Sided = field(default_factory=Sided)
     static_plantar_flexion: Sided = field(default_factory=Sided)
     static_rotation_offset: Sided = field(default_factory=Sided)
+    shoulder_offset: Sided = field(default_factory=Sided)
+    elbow_width: Sided = field(default_factory=Sided)
+    wrist_width: Sided = field(default_factory=Sided)
+    hand_thickness: Sided = field(default_factory=Sided)
+    head_offset: float | None = None
     source: str = ""
     present: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()

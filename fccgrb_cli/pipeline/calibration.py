@@ -59,11 +59,12 @@ class Subject:
 @dataclass(frozen=True)
 class Choices:
     """How to calibrate: frame indices [A, B) of the static (None: every frame), Plug-in Gait's
-    foot-flat option, the template's labels → the trial's (a virtual marker ``mid(A,B)``
-    allowed), the lab's vertical ('auto' or an axis such as '+z')."""
+    foot-flat option (None: as the subject's recorded static offsets say, else flat;
+    ``plugin_gait.calibration.Options``), the template's labels → the trial's (a virtual
+    marker ``mid(A,B)`` allowed), the lab's vertical ('auto' or an axis such as '+z')."""
 
     frames: tuple[int, int] | None = None
-    foot_flat: bool = True
+    foot_flat: bool | None = None
     mapping: dict[str, str] = field(default_factory=dict)
     vertical: str = "auto"
 
@@ -147,7 +148,7 @@ def _plugin_gait(template: Model, trial: Trial, subject: Subject, choices: Choic
               f"{np.degrees(flexion.right):.2f}, rotation L/R "
               f"{np.degrees(rotation.left):.2f} / "
               f"{np.degrees(rotation.right):.2f}"
-              f" ({'foot flat' if choices.foot_flat else 'foot not flat'})"]
+              f" ({'foot flat' if result.foot_flat else 'foot not flat'})"]
     warnings = list(result.warnings)
     if m.body_mass is None:
         warnings.append("no body mass (Bodymass or --mass): the model has no inertia (inverse "

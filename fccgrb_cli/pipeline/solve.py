@@ -161,9 +161,12 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
             result = with_findings(result, dynamic_findings(model, solved_dynamics))
         pig = None
         if model.calibration_method == "plugin-gait":
-            from fccgrb_cli.plugin_gait.outputs import plugin_gait_results
+            from fccgrb_cli.plugin_gait.outputs import plugin_gait_results, upper_body_missing
 
-            pig = plugin_gait_results(model, result.q, result.trusted, solved_dynamics)
+            pig = plugin_gait_results(model, result.q, result.trusted, solved_dynamics, {
+                label: trial.markers[:, k] for k, label in enumerate(trial.labels)})
+            missing = upper_body_missing(model, trial.labels)
+            warnings += [missing] if missing else []
         result = store.coordinates(result)
         solved_dynamics = store.dynamics(solved_dynamics)
         clinical = clinical_results(
@@ -241,14 +244,21 @@ class _Store:
 
     def trial(self, trial: Trial, model: Model) -> Trial:
         """What the stages after the markers' selection read of the trial: its path, rate and
-        frame count, the markers of tracked vectors and the gait's landmarks; the trial's every
+        frame count, the markers of tracked vectors and the gait's landmarks (and a Plug-in Gait
+        model's upper-body markers, which its outputs read); the trial's every
         marker of every frame can then go (when the caller, as ``fccgrb solve``, keeps no
         reference to it)."""
         if self.spill is None:
             return trial
         vectors = {label for tv in model.tracked_vectors
                    for label in (tv.from_marker, tv.to_marker) if label in trial.labels}
-        labels = tuple(dict.fromkeys([*landmark_labels(model, trial).values(), *vectors]))
+        upper: tuple[str, ...] = ()
+        if model.calibration_method == "plugin-gait":  # the upper body's angles read them
+            from fccgrb_cli.plugin_gait.upper import MARKERS
+
+            upper = tuple(label for label in MARKERS if label in trial.labels)
+        labels = tuple(dict.fromkeys([*landmark_labels(model, trial).values(), *vectors,
+                                      *upper]))
         return Trial(trial.path, labels, trial.select(list(labels)), trial.rate, trial.warnings,
                      trial.start)
 

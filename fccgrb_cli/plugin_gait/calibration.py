@@ -13,6 +13,7 @@ section with where each came from.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -45,13 +46,21 @@ PIG_SEGMENTS = {"thigh": (0.1, 0.567, 0.540), "shank": (0.0465, 0.567, 0.528),
 PIG_PELVIS = (0.142, 0.925, 0.895, 0.31)
 
 
+# Static foot offsets a subject file records (Vicon's) agree with the ones this static gives
+# with an option when every one lies within this (rad; Vicon's own agree to ~1e-6° when its
+# option is the same, and the two options differ by degrees on a foot that is not level).
+OFFSETS_AGREE = np.radians(0.1)
+
+
 @dataclass(frozen=True)
 class Options:
     """Calibration options: frame indices [A, B) (None: every frame); Plug-in Gait's static
-    'foot flat' (the heel-to-toe line taken level, the heel raised by the sole delta)."""
+    'foot flat' (the heel-to-toe line taken level, the heel raised by the sole delta; None:
+    the option whose offsets equal the ones the subject's files record — Vicon's, computed on
+    this static — else foot flat)."""
 
     frames: tuple[int, int] | None = None
-    foot_flat: bool = True
+    foot_flat: bool | None = None
 
 
 @dataclass(frozen=True)
@@ -67,6 +76,7 @@ class PigCalibration:
     notes: tuple[str, ...]
     lengths: dict[str, float]
     warnings: tuple[str, ...] = ()
+    foot_flat: bool = True
 
 
 def _marker(trial: Trial, label: str, window: slice, used_by: str,
@@ -205,10 +215,15 @@ def calibrate_plugin_gait(model: Model, trial: Trial, measured: SubjectMeasureme
         markers[f"toe_{s}"] = lm[f"{side}_toe"]
     uncorrected = pg.segments(markers, side_geometry(m))
     up = -np.asarray(model.gravity) / np.linalg.norm(model.gravity)
-    offsets = {s: pg.foot_offsets(uncorrected[f"foot_{s}"], lm[f"{side}_heel"],
-                                  lm[f"{side}_toe"], up, options.foot_flat,
-                                  _resolved(m.sole_delta.side(s)))
-               for s, side in SIDES.items()}
+
+    def computed(flat: bool) -> dict[str, tuple[float, float]]:
+        return {s: pg.foot_offsets(uncorrected[f"foot_{s}"], lm[f"{side}_heel"],
+                                   lm[f"{side}_toe"], up, flat, _resolved(m.sole_delta.side(s)))
+                for s, side in SIDES.items()}
+
+    flat, said = _foot_flat(options.foot_flat, measured, computed)
+    warnings += said
+    offsets = computed(flat)
     m = replace(m, static_plantar_flexion=Sided(offsets["l"][0], offsets["r"][0]),
                 static_rotation_offset=Sided(offsets["l"][1], -offsets["r"][1]))
     seg = pg.segments(markers, side_geometry(m, offsets))
@@ -244,11 +259,47 @@ def calibrate_plugin_gait(model: Model, trial: Trial, measured: SubjectMeasureme
     header = (f"# {doc.get('name', 'model')} personalized by `fccgrb calibrate` from "
               f"{trial.path}, frame indices {start}:{stop}\n# from the template {model.source}: "
               "Plug-in Gait's segments (Davis hip centres, chord knee and ankle centres, "
-              f"{'foot flat' if options.foot_flat else 'foot not flat'}); inertia: Plug-in "
+              f"{'foot flat' if flat else 'foot not flat'}); inertia: Plug-in "
               f"Gait's{'' if m.body_mass is not None else ' (not computed: no body mass)'}.\n"
               + "".join(f"# {note}\n" for note in notes))
     text = header + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=100)
-    return PigCalibration(text, (start, stop), m, notes, lengths, tuple(warnings))
+    return PigCalibration(text, (start, stop), m, notes, lengths, tuple(warnings), flat)
+
+
+def _foot_flat(chosen: bool | None, measured: SubjectMeasurements,
+               computed: Callable[[bool], dict[str, tuple[float, float]]]
+               ) -> tuple[bool, list[str]]:
+    """The foot-flat option to calibrate with, and what to tell: ``chosen`` when given; else
+    the option whose static offsets (``computed(flat)``: side → (β, α)) equal, within
+    ``OFFSETS_AGREE``, the ones ``measured`` records (``StaticPlantFlex``, ``StaticRotOff``:
+    Vicon computed them on this static with its option, which its files do not name), foot flat
+    first; else foot flat, saying how far the recorded ones lie from either."""
+    if chosen is not None:
+        return chosen, []
+    given = (measured.static_plantar_flexion.left, measured.static_plantar_flexion.right,
+             measured.static_rotation_offset.left, measured.static_rotation_offset.right)
+    recorded = [v for v in given if v is not None]
+    if len(recorded) < len(given):
+        return True, []
+
+    def gap(flat: bool) -> float:
+        o = computed(flat)
+        ours = (o["l"][0], o["r"][0], o["l"][1], -o["r"][1])  # Vicon's signs
+        return max(abs(a - b) for a, b in zip(ours, recorded, strict=True))
+
+    gaps = {flat: gap(flat) for flat in (True, False)}
+    source = measured.source or "the subject's files"
+    if gaps[True] <= OFFSETS_AGREE:
+        return True, []
+    if gaps[False] <= OFFSETS_AGREE:
+        return False, [f"foot not flat: the static foot offsets {source} records are this "
+                       "static's without Plug-in Gait's foot-flat option (with it they would "
+                       f"differ by up to {np.degrees(gaps[True]):.2f}°); --foot-flat to "
+                       "override"]
+    return True, [f"the static foot offsets {source} records differ from this static's by up "
+                  f"to {np.degrees(gaps[True]):.2f}° with foot flat (used) and "
+                  f"{np.degrees(gaps[False]):.2f}° without (--no-foot-flat): recorded on "
+                  "another static, or with other measurements"]
 
 
 def _inertia(mass: float | None, points: dict[str, dict], toes: dict[str, np.ndarray]

@@ -3,7 +3,11 @@
 frames, and with the dynamics the joint moments and powers (gait/plugin_gait_kinetics.py) from
 the classical model's motion and the force plates. Each output is frames × 3 under Plug-in
 Gait's name; frames the quality checks do not trust keep their values (the run's ``trusted``
-says which; exports mark them), frames not solved are NaN.
+says which; exports mark them), frames not solved are NaN. On a full-body trial, the upper
+body's angles (plugin_gait/upper.py: ``LThoraxAngles`` … ``RWristAngles``) join them, built
+frame by frame from the trial's markers as Vicon builds them (its spine from the solved
+pelvis), where the subject's measurements give the arms' and the trial has the markers; a
+frame where a marker is missing is NaN there.
 """
 
 from __future__ import annotations
@@ -14,8 +18,12 @@ import numpy as np
 
 from fccgrb_cli.dynamics.convert import Dynamics
 from fccgrb_cli.model import Model
-from fccgrb_cli.plugin_gait.angles import pig_angles, progression_frame
+from fccgrb_cli.model.subject import PIG_KEYS
+from fccgrb_cli.plugin_gait.angles import pig_angles, pig_axes, progression_frame
 from fccgrb_cli.plugin_gait.kinetics import leg_kinetics, segment_motion
+from fccgrb_cli.plugin_gait.upper import MARKERS as UPPER_MARKERS
+from fccgrb_cli.plugin_gait.upper import UpperGeometry, segments
+from fccgrb_cli.plugin_gait.upper import upper_angles as upper_body_angles
 from fccgrb_cli.system.layout import build_layout
 
 UNITS = {"angles": "deg", "moments": "N.mm/kg", "powers": "W/kg"}
@@ -62,10 +70,54 @@ def _point(model: Model, x: np.ndarray, body: str, point: str) -> np.ndarray:
     return x[:, :3] + _axes(x) @ local
 
 
+def upper_geometry(model: Model) -> UpperGeometry | None:
+    """The subject's upper-body measurements from the model's ``subject:`` section (the marker
+    radius Plug-in Gait's 7 mm without a diameter, the head offset 0), or None when a side's
+    shoulder offset, elbow or wrist width or hand thickness is not given."""
+    m = model.measurements
+    sided = (m.shoulder_offset, m.elbow_width, m.wrist_width, m.hand_thickness)
+    values = [{s: v for s in "lr" if (v := q.side(s)) is not None} for q in sided]
+    if any(len(side) < 2 for side in values):
+        return None
+    shoulder, elbow, wrist, hand = values
+    diameter = m.marker_diameter if m.marker_diameter is not None else 0.014
+    return UpperGeometry(diameter / 2.0, m.head_offset or 0.0, shoulder, elbow, wrist, hand)
+
+
+def upper_body_missing(model: Model, labels: tuple[str, ...]) -> str | None:
+    """Why a trial with Plug-in Gait's upper-body markers (all of ``UPPER_MARKERS`` among
+    ``labels``) gets no upper-body angles — the subject's measurements lacking an arm's — or
+    None (they are computed, or the trial is not a full-body one)."""
+    if any(label not in labels for label in UPPER_MARKERS) or upper_geometry(model):
+        return None
+    m = model.measurements
+    absent = [f"{side}{q.vicon}" for name, q in PIG_KEYS.items()
+              if name in ("shoulder_offset", "elbow_width", "wrist_width", "hand_thickness")
+              for s, side in (("l", "Left"), ("r", "Right")) if getattr(m, name).side(s) is None]
+    return (f"{model.source}: the trial has Plug-in Gait's upper-body markers but the subject's "
+            f"measurements lack {', '.join(absent)} (calibrate with --subject a .vsk or .mp that "
+            "gives them): no upper-body angles")
+
+
+def upper_angles(model: Model, markers: dict[str, np.ndarray], pelvis: np.ndarray,
+                 progression: np.ndarray) -> dict[str, np.ndarray]:
+    """The upper body's Plug-in Gait angles from the trial's ``markers`` (label → frames × 3,
+    m) and the solved pelvis's axes (frames × 3 × 3, u, v, w), or none when the trial lacks
+    one of ``UPPER_MARKERS`` or the subject's measurements lack the arms'."""
+    geometry = upper_geometry(model)
+    if geometry is None or any(label not in markers for label in UPPER_MARKERS):
+        return {}
+    axes, _ = segments({k: markers[k] for k in UPPER_MARKERS}, geometry)
+    return upper_body_angles({**axes, "pelvis": pig_axes(pelvis)}, progression)
+
+
 def plugin_gait_results(model: Model, q: np.ndarray, trusted: np.ndarray,
-                        dynamics: Dynamics | None) -> PluginGaitResults:
+                        dynamics: Dynamics | None,
+                        markers: dict[str, np.ndarray] | None = None) -> PluginGaitResults:
     """The outputs of a run of a Plug-in Gait model: its solved coordinates ``q`` (frames ×
-    nq), which frames are trusted, and its dynamics (None: angles only)."""
+    nq), which frames are trusted, its dynamics (None: angles only), and the trial's markers
+    (label → frames × 3, m, the frames of ``q``; the upper body's angles where they allow:
+    :func:`upper_angles`)."""
     x = _body_coordinates(model, q)
     up = -np.asarray(model.gravity) / np.linalg.norm(model.gravity)
     frames = {name: _axes(value) for name, value in x.items()}
@@ -74,6 +126,8 @@ def plugin_gait_results(model: Model, q: np.ndarray, trusted: np.ndarray,
     torsion = {"l": model.measurements.tibial_torsion.left or 0.0,
                "r": model.measurements.tibial_torsion.right or 0.0}
     angles = pig_angles(frames, torsion, lab)
+    if markers:
+        angles.update(upper_angles(model, markers, frames["pelvis"], lab))
     moments: dict[str, np.ndarray] = {}
     powers: dict[str, np.ndarray] = {}
     if dynamics is not None and model.subject_mass is not None:
