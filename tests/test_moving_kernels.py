@@ -1,7 +1,8 @@
 """The compiled function rows (solvers/moving_kernels.py) against the numpy reference: every
 function kind's polynomial pieces against its ``terms`` (random knots and values, x inside,
 at and outside the knots), and the rows' h, ∂h/∂θ, ∂²h/∂θ² against FunctionRows.terms on
-generated models and on the OpenSim test models at random coordinates."""
+generated models and on the OpenSim test models at random coordinates; then the kernels' Φ,
+Φ_q, residual Hessian and γ of those models against the numpy system's."""
 
 from __future__ import annotations
 
@@ -22,9 +23,12 @@ from fccgrb_cli.model.osim.functions import (
     Polynomial,
     SimmSpline,
 )
+from fccgrb_cli.solvers import kernels
 from fccgrb_cli.solvers.moving_kernels import function_terms, row_terms
-from fccgrb_cli.system.compiled import compile_system
+from fccgrb_cli.system.compiled import Drive, compile_system
 from fccgrb_cli.system.moving_tables import MovingRows, moving_rows
+from fccgrb_cli.system.sparse import sparse_of
+from tests.test_kernels import dense_jacobian, envelope_mask, in_q_order
 from tests.test_moving_joints import system_of
 
 OPENSIM = Path(__file__).resolve().parents[2] / "shared" / "data" / "opensim"
@@ -136,3 +140,45 @@ def test_compiled_rows_equal_the_numpy_rows_on_the_opensim_models(path):
     model = load_osim(path)
     system = compile_system(model, angles="coordinate", track=True)
     _agree(system.functions, np.random.default_rng(0), draws=10)
+
+
+def _sparse_agrees(system, rng) -> None:
+    """Φ, Φ_q, Σ c ∇²Φ and the topology's γ of the compiled kernels equal the numpy system's."""
+    s = sparse_of(system)
+    assert len(s.moving.rows) == len(system.functions.rows)
+    n_rows = system.n_rows
+    inside = envelope_mask(s)
+    for _ in range(3):
+        q = system.pose() + 0.05 * rng.standard_normal(system.nq)
+        ref = rng.standard_normal((system.n_targets, 3))
+        F, phi = np.empty(len(s.f0)), np.empty(n_rows)
+        kernels.residual(s, q, q[s.nb:], ref, F, phi)
+        phi_dense, J_dense = system.evaluate(q, Drive(ref=ref))
+        assert np.abs(phi - phi_dense).max() < 1e-12
+        values = np.empty(len(s.j_col))
+        kernels.jacobian(s, q, F, values)
+        assert np.abs(dense_jacobian(s, values, n_rows) - J_dense).max() < 1e-12
+        c = rng.standard_normal(n_rows)
+        H = np.where(inside, 0.0, np.nan)
+        kernels.add_hessian(s, q, c, H)
+        H_dense = system.residual_hessian(q, c)
+        assert np.abs(in_q_order(s, np.where(inside, H, 0.0)) - H_dense).max() \
+            < 1e-12 * np.abs(H_dense).max()
+        qd = rng.standard_normal(system.nq)
+        gamma = np.full(n_rows, np.nan)
+        kernels._gamma_top(s, q, qd, np.empty(len(s.f0)), gamma)
+        want = system.gamma(q, qd, Drive(ref=ref))
+        top = s.top_rows
+        assert np.abs(gamma[top] - want[top]).max() < 1e-11 * (1 + np.abs(want[top]).max())
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_kernels_evaluate_a_moving_model_as_the_numpy_system(seed):
+    _sparse_agrees(system_of(seed), np.random.default_rng(seed))
+
+
+@pytest.mark.skipif(not MODELS, reason="the OpenSim test models are not here")
+@pytest.mark.parametrize("path", MODELS, ids=lambda p: p.name)
+def test_the_kernels_evaluate_the_opensim_models_as_the_numpy_system(path):
+    system = compile_system(load_osim(path), angles="coordinate", track=True)
+    _sparse_agrees(system, np.random.default_rng(1))

@@ -17,6 +17,7 @@ from typing import NamedTuple
 import numpy as np
 
 from fccgrb_cli.system.compiled import System
+from fccgrb_cli.system.moving_tables import MovingRows, moving_rows, no_moving_rows
 
 
 class SparseSystem(NamedTuple):
@@ -27,7 +28,8 @@ class SparseSystem(NamedTuple):
     ``ang_pos``/``sin_pos``: where the mixed coordinates' entries −g′(θ) and −cos θ sit;
     ``first``: each row's first column in the factor's envelope; ``inverse``: each column of q
     at its place in that order (perm's inverse); ``h_*``: the Hessian's
-    lower-triangle terms (row, column, coefficient, dot row)."""
+    lower-triangle terms (row, column, coefficient, dot row); ``moving``: the function rows of
+    moving joints and couplings (system/moving_tables.py; empty without them)."""
 
     nq: int
     nb: int
@@ -62,44 +64,75 @@ class SparseSystem(NamedTuple):
     h_coef: np.ndarray
     h_dot: np.ndarray
     top_rows: np.ndarray
+    moving: MovingRows
 
 
 def supported(system: System) -> bool:
-    """The NRM and SQP kernels take mixed coordinates with tracking and fully-defined bodies
-    (a reduced body's w = u × v makes Φ_q depend on q through X_q: those systems keep the numpy
-    path)."""
-    return system.mixed and system.n_targets > 0 and compilable(system)
+    """The mixed-coordinate kernels (NRM, the structured optimizers, the rates of their
+    solution) take mixed coordinates with tracking and fully-defined bodies (a reduced body's
+    w = u × v makes Φ_q depend on q through X_q: those systems keep the numpy path), moving
+    joints and couplings included where every function has polynomial pieces (else a line on
+    stderr, once per process, says that the numpy reference engine solves the model)."""
+    if not (system.mixed and system.n_targets > 0 and _fully_defined(system)):
+        return False
+    if system.functions is None:
+        return True
+    rows = _moving_of(system)
+    if isinstance(rows, str):
+        _tell_once(f"the compiled kernels do not take {rows} functions: the numpy reference "
+                   "engine solves this model")
+        return False
+    return True
 
 
 def compilable(system: System) -> bool:
-    """Fully-defined bodies only: x is q's body part (the classical model's kernels need no
-    more; the mixed ones need tracking too, see :func:`supported`), and no moving joint (their
-    rows' functions of the coordinates are numpy's only: such a model runs in the numpy
-    reference engine, which a line on stderr says once per process)."""
+    """Every kernel, the classical model's too (driven frames, the multipliers, the smoother's
+    linearization): fully-defined bodies (x is q's body part) and no moving joint. A model
+    with moving joints (an imported OpenSim model) has its smoothing and inverse dynamics
+    in the numpy reference engine, which a line on stderr says once per process."""
     if system.functions is not None:
-        _tell_moving_numpy()
+        _tell_once("the compiled kernels take moving joints (an imported OpenSim model) in "
+                   "the mixed-coordinate solves only: the numpy reference engine runs its "
+                   "smoothing and inverse dynamics")
         return False
+    return _fully_defined(system)
+
+
+def _fully_defined(system: System) -> bool:
     layout = system.layout
     return not len(layout.reduced_w) and layout.n_body_q == layout.nx
 
 
-_TOLD: list[bool] = []
+_TOLD: set[str] = set()
 
 
-def _tell_moving_numpy() -> None:
+def _tell_once(note: str) -> None:
     import sys
 
-    if not _TOLD:
-        _TOLD.append(True)
-        sys.stderr.write("fccgrb: note: the compiled kernels do not take moving joints (an "
-                         "imported OpenSim model): the numpy reference engine solves it\n")
+    if note not in _TOLD:
+        _TOLD.add(note)
+        sys.stderr.write(f"fccgrb: note: {note}\n")
+
+
+_MOVING: weakref.WeakKeyDictionary[System, MovingRows | str] = weakref.WeakKeyDictionary()
+
+
+def _moving_of(system: System) -> MovingRows | str:
+    """The system's function rows as arrays (moving_tables.moving_rows), built once."""
+    if system not in _MOVING:
+        _MOVING[system] = (no_moving_rows() if system.functions is None
+                           else moving_rows(system.functions))
+    return _MOVING[system]
 
 
 def sparse_system(system: System) -> SparseSystem:
     """The arrays of :class:`SparseSystem` for ``system``: mixed (see :func:`supported`) or
     classical, angles as drivers (no θ columns; θ* comes with each frame)."""
-    if not compilable(system) or (system.mixed and not system.n_targets):
-        raise ValueError("sparse_system needs fully-defined bodies (and tracking when mixed)")
+    if not (supported(system) or (not system.mixed and compilable(system))):
+        raise ValueError("sparse_system needs fully-defined bodies (and tracking when mixed; "
+                         "moving joints only when mixed)")
+    moving = _moving_of(system)
+    assert isinstance(moving, MovingRows)  # supported() has checked
     nq, nb, n_rows = system.nq, system.layout.n_body_q, system.n_rows
     n_lin = system.n_linear_rows
     n_ang = len(system.angle_rows) if system.mixed else 0
@@ -112,6 +145,9 @@ def sparse_system(system: System) -> SparseSystem:
     pattern.flat[system.scatter_index] = True
     pattern[:n_lin, :nb] |= system.J_const != 0.0
     pattern[mixed_rows, mixed_cols] = True
+    moved = moving.cols >= 0  # a function row's θ columns
+    moving_rows_all = np.broadcast_to(n_lin + moving.rows[:, None], moving.cols.shape)
+    pattern[moving_rows_all[moved], nb + moving.cols[moved]] = True
     # degree-aware order of the normal matrix's graph (entries where two columns share a row)
     graph = (pattern.T.astype(float) @ pattern.astype(float)) != 0.0
     perm = _reverse_cuthill_mckee(graph)
@@ -134,6 +170,8 @@ def sparse_system(system: System) -> SparseSystem:
     a_rows, a_cols = np.nonzero(A)
     hess_rows, hess_cols, hess_coef, hess_dot = _hessian_terms(system, inverse)
     first = _envelope(graph[np.ix_(perm, perm)])
+    pos = np.full(moving.cols.shape, -1, dtype=np.int64)
+    pos[moved] = position[moving_rows_all[moved], nb + moving.cols[moved]]
     return SparseSystem(
         nq=nq, nb=nb, n_lin=n_lin, trk_start=3 * len(system.lin_a),
         a_ptr=_pointers(a_rows, len(A)), a_col=a_cols, a_val=A[a_rows, a_cols],
@@ -152,6 +190,7 @@ def sparse_system(system: System) -> SparseSystem:
         inverse=inverse.astype(np.int64),
         h_row=hess_rows, h_col=hess_cols, h_coef=hess_coef, h_dot=hess_dot,
         top_rows=np.flatnonzero(system.masks()["topology"]),
+        moving=moving._replace(pos=pos),
     )
 
 

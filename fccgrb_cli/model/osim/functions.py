@@ -34,34 +34,18 @@ from math import comb
 
 import numpy as np
 
+from fccgrb_cli.model.spatial import Pieces
+
 __all__ = [
     "Constant",
     "Function",
     "LinearFunction",
     "Multiplier",
     "NaturalSpline",
-    "Pieces",
     "PiecewiseLinear",
     "Polynomial",
     "SimmSpline",
 ]
-
-
-@dataclass(frozen=True)
-class Pieces:
-    """A function as polynomials piece by piece. With no ``knots`` one piece for every x; with
-    m ≥ 2 increasing knots m + 1 pieces: x < knots[0], then [knots[k], knots[k+1]) for
-    k = 0 … m − 2 (the last one closed: x = knots[−1] is in it), then x > knots[−1]. Piece p is
-    Σ_j coefficients[p][j] (x − origins[p])^j: the same function as the class's ``terms``, its
-    first and second derivatives included, to rounding."""
-
-    knots: np.ndarray
-    origins: np.ndarray
-    coefficients: tuple[np.ndarray, ...]
-
-    def scaled(self, scale: float) -> Pieces:
-        """The pieces of scale · f."""
-        return Pieces(self.knots, self.origins, tuple(scale * c for c in self.coefficients))
 
 
 class Function:
@@ -92,7 +76,7 @@ class Constant(Function):
         return self.value, 0.0, 0.0
 
     def pieces(self) -> Pieces:
-        return _one_piece([self.value])
+        return Pieces.polynomial([self.value])
 
     @property
     def constant(self) -> bool:
@@ -110,7 +94,7 @@ class LinearFunction(Function):
         return self.slope * x + self.intercept, self.slope, 0.0
 
     def pieces(self) -> Pieces:
-        return _one_piece([self.intercept, self.slope])
+        return Pieces.polynomial([self.intercept, self.slope])
 
 
 @dataclass(frozen=True)
@@ -126,7 +110,7 @@ class Polynomial(Function):
         return float(np.polyval(c, x)), float(np.polyval(d1, x)), float(np.polyval(d2, x))
 
     def pieces(self) -> Pieces:
-        return _one_piece(list(self.coefficients)[::-1])
+        return Pieces.polynomial(list(self.coefficients)[::-1])
 
 
 @dataclass(frozen=True)
@@ -147,11 +131,6 @@ class Multiplier(Function):
     @property
     def constant(self) -> bool:
         return self.inner.constant
-
-
-def _one_piece(coefficients: list[float]) -> Pieces:
-    """A polynomial Σ c_j x^j for every x."""
-    return Pieces(np.zeros(0), np.zeros(1), (np.asarray(coefficients, dtype=float),))
 
 
 def _interval(knots: np.ndarray, x: float) -> int:
