@@ -46,6 +46,7 @@ from fccgrb_cli.solvers.nrm.problem import unsolvable_text
 from fccgrb_cli.solvers.optimize.frame import method_label
 from fccgrb_cli.solvers.quality import JUMP, NO_DATA, Finding, assessed, with_findings
 from fccgrb_cli.system import System, compile_system
+from fccgrb_cli.system.sparse import supported
 from fccgrb_cli.trial.labels import match_labels, vector_targets
 from fccgrb_cli.trial.record import Trial
 from fccgrb_cli.trial.truth import Truth, read_truth, truth_path
@@ -278,7 +279,12 @@ def _moving_engine(options: SolveOptions, system: System) -> str:
     """The note that says which engine solved a model with moving joints."""
     if mixed_runs_compiled(options.method, system, options):
         return "engine: compiled kernels (moving joints' functions as polynomial pieces)"
-    why = "--engine numpy" if options.engine == "numpy" else "the compiled kernels do not take it"
+    if options.engine == "numpy":
+        why = "--engine numpy"
+    elif not supported(system):
+        why = "the compiled kernels do not take this model's functions"
+    else:
+        why = f"the compiled kernels do not run {options.method} with these options"
     return f"engine: numpy reference ({why})"
 
 
