@@ -22,7 +22,8 @@ from fccgrb_cli.system.moving_tables import MovingRows, moving_rows, no_moving_r
 
 class SparseSystem(NamedTuple):
     """Constant arrays of a mixed-coordinate system with fully-defined bodies (x = q's body
-    part). ``j_ptr``/``j_col``: CSR pattern of Φ_q (columns already in the factor's order);
+    part). ``j_ptr``/``j_col``: CSR pattern of Φ_q (columns already in the factor's order;
+    entries whose feature coefficient is zero left out);
     ``j_const``: the constant values (linear and tracking rows, zero elsewhere); ``scat_pos``,
     ``scat_coef``, ``scat_feat``: each dot row's value += coef · F_flat[feat] (Eq. 2–3);
     ``ang_pos``/``sin_pos``: where the mixed coordinates' entries −g′(θ) and −cos θ sit;
@@ -141,8 +142,11 @@ def sparse_system(system: System) -> SparseSystem:
 
     mixed_rows = n_lin + np.concatenate([system.angle_rows[:n_ang], sine_rows]).astype(int)
     mixed_cols = nb + np.concatenate([np.arange(n_ang), sine_of]).astype(int)
+    # a feature's block of 12 columns holds [c0 I, c1 I, c2 I, c3 I]: where c_k = 0 (a vector
+    # has no r term; a frame axis along a body axis has one u, v or w) the entry is always zero
+    kept = system.scatter_coef != 0.0
     pattern = np.zeros((n_rows, nq), dtype=bool)
-    pattern.flat[system.scatter_index] = True
+    pattern.flat[system.scatter_index[kept]] = True
     pattern[:n_lin, :nb] |= system.J_const != 0.0
     pattern[mixed_rows, mixed_cols] = True
     moved = moving.cols >= 0  # a function row's θ columns
@@ -150,6 +154,12 @@ def sparse_system(system: System) -> SparseSystem:
     pattern[moving_rows_all[moved], nb + moving.cols[moved]] = True
     # degree-aware order of the normal matrix's graph (entries where two columns share a row)
     graph = (pattern.T.astype(float) @ pattern.astype(float)) != 0.0
+    # and each tracked point's three rows together: goal attainment's distance curvature
+    # couples them (goal/kernels.py's ed_fits)
+    start = 3 * len(system.lin_a)
+    for t in range(system.n_targets):
+        together = np.flatnonzero(pattern[start + 3 * t:start + 3 * t + 3].any(axis=0))
+        graph[np.ix_(together, together)] = True
     perm = _reverse_cuthill_mckee(graph)
     inverse = np.empty(nq, dtype=int)
     inverse[perm] = np.arange(nq)
@@ -164,7 +174,7 @@ def sparse_system(system: System) -> SparseSystem:
     j_const = np.zeros(len(rows))
     lin = rows < n_lin
     j_const[lin] = system.J_const[rows[lin], cols[lin]]
-    scat_rows, scat_cols = np.divmod(system.scatter_index, nq)
+    scat_rows, scat_cols = np.divmod(system.scatter_index[kept], nq)
 
     A = system.A_flat
     a_rows, a_cols = np.nonzero(A)
@@ -183,7 +193,7 @@ def sparse_system(system: System) -> SparseSystem:
         sine_of=system.sine_of.astype(np.int64),
         j_ptr=_pointers(rows, n_rows), j_col=inverse[cols], j_const=j_const,
         scat_pos=position[scat_rows, scat_cols],
-        scat_coef=system.scatter_coef.copy(), scat_feat=system.scatter_gather.astype(np.int64),
+        scat_coef=system.scatter_coef[kept], scat_feat=system.scatter_gather[kept].astype(np.int64),
         ang_pos=position[n_lin + system.angle_rows[:n_ang], nb + np.arange(n_ang)],
         sin_pos=position[n_lin + sine_rows, nb + sine_of],
         perm=perm, first=first,
@@ -209,7 +219,7 @@ def _hessian_terms(system: System, inverse: np.ndarray
     cols = inverse[(3 * kb[:, None] + d).ravel()]
     coef = np.repeat(system.hess_coef, 3)
     dot = np.repeat(system.hess_row, 3)
-    lower = rows >= cols
+    lower = (rows >= cols) & (coef != 0.0)  # a zero coefficient's term is no term
     return rows[lower], cols[lower], coef[lower], dot[lower].astype(np.int64)
 
 
