@@ -3,10 +3,11 @@ each dot row's values come from the features, the order that keeps the normal ma
 Cholesky factor inside a narrow envelope, and the Hessian's terms in that order. The arrays feed
 the compiled per-frame kernels (fccgrb_cli/solvers/kernels.py); nothing here runs per frame.
 
-A row of Φ_q touches the 12 coordinates of at most two bodies (plus one mixed coordinate): on
-the five-bar 87 rows × 69 columns hold 1,272 non-zeros (21 %), so ΦᵀWΦ costs Σ nnz_r² instead of
-a dense product, and ordered by reverse Cuthill–McKee its factor fills an envelope of a third
-of the lower triangle.
+A row of Φ_q touches at most two bodies' coordinates (plus its mixed coordinates), and of a
+body's 12 only those whose coefficient in the feature is not zero (a vector has no r term; an
+axis along a body axis is one of u, v, w): on the five-bar 87 rows × 69 columns hold 339
+non-zeros (6 %), so ΦᵀWΦ costs Σ nnz_r² instead of a dense product, and ordered by reverse
+Cuthill–McKee its factor fills an envelope of a third of the lower triangle.
 """
 
 from __future__ import annotations
