@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from fccgrb_cli.model.elements import Model
-from fccgrb_cli.model.spatial import Coupling, JointCoordinate
+from fccgrb_cli.model.spatial import Coupling, JointCoordinate, Pieces
 
 __all__ = ["Fixed", "holding_unobserved", "unobserved"]
 
@@ -25,6 +25,10 @@ class Fixed:
     def terms(self, x: float) -> tuple[float, float, float]:
         """f, f′, f″."""
         return self.value, 0.0, 0.0
+
+    def pieces(self) -> Pieces:
+        """One constant piece."""
+        return Pieces.polynomial([self.value])
 
 
 def unobserved(model: Model) -> list[str]:

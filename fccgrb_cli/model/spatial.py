@@ -20,16 +20,41 @@ from typing import Protocol
 
 import numpy as np
 
-__all__ = ["Coupling", "JointCoordinate", "MovingJoint", "ScalarFunction", "SpatialAxis",
-           "SpatialTransform", "axis_rotation"]
+__all__ = ["Coupling", "JointCoordinate", "MovingJoint", "Pieces", "ScalarFunction",
+           "SpatialAxis", "SpatialTransform", "axis_rotation"]
 
 Vec3 = tuple[float, float, float]
 
 
+@dataclass(frozen=True)
+class Pieces:
+    """A function as polynomials piece by piece. With no ``knots`` one piece for every x; with
+    m ≥ 2 increasing knots m + 1 pieces: x < knots[0], then [knots[k], knots[k+1]) for
+    k = 0 … m − 2 (the last one closed: x = knots[−1] is in it), then x > knots[−1]. Piece p is
+    Σ_j coefficients[p][j] (x − origins[p])^j: the same function as the class's ``terms``, its
+    first and second derivatives included, to rounding."""
+
+    knots: np.ndarray
+    origins: np.ndarray
+    coefficients: tuple[np.ndarray, ...]
+
+    @classmethod
+    def polynomial(cls, coefficients: list[float]) -> Pieces:
+        """Σ c_j x^j for every x (coefficients from the constant term up)."""
+        return cls(np.zeros(0), np.zeros(1), (np.asarray(coefficients, dtype=float),))
+
+    def scaled(self, scale: float) -> Pieces:
+        """The pieces of scale · f."""
+        return Pieces(self.knots, self.origins, tuple(scale * c for c in self.coefficients))
+
+
 class ScalarFunction(Protocol):
-    """f(x) with f′ and f″ (OpenSim's functions, ``fccgrb_cli.model.osim.functions``)."""
+    """f(x) with f′ and f″ (OpenSim's functions, ``fccgrb_cli.model.osim.functions``), and
+    where it has that form, its polynomial pieces (None: it has not)."""
 
     def terms(self, x: float) -> tuple[float, float, float]: ...
+
+    def pieces(self) -> Pieces | None: ...
 
 
 def skew3(n: np.ndarray) -> np.ndarray:

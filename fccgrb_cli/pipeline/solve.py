@@ -41,12 +41,13 @@ from fccgrb_cli.signals.butterworth import frames_needed
 from fccgrb_cli.solvers import KinematicResult, solve_ad
 from fccgrb_cli.solvers.ad.solve import stacked_drives
 from fccgrb_cli.solvers.determined import determined
-from fccgrb_cli.solvers.methods import Method, solve_stretch
+from fccgrb_cli.solvers.methods import Method, mixed_runs_compiled, solve_stretch
 from fccgrb_cli.solvers.mixed import recounted
 from fccgrb_cli.solvers.nrm.problem import unsolvable_text
 from fccgrb_cli.solvers.optimize.frame import method_label
 from fccgrb_cli.solvers.quality import JUMP, NO_DATA, Finding, assessed, with_findings
 from fccgrb_cli.system import System, compile_system
+from fccgrb_cli.system.sparse import supported
 from fccgrb_cli.trial.labels import match_labels, vector_targets
 from fccgrb_cli.trial.record import Trial
 from fccgrb_cli.trial.truth import Truth, read_truth, truth_path
@@ -121,8 +122,7 @@ def solve_trial(model: Model, trial: Trial, options: SolveOptions | None = None,
         warnings: list[str] = [*trial.warnings, *axes.warnings, *_quality_advice(result)]
         notes: list[str] = [axes.note()] if axes.chosen_by != "ground" else []
         if model.moving_joints:  # recorded with the run: which engine solved it
-            notes.append("engine: numpy reference (the compiled kernels do not take moving "
-                         "joints)")
+            notes.append(_moving_engine(options, system))
         if artefact_m:
             notes.append(f"{trial.path}: markers perturbed by fccgrb perturb at "
                          f"{1e3 * artefact_m:g} mm (recorded in the file): the fit check allows "
@@ -306,6 +306,19 @@ def _reference(measured: np.ndarray, labels: list[str], trial: Trial,
         if all(label in index for label in labels) and len(truth.time) == trial.n_frames:
             return truth.markers[:, [index[label] for label in labels]]
     return measured
+
+
+def _moving_engine(options: SolveOptions, system: System) -> str:
+    """The note that says which engine solved a model with moving joints."""
+    if mixed_runs_compiled(options.method, system, options):
+        return "engine: compiled kernels (moving joints' functions as polynomial pieces)"
+    if options.engine == "numpy":
+        why = "--engine numpy"
+    elif not supported(system):
+        why = "the compiled kernels do not take this model's functions"
+    else:
+        why = f"the compiled kernels do not run {options.method} with these options"
+    return f"engine: numpy reference ({why})"
 
 
 def _kinematics(model: Model, trial: Trial, inputs: np.ndarray, options: SolveOptions,

@@ -156,6 +156,9 @@ class Stacked:
             theta = drives.theta
             dot[:, s.angle_rows] -= s.g_terms(theta)[0]
             dot[:, s.sine_rows] -= np.sin(theta[:, s.sine_of])
+        if s.functions is not None:
+            for f, theta_f in enumerate(drives.theta):
+                dot[f, s.functions.rows] -= s.functions.terms(theta_f, False)[0]
         return np.concatenate([lin, dot], axis=1)
 
     def jacobian_x(self, F: np.ndarray) -> np.ndarray:
@@ -185,7 +188,8 @@ class Stacked:
 
     def nu(self, drives: Drives) -> np.ndarray:
         """ν = −Φ_t of every frame of a driven system: ṙ* on the base rows, g′(θ*) θ̇* on the
-        driver rows (Eq. 25: −θ̇* sin θ* for an angle), cos θ* θ̇* on the sine rows."""
+        driver rows (Eq. 25: −θ̇* sin θ* for an angle), cos θ* θ̇* on the sine rows,
+        ∂h/∂θ θ̇* on a moving joint's or coupling's rows (one frame at a time)."""
         s = self.system
         n = len(drives.theta)
         nu = np.zeros((n, s.n_rows))
@@ -197,13 +201,18 @@ class Stacked:
             k = s.sine_of
             nu[:, s.n_linear_rows + s.sine_rows] = (np.cos(drives.theta[:, k])
                                                     * drives.theta_d[:, k])
+        if s.functions is not None:
+            rows = s.n_linear_rows + s.functions.rows
+            for f, (theta, theta_d) in enumerate(zip(drives.theta, drives.theta_d, strict=True)):
+                nu[f, rows] = s.functions.terms(theta, False)[1] @ theta_d
         return nu
 
     def gamma(self, q: np.ndarray, qd: np.ndarray, drives: Drives) -> np.ndarray:
         """γ = −(Φ_q q̇)_q q̇ − 2Φ_qt q̇ − Φ_tt of every frame (docs/formulation.md §2): −Φ_x V̇q̇,
         −2 Ḟ_a·Ḟ_b on the dot rows, r̈* on the base rows, g″(θ*) θ̇*² + g′(θ*) θ̈* on the
         driver rows (Eq. 26: −θ̇*² cos θ* − θ̈* sin θ* for an angle), −sin θ* θ̇*² + cos θ* θ̈*
-        on the sine rows."""
+        on the sine rows, θ̇*ᵀ ∂²h/∂θ² θ̇* + ∂h/∂θ θ̈* on a moving joint's or coupling's rows
+        (one frame at a time)."""
         s, lay = self.system, self.system.layout
         n, start = len(q), self.system.n_linear_rows
         Fd = (self.expand_rate(q, qd) @ s.A_flat.T).reshape(n, -1, 3)
@@ -221,6 +230,13 @@ class Stacked:
             k = s.sine_of
             th, thd, thdd = drives.theta[:, k], drives.theta_d[:, k], drives.theta_dd[:, k]
             gamma[:, start + s.sine_rows] += -np.sin(th) * thd**2 + np.cos(th) * thdd
+        if s.functions is not None:
+            rows = start + s.functions.rows
+            for f in range(n):
+                _, h1, h2 = s.functions.terms(drives.theta[f])
+                theta_d = drives.theta_d[f]
+                gamma[f, rows] += (np.einsum("rij,i,j->r", h2, theta_d, theta_d)
+                                   + h1 @ drives.theta_dd[f])
         return gamma
 
 

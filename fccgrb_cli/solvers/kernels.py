@@ -37,6 +37,7 @@ from fccgrb_cli.solvers.kernel_arrays import (
     NrmTrial,
     WarmStart,
 )
+from fccgrb_cli.solvers.moving_kernels import row_terms
 from fccgrb_cli.solvers.newton import LARGE, NEAR, ROUNDING, SLOW
 from fccgrb_cli.system.sparse import SparseSystem
 
@@ -69,8 +70,8 @@ def features(s: SparseSystem, q: np.ndarray, F: np.ndarray) -> None:
 def residual(s: SparseSystem, q: np.ndarray, theta: np.ndarray, ref: np.ndarray,
              F: np.ndarray, phi: np.ndarray) -> None:
     """Φ: linear and tracking rows from the constant rows, dot rows F_a·F_b − c − g(θ), a signed
-    angle's sine row − sin θ (docs/formulation.md §2); θ is q's tail in a mixed system, the drivers'
-    θ* in a classical one."""
+    angle's sine row − sin θ (docs/formulation.md §2), a moving joint's or coupling's row − h(θ)
+    (system/moving.py); θ is q's tail in a mixed system, the drivers' θ* in a classical one."""
     features(s, q, F)
     for r in range(s.n_lin):
         total = s.c_const[r]
@@ -88,12 +89,19 @@ def residual(s: SparseSystem, q: np.ndarray, theta: np.ndarray, ref: np.ndarray,
         phi[s.n_lin + s.angle_rows[k]] -= g
     for j in range(len(s.sine_rows)):
         phi[s.n_lin + s.sine_rows[j]] -= np.sin(theta[s.sine_of[j]])
+    m = s.moving
+    if len(m.rows):
+        h = np.empty(len(m.rows))
+        row_terms(m, theta, 0, h, np.empty((0, 0)), np.empty((0, 0, 0)))
+        for i in range(len(m.rows)):
+            phi[s.n_lin + m.rows[i]] -= h[i]
 
 
 @njit(cache=True)
 def jacobian(s: SparseSystem, q: np.ndarray, F: np.ndarray, values: np.ndarray) -> None:
     """Φ_q's non-zeros at the features F: constant rows, the dot rows' c ⊗ F_other scattered
-    block by block (Eq. 2–3), −g′(θ) and −cos θ of the mixed coordinates (Eq. 13–22)."""
+    block by block (Eq. 2–3), −g′(θ) and −cos θ of the mixed coordinates (Eq. 13–22), −∂h/∂θ
+    of the function rows (moving joints and couplings)."""
     values[:] = s.j_const
     for k in range(len(s.scat_pos)):
         values[s.scat_pos[k]] += s.scat_coef[k] * F[s.scat_feat[k]]
@@ -102,6 +110,15 @@ def jacobian(s: SparseSystem, q: np.ndarray, F: np.ndarray, values: np.ndarray) 
         values[s.ang_pos[k]] = -1.0 if s.distance[k] else np.sin(q[nb + k])
     for j in range(len(s.sin_pos)):
         values[s.sin_pos[j]] = -np.cos(q[nb + s.sine_of[j]])
+    m = s.moving
+    if len(m.rows):
+        width = m.cols.shape[1]
+        d1 = np.empty((len(m.rows), width))
+        row_terms(m, q[nb:], 1, np.empty(len(m.rows)), d1, np.empty((0, 0, 0)))
+        for i in range(len(m.rows)):
+            for a in range(width):
+                if m.pos[i, a] >= 0:
+                    values[m.pos[i, a]] = -d1[i, a]
 
 
 @njit(cache=True)
@@ -138,8 +155,8 @@ def normal_equations(s: SparseSystem, values: np.ndarray, phi: np.ndarray, w: np
 @njit(cache=True)
 def add_hessian(s: SparseSystem, q: np.ndarray, c: np.ndarray, N: np.ndarray) -> None:
     """N += Σ_i c_i ∇²_q Φ_i (lower triangle): the dot rows' constant C_aᵀC_b + C_bᵀC_a, and
-    −c_k g″(θ_k) (c_k cos θ_k for an angle), c_s sin θ for a sine row on the diagonal (see
-    System.residual_hessian)."""
+    −c_k g″(θ_k) (c_k cos θ_k for an angle), c_s sin θ for a sine row on the diagonal, and
+    −Σ c_r ∂²h_r/∂θ² of the function rows (see System.residual_hessian)."""
     for t in range(len(s.h_row)):
         N[s.h_row[t], s.h_col[t]] += s.h_coef[t] * c[s.n_lin + s.h_dot[t]]
     nb = s.nb
@@ -150,6 +167,23 @@ def add_hessian(s: SparseSystem, q: np.ndarray, c: np.ndarray, N: np.ndarray) ->
     for j in range(len(s.sine_rows)):
         p = s.inverse[nb + s.sine_of[j]]
         N[p, p] += c[s.n_lin + s.sine_rows[j]] * np.sin(q[nb + s.sine_of[j]])
+    m = s.moving
+    if len(m.rows):
+        width = m.cols.shape[1]
+        d2 = np.empty((len(m.rows), width, width))
+        row_terms(m, q[nb:], 2, np.empty(len(m.rows)), np.empty((len(m.rows), width)), d2)
+        for i in range(len(m.rows)):
+            weight = c[s.n_lin + m.rows[i]]
+            for a in range(width):
+                if m.cols[i, a] < 0:
+                    continue
+                pa = s.inverse[nb + m.cols[i, a]]
+                for b in range(width):  # each pair once, in the lower triangle
+                    if m.cols[i, b] < 0:
+                        continue
+                    pb = s.inverse[nb + m.cols[i, b]]
+                    if pa > pb or a == b:
+                        N[pa, pb] -= weight * d2[i, a, b]
 
 
 @njit(cache=True)
@@ -577,7 +611,7 @@ def _gamma_top(s: SparseSystem, q: np.ndarray, qd: np.ndarray, Fd: np.ndarray,
                gamma: np.ndarray) -> None:
     """γ of the topological rows of a mixed system with fully-defined bodies: 0 on the linear
     rows, −2Ḟ_a·Ḟ_b on the dot rows, + g″(θ)θ̇² on an angle's or distance's row (−cos θ θ̇²,
-    0) and − sin θ θ̇² on a sine row (System.gamma)."""
+    0), − sin θ θ̇² on a sine row and θ̇ᵀ ∂²h/∂θ² θ̇ on a function row (System.gamma)."""
     for i in range(len(Fd)):
         total = 0.0
         for k in range(s.a_ptr[i], s.a_ptr[i + 1]):
@@ -596,6 +630,18 @@ def _gamma_top(s: SparseSystem, q: np.ndarray, qd: np.ndarray, Fd: np.ndarray,
     for j in range(len(s.sine_rows)):
         k = s.sine_of[j]
         gamma[s.n_lin + s.sine_rows[j]] -= np.sin(q[nb + k]) * qd[nb + k] ** 2
+    m = s.moving
+    if len(m.rows):
+        width = m.cols.shape[1]
+        d2 = np.empty((len(m.rows), width, width))
+        row_terms(m, q[nb:], 2, np.empty(len(m.rows)), np.empty((len(m.rows), width)), d2)
+        for i in range(len(m.rows)):
+            total = 0.0
+            for a in range(width):
+                for b in range(width):
+                    if m.cols[i, a] >= 0 and m.cols[i, b] >= 0:
+                        total += d2[i, a, b] * qd[nb + m.cols[i, a]] * qd[nb + m.cols[i, b]]
+            gamma[s.n_lin + m.rows[i]] += total
 
 
 @njit(cache=True)

@@ -17,7 +17,7 @@ import numpy as np
 from fccgrb_cli.solvers.result import KinematicResult
 from fccgrb_cli.system import System
 
-__all__ = ["METHODS", "Method", "solve_stretch"]
+__all__ = ["METHODS", "Method", "mixed_runs_compiled", "solve_stretch"]
 
 
 class Method(str, Enum):
@@ -106,3 +106,19 @@ def solve_stretch(method: Method | str, system: System, time: np.ndarray,
     )
 
     return solve_optimization(system, time, targets, Settings.from_options(options), progress)
+
+
+def mixed_runs_compiled(method: Method | str, system: System, options: Any) -> bool:
+    """Whether :func:`solve_stretch` solves with a mixed-coordinate ``method`` (not 'ad') in
+    the compiled kernels: the decision its solver makes from the same options."""
+    method = Method(method)
+    if method.drives_angles:
+        raise ValueError("mixed_runs_compiled: 'ad' is not a mixed-coordinate method")
+    if method.family == "nrm":
+        from fccgrb_cli.solvers.nrm.solve import NrmSettings
+
+        return NrmSettings.from_options(options).compiled(system)
+    from fccgrb_cli.solvers.optimize.solve import Settings, compiled_structured
+
+    settings = Settings.from_options(options)
+    return not settings.parallel and compiled_structured(system, settings)

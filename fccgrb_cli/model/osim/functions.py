@@ -20,14 +20,21 @@ mathematics OpenSim documents for the element of the same name:
   ``Σ c_i x_i^k = 0`` for k < m; outside the points it is the polynomial of degree m − 1 its end
   piece continues into (derivatives m … 2m − 2 vanish at the ends).
 * ``MultiplierFunction``: ``scale · f(x)``.
+
+Every one of them is a polynomial piece by piece, inside and outside its points: ``pieces()``
+gives that exact form (:class:`Pieces`), which the compiled kernels evaluate.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from fractions import Fraction
 from functools import cached_property
+from math import comb
 
 import numpy as np
+
+from fccgrb_cli.model.spatial import Pieces
 
 __all__ = [
     "Constant",
@@ -48,6 +55,11 @@ class Function:
         """f(x), f′(x) and f″(x) (units of the output per unit of x, and per unit²)."""
         raise NotImplementedError
 
+    def pieces(self) -> Pieces | None:
+        """f as :class:`Pieces`; None for a function without that form (it stays with the
+        numpy reference engine)."""
+        return None
+
     @property
     def constant(self) -> bool:
         """Whether f does not depend on x (a transform axis without a coordinate needs one)."""
@@ -62,6 +74,9 @@ class Constant(Function):
 
     def terms(self, x: float) -> tuple[float, float, float]:
         return self.value, 0.0, 0.0
+
+    def pieces(self) -> Pieces:
+        return Pieces.polynomial([self.value])
 
     @property
     def constant(self) -> bool:
@@ -78,6 +93,9 @@ class LinearFunction(Function):
     def terms(self, x: float) -> tuple[float, float, float]:
         return self.slope * x + self.intercept, self.slope, 0.0
 
+    def pieces(self) -> Pieces:
+        return Pieces.polynomial([self.intercept, self.slope])
+
 
 @dataclass(frozen=True)
 class Polynomial(Function):
@@ -91,6 +109,9 @@ class Polynomial(Function):
         d2 = np.polyder(d1) if len(d1) > 1 else np.zeros(1)
         return float(np.polyval(c, x)), float(np.polyval(d1, x)), float(np.polyval(d2, x))
 
+    def pieces(self) -> Pieces:
+        return Pieces.polynomial(list(self.coefficients)[::-1])
+
 
 @dataclass(frozen=True)
 class Multiplier(Function):
@@ -102,6 +123,10 @@ class Multiplier(Function):
     def terms(self, x: float) -> tuple[float, float, float]:
         f, d1, d2 = self.inner.terms(x)
         return self.scale * f, self.scale * d1, self.scale * d2
+
+    def pieces(self) -> Pieces | None:
+        inner = self.inner.pieces()
+        return None if inner is None else inner.scaled(self.scale)
 
     @property
     def constant(self) -> bool:
@@ -125,6 +150,13 @@ class PiecewiseLinear(Function):
         k = _interval(xs, x)
         slope = (ys[k + 1] - ys[k]) / (xs[k + 1] - xs[k])
         return float(ys[k] + slope * (x - xs[k])), float(slope), 0.0
+
+    def pieces(self) -> Pieces:
+        xs, ys = np.asarray(self.x, dtype=float), np.asarray(self.y, dtype=float)
+        slopes = np.diff(ys) / np.diff(xs)
+        # outside, the end segments themselves (origins x_0 and x_(m−2), as ``terms`` has them)
+        k = np.concatenate([[0], np.arange(len(xs) - 1), [len(xs) - 2]])
+        return Pieces(xs, xs[k], tuple(np.array([ys[i], slopes[i]]) for i in k))
 
 
 class _Cubic(Function):
@@ -158,6 +190,21 @@ class _Cubic(Function):
         h = xs[k + 1] - xs[k]
         a, b = (xs[k + 1] - x) / h, (x - xs[k]) / h
         return (ys[k + 1] - ys[k]) / h + ((1 - 3 * a**2) * M[k] + (3 * b**2 - 1) * M[k + 1]) * h / 6
+
+    def pieces(self) -> Pieces:
+        """Inside, the Taylor form at each interval's left knot (y_k, f′, M_k/2,
+        (M_k+1 − M_k)/6h); outside, the tangent line at the end knot."""
+        xs, ys = np.asarray(self.x, dtype=float), np.asarray(self.y, dtype=float)
+        M, n = self.moments, len(xs)
+        inside = []
+        for k in range(n - 1):
+            h = xs[k + 1] - xs[k]
+            inside.append(np.array([ys[k], self._slope(xs, ys, M, k, xs[k]), M[k] / 2,
+                                    (M[k + 1] - M[k]) / (6 * h)]))
+        left = np.array([ys[0], self._slope(xs, ys, M, 0, xs[0])])
+        right = np.array([ys[-1], self._slope(xs, ys, M, n - 2, xs[-1])])
+        origins = np.concatenate([[xs[0]], xs[:-1], [xs[-1]]])
+        return Pieces(xs, origins, (left, *inside, right))
 
     def _interior(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The continuity rows h_{i−1} M_{i−1} + 2(h_{i−1} + h_i) M_i + h_i M_{i+1} = 6 Δ²."""
@@ -242,3 +289,31 @@ class NaturalSpline(Function):
         poly2 = np.polyder(p[::-1], 2) if len(p) > 2 else np.zeros(1)
         d2 = (k * (k - 1) * c @ a ** (k - 2) if k > 1 else 0.0) + np.polyval(poly2, t)
         return float(value), float(d1 / scale), float(d2 / scale**2)
+
+    def pieces(self) -> Pieces:
+        """On each piece |t − t_i|^k is ±(t − t_i)^k (k odd: − where t < t_i): the sum and
+        the polynomial expanded about the piece's origin (the nearest knot on its left, the
+        first knot for the piece before it), then t − t_o = (x − x_o) / scale. The expansion
+        is exact (rational arithmetic on the float coefficients, rounded once at the end):
+        where the c_i are large its terms cancel, and rounding them one by one would add to
+        the error ``terms`` already has. At a knot of a degree-1 spline (a kink) f′ is the
+        right-hand one, where ``terms`` gives the mean of the two sides."""
+        xs = np.asarray(self.x, dtype=float)
+        c, p = self.coefficients
+        shift = 0.5 * (xs[0] + xs[-1])
+        scale = max(0.5 * (xs[-1] - xs[0]), 1e-300)
+        t = [(Fraction(v) - Fraction(shift)) / Fraction(scale) for v in xs]
+        cs, ps, k, n = [Fraction(v) for v in c], [Fraction(v) for v in p], self.degree, len(xs)
+        out, origins = [], []
+        for piece in range(n + 1):
+            o = max(piece - 1, 0)
+            # Σ_i σ_i c_i (t − t_i)^k = Σ_j C(k, j) (t − t_o)^j Σ_i σ_i c_i (t_o − t_i)^(k−j)
+            a = [comb(k, j) * sum(((ci if i < piece else -ci) * (t[o] - t[i]) ** (k - j)
+                                   for i, ci in enumerate(cs)), Fraction(0))
+                 for j in range(k + 1)]
+            for power, coefficient in enumerate(ps):  # p_l t^l about t_o
+                for j in range(power + 1):
+                    a[j] += coefficient * comb(power, j) * t[o] ** (power - j)
+            out.append(np.array([float(a_j / Fraction(scale) ** j) for j, a_j in enumerate(a)]))
+            origins.append(xs[o])
+        return Pieces(xs, np.array(origins), tuple(out))
