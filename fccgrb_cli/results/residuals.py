@@ -2,7 +2,9 @@
 
     residuals/                 the run's residual (its floating base's), attributes ``base``,
                                ``weight`` (N, the body weight the percentages refer to),
-                               ``weighed`` (whether the plates measured it)
+                               ``weighed`` (whether the plates measured it),
+                               ``plates_estimate`` (N: the plates' estimate where they load
+                               the measured frames, NaN where not; refused when implausible)
       measured, single         per frame: every ground contact measured (a plate under it or
                                in the air); of those, exactly one on a plate
       states/<body>            per frame and contact body: 0 air, 1 on a plate, 2 on the
@@ -46,6 +48,7 @@ def _write_report(out, report: ResidualReport, arrays: bool = True) -> None:
     out.attrs["base"] = report.base
     out.attrs["weight"] = report.over_measured.weight
     out.attrs["weighed"] = report.weighed
+    out.attrs["plates_estimate"] = report.plates_estimate
     out.attrs["states"] = list(STATES)
     put(out, "measured", report.measured)
     put(out, "single", report.single)
@@ -98,7 +101,8 @@ def _read_report(out, force: np.ndarray, moment: np.ndarray) -> ResidualReport:
     return ResidualReport(str(out.attrs["base"]),
                           {body: state[()] for body, state in out["states"].items()},
                           out["measured"][()], out["single"][()], force, moment, over_measured,
-                          over_single, weighed=bool(out.attrs["weighed"]))
+                          over_single, weighed=bool(out.attrs["weighed"]),
+                          plates_estimate=float(out.attrs.get("plates_estimate", np.nan)))
 
 
 def read_residuals(g) -> tuple[ResidualReport | None, Reduction | None]:
