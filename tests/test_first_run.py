@@ -55,6 +55,13 @@ def test_a_first_run_solves_in_numpy_and_compiles_in_the_background(cold, tmp_pa
     # a second command while it compiles: numpy again, no second compile
     done = run_cli("solve", *SAMPLE, "-o", tmp_path / "b.h5")
     assert done.exit_code == 0 and len(calls) == 1 and _engine(tmp_path / "b.h5") == "numpy"
+    # the compile has written its first kernel and goes on: still numpy (taking the kernels
+    # then would compile the rest in this command, ~45 s), and once the lock is gone, compiled
+    (folder / "solvers").mkdir()
+    (folder / "solvers" / "kernels.nrm-1.py311.nbi").write_bytes(b"")
+    assert _first_run_engine(SolveOptions()).engine == "numpy" and len(calls) == 1
+    (folder / ".compiling").unlink()
+    assert _first_run_engine(SolveOptions()).engine == "auto" and len(calls) == 1
 
 
 def test_compiled_kernels_or_a_stated_engine_start_nothing(cold, tmp_path):

@@ -408,7 +408,7 @@ def _first_run_engine(options: SolveOptions) -> SolveOptions:
     compile (the tests set it: every run of a suite then uses one engine)."""
     import os
 
-    from fccgrb_cli.pipeline.precompile import BACKGROUND, compile_in_background
+    from fccgrb_cli.pipeline.precompile import BACKGROUND, compile_in_background, compiling
     from fccgrb_cli.solvers.engine import numba_available
 
     if options.engine != "auto" or os.environ.get(BACKGROUND) == "0" or \
@@ -418,7 +418,9 @@ def _first_run_engine(options: SolveOptions) -> SolveOptions:
     from fccgrb_cli.core.kernel_cache import compiled_here
 
     folder = os.environ.get("NUMBA_CACHE_DIR")
-    if not folder or compiled_here():
+    # a compile under way has written its first kernels: a run that took them would compile
+    # the rest itself, in the foreground (~45 s)
+    if not folder or (compiled_here() and not compiling(Path(folder))):
         return options
     started = compile_in_background(Path(folder))
     click.echo("fccgrb: the compiled kernels are not built on this machine yet: this run uses "

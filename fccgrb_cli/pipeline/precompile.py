@@ -86,6 +86,16 @@ LOCK = ".compiling"  # in the cache folder while a background compile runs
 STALE = 900.0  # s: a lock older than this was left by a compile that died
 
 
+def compiling(folder: Path) -> bool:
+    """Whether a background compile is filling ``folder`` now (its :data:`LOCK`, younger than
+    :data:`STALE`): its first kernels are already there while it compiles the rest."""
+    lock = folder / LOCK
+    try:
+        return lock.exists() and time.time() - lock.stat().st_mtime < STALE
+    except OSError:
+        return False
+
+
 def compile_in_background(folder: Path) -> bool:
     """Start ``fccgrb compile`` as a detached process (its own session, no terminal, output
     discarded) that fills the kernel cache ``folder`` for the next runs, unless one is running
@@ -95,7 +105,7 @@ def compile_in_background(folder: Path) -> bool:
 
     lock = folder / LOCK
     try:
-        if lock.exists() and time.time() - lock.stat().st_mtime < STALE:
+        if compiling(folder):
             return True
         lock.write_text(str(os.getpid()))
     except OSError:
