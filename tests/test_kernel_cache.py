@@ -117,3 +117,18 @@ def test_the_folder_is_under_the_users_choice_then_the_cache_home():
     assert cache_folder("1.0", "cd", {"NUMBA_CACHE_DIR": "/x/fccgrb/kernels-1.0-ab",
                                       "FCCGRB_USER_NUMBA_CACHE_DIR": "",
                                       "XDG_CACHE_HOME": "/x"}) == Path("/x/fccgrb/kernels-1.0-cd")
+
+
+def test_another_install_of_the_same_sources_has_its_own_folder(tmp_path):
+    """numba keys its index by each kernel's file path: a second install of the very same
+    sources (another environment, a fresh clone) must not find the first one's kernels and
+    count as compiled, or its first command compiles them all in the foreground."""
+    import shutil
+
+    root = tmp_path / "one" / "pkg"
+    (root / "solvers").mkdir(parents=True)
+    (root / "solvers" / "a.py").write_text("A = 1\n")
+    other = tmp_path / "two" / "pkg"
+    shutil.copytree(root, other)
+    assert source_digest(root, ("solvers",)) != source_digest(other, ("solvers",))
+    assert source_digest(root, ("solvers",)) == source_digest(root, ("solvers",))

@@ -28,9 +28,15 @@ _USER_SET = "FCCGRB_USER_NUMBA_CACHE_DIR"  # the user's own NUMBA_CACHE_DIR, kep
 
 
 def source_digest(root: Path = PACKAGE, folders: tuple[str, ...] = SOURCES) -> str:
-    """A digest (16 hex digits) of the relative path and bytes of every ``*.py`` file under
-    ``root``'s ``folders``, in a fixed order."""
+    """A digest (16 hex digits) of where ``root`` is and of the relative path and bytes of every
+    ``*.py`` file under its ``folders``, in a fixed order. The place counts because numba's
+    index inside the folder is keyed by each kernel's file path: another install of the same
+    sources (a second virtual environment, a fresh clone) would otherwise find this one's index
+    files, count as compiled (:func:`compiled_here`), and compile every kernel in the
+    foreground of its first command instead of in the background."""
     digest = hashlib.sha256()
+    digest.update(str(Path(root).resolve()).encode())
+    digest.update(b"\0")
     for folder in folders:
         for path in sorted((root / folder).rglob("*.py")):
             digest.update(str(path.relative_to(root)).encode())
