@@ -144,17 +144,19 @@ def coordinate_rates(time: np.ndarray, theta: np.ndarray, cutoff: float | None =
     tuple of numpy.ndarray
         θ (filtered), θ̇, θ̈ at ``time`` (frames × n_θ each; rad, m and per s, s²).
     """
-    from scipy.interpolate import make_interp_spline
-
+    from fccgrb_cli.signals.natural_quintic import natural_quintic
     from fccgrb_cli.signals.opensim_lowpass import lowpass_padded
 
     time = np.asarray(time, dtype=float)
     theta = np.asarray(theta, dtype=float)
-    knots, values = (time, theta) if cutoff is None else lowpass_padded(time, theta, cutoff)
-    zero = np.zeros(theta.shape[1:])
-    natural = [(3, zero), (4, zero)]
-    spline = make_interp_spline(knots, values, k=5, bc_type=(natural, natural))
-    return spline(time), spline(time, 1), spline(time, 2)
+    if cutoff is None:
+        knots, values, first = time, theta, 0
+    else:  # the padded rows hold the trial's own at rows // 2 onwards (signals.opensim_lowpass)
+        knots, values = lowpass_padded(time, theta, cutoff)
+        first = len(theta) // 2
+    rate, acceleration = natural_quintic(knots, values)
+    rows = slice(first, first + len(theta))
+    return values[rows], rate[rows], acceleration[rows]
 
 
 def forces_from_coordinates(system: System, time: np.ndarray, theta: np.ndarray,
