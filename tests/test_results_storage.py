@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import fccgrb_cli as fc
-from fccgrb_cli.core.datasets import LARGE
+from fccgrb_cli.core import datasets
 from fccgrb_cli.pipeline.run import summary
 from fccgrb_cli.presentation.tables import collect
 from fccgrb_cli.results.export import write_csv
@@ -80,11 +80,18 @@ def same(a, b) -> bool:
     return a == b
 
 
+LARGE = 1 << 16  # bytes: the size from which the fixture's runs are compressed
+
+
 @pytest.fixture(scope="module", params=["five_bar", "gait"])
 def written(request, tmp_path_factory) -> tuple[fc.Run, Path]:
     run = five_bar_run() if request.param == "five_bar" else gait_run()
     path = tmp_path_factory.mktemp(request.param) / "results.h5"
-    write_run(path, run, "fccgrb solve (test)")
+    # these short trials' arrays fall below the default size for compression: a smaller one
+    # makes some of them large, so that both ways of storing are written and read back
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(datasets, "LARGE", LARGE)
+        write_run(path, run, "fccgrb solve (test)")
     return run, path
 
 

@@ -56,15 +56,21 @@ def _is_bit(value) -> bool:
 def run_flags(group) -> tuple[tuple[Flag, ...], tuple[tuple[str, str], ...]]:
     """Every bit of every flag dataset of a run group (the frame flags first, then the others
     by path; bits in order), and the datasets' other attributes as (dataset:attribute, text)."""
-    datasets: list[tuple[str, Any]] = []  # (path, h5py dataset)
+    names: list[str] = []
 
-    def visit(name: str, obj) -> None:
+    def visit(name: str) -> None:
         stem = name.rsplit("/", 1)[-1]
-        if hasattr(obj, "dtype") and obj.dtype.kind in "iu" and (
-                stem == "flags" or stem.endswith("_flags")):
-            datasets.append((name, obj))
+        if stem == "flags" or stem.endswith("_flags"):
+            names.append(name)
 
-    group.visititems(visit)
+    # names first, objects only for those: opening every object of a run (visititems) took
+    # ~20 ms a run, a second of a 50-trial study's merge
+    group.visit(visit)
+    datasets: list[tuple[str, Any]] = []  # (path, h5py dataset)
+    for name in names:
+        obj = group[name]
+        if hasattr(obj, "dtype") and obj.dtype.kind in "iu":
+            datasets.append((name, obj))
     datasets.sort(key=lambda item: (item[0] != "flags", item[0]))
     flags: list[Flag] = []
     notes: list[tuple[str, str]] = []
