@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.trial.c3d_file import ezc3d_read
 
 _LENGTH = {"mm": 1e-3, "m": 1.0, "cm": 1e-2}
 _MOMENT = {"Nmm": 1e-3, "Nm": 1.0, "N.mm": 1e-3, "N.m": 1.0}
@@ -216,10 +217,8 @@ def plate_file(path: str | Path) -> PlateFile:
 def _read_plate_file(real: str, identity: tuple[int, int, int], shown: str) -> PlateFile:
     """plate_file's read (``identity`` in the key only; ``shown``: the path as the user gave
     it, for messages)."""
-    import ezc3d
-
     try:
-        c3d = ezc3d.c3d(real, extract_forceplat_data=True)
+        c3d = ezc3d_read(real, True)
     except Exception as exc:  # ezc3d raises plain RuntimeErrors for unreadable platform data
         reason = str(exc).strip() or exc.__class__.__name__
         raise InputError(f"{shown}: cannot read the force platforms ({reason})") from None

@@ -21,6 +21,7 @@ from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.core.inputs import decode, read_bytes, regular_file
 from fccgrb_cli.core.stretches import window
 from fccgrb_cli.trial.c3d import ARTEFACT_PARAMETER, ARTEFACT_TRC_KEY, UNIT_SCALE, write_markers
+from fccgrb_cli.trial.c3d_file import ezc3d_read
 from fccgrb_cli.trial.c3d_header import (
     TRUNCATED,
     WORD_LIMIT,
@@ -111,8 +112,6 @@ def _complete(path: Path, announced: str, held: int, accept_truncated: bool) -> 
 
 def read_c3d(path: Path, accept_truncated: bool = False) -> Trial:
     """A C3D trial; its layout is read first, so that a cut file is not read as a short one."""
-    import ezc3d
-
     layout = read_layout(path)
     warnings: tuple[str, ...] = ()
     frames = layout.frames
@@ -122,7 +121,7 @@ def read_c3d(path: Path, accept_truncated: bool = False) -> Trial:
     if frames > WORD_LIMIT:  # ezc3d counts frames in a 16-bit word: read the file's bytes
         return _read_long_c3d(path, layout, frames, warnings)
     try:
-        c3d = ezc3d.c3d(str(path))
+        c3d = _ezc3d(path)
     except Exception as exc:  # ezc3d raises bare RuntimeError/IOError on bad files
         reason = str(exc).strip() or exc.__class__.__name__
         raise InputError(f"{path}: not a readable C3D file ({reason})") from None
@@ -146,6 +145,17 @@ def read_c3d(path: Path, accept_truncated: bool = False) -> Trial:
                          ARTEFACT_PARAMETER)
     return Trial(str(path), labels, xyz, rate, warnings, (layout.first_frame - 1) / rate,
                  artefact)
+
+
+def _ezc3d(path: Path):
+    """ezc3d's read of the file, with its platforms' extraction where it uses platforms (the
+    solve reads them next: ``trial.c3d_file``); without it where that extraction fails, which
+    the platforms' own read then reports, if they are needed."""
+    used = read_parameters(path).get("FORCE_PLATFORM:USED")
+    if used is not None and used.values.size and used.values[0]:
+        with contextlib.suppress(Exception):  # the markers may still be readable
+            return ezc3d_read(path, True)
+    return ezc3d_read(path, False)
 
 
 def _artefact(value: object, path: Path, where: str) -> float:
