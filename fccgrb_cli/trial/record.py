@@ -121,7 +121,7 @@ def read_c3d(path: Path, accept_truncated: bool = False) -> Trial:
     if frames > WORD_LIMIT:  # ezc3d counts frames in a 16-bit word: read the file's bytes
         return _read_long_c3d(path, layout, frames, warnings)
     try:
-        c3d = _ezc3d(path)
+        c3d = ezc3d_read(path, False)  # shared with the platforms' read: trial.c3d_file
     except Exception as exc:  # ezc3d raises bare RuntimeError/IOError on bad files
         reason = str(exc).strip() or exc.__class__.__name__
         raise InputError(f"{path}: not a readable C3D file ({reason})") from None
@@ -145,17 +145,6 @@ def read_c3d(path: Path, accept_truncated: bool = False) -> Trial:
                          ARTEFACT_PARAMETER)
     return Trial(str(path), labels, xyz, rate, warnings, (layout.first_frame - 1) / rate,
                  artefact)
-
-
-def _ezc3d(path: Path):
-    """ezc3d's read of the file, with its platforms' extraction where it uses platforms (the
-    solve reads them next: ``trial.c3d_file``); without it where that extraction fails, which
-    the platforms' own read then reports, if they are needed."""
-    used = read_parameters(path).get("FORCE_PLATFORM:USED")
-    if used is not None and used.values.size and used.values[0]:
-        with contextlib.suppress(Exception):  # the markers may still be readable
-            return ezc3d_read(path, True)
-    return ezc3d_read(path, False)
 
 
 def _artefact(value: object, path: Path, where: str) -> float:
