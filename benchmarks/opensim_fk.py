@@ -1,0 +1,216 @@
+"""Forward kinematics of OpenSim models: fccgrb's imported model beside OpenSim itself.
+
+    python benchmarks/opensim_fk.py MODEL.osim [MODEL.osim ...] --opensim-python PATH
+        [--poses 20] [--seed 0]
+
+For each model, OpenSim (in the Python given by ``--opensim-python``, one subprocess per model,
+JSON across) draws ``--poses`` random poses: every unlocked coordinate that no enforced
+CoordinateCouplerConstraint sets uniform in its range (a range wider than ±1e3 is taken as
+±π rad or ±1 m), locked ones at their default, each coupler's dependent set by OpenSim's own
+coupler function of its independent value (repeated until chained couplers settle), with
+``Coordinate.setValue`` without enforcing constraints. It reports every coordinate's value,
+every body's origin and rotation in the ground and every marker's position in the ground, and
+how far ``Model.assemble`` moves the coordinates from there (a check that the couplers were
+set as OpenSim's assembly sets them).
+
+fccgrb reads the same file (``fccgrb_cli.model.load_model``), takes OpenSim's values of the
+coordinates no coupling of its own sets, computes the rest from its couplings (coupler
+functions and locked values, one pass in the model's order, as its initial guess does), places
+the bodies by ``pose_from_coordinates`` and reads the markers by ``system.point_positions``.
+
+Per model one row: the largest body-origin difference (mm), body-rotation difference (deg, the
+angle of R_fccgrbᵀ R_OpenSim, from ‖ΔR‖_F so that it keeps its precision near zero) and
+marker difference (mm) over the poses, the largest coordinate difference and the coordinates
+that differ by more than 1e-9 (rad or m). A model fccgrb refuses gets its one-line reason.
+Markers fixed in the ground are left out (they do not move).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from fccgrb_cli.core.errors import InputError
+from fccgrb_cli.model import Model, load_model
+from fccgrb_cli.system import compile_system
+from fccgrb_cli.system.moving_pose import pose_from_coordinates
+
+# Run in OpenSim's Python: argv[1] the request (JSON), argv[2] where to write the answer.
+OPENSIM_SIDE = r'''
+import json, math, sys
+import numpy as np
+import opensim as osim
+
+request = json.load(open(sys.argv[1]))
+osim.Logger.setLevelString("error")
+model = osim.Model(request["model"])
+state = model.initSystem()
+coords = model.getCoordinateSet()
+names = [coords.get(k).getName() for k in range(coords.getSize())]
+couplers = []
+constraints = model.getConstraintSet()
+for k in range(constraints.getSize()):
+    c = osim.CoordinateCouplerConstraint.safeDownCast(constraints.get(k))
+    if c is None or not c.isEnforced(state):
+        continue
+    independent = c.getIndependentCoordinateNames()
+    couplers.append(([independent.get(i) for i in range(independent.getSize())],
+                     c.getDependentCoordinateName(), c.getFunction()))
+dependent = {d for _, d, _ in couplers}
+rng = np.random.default_rng(request["seed"])
+free = []
+for k, name in enumerate(names):
+    c = coords.get(k)
+    if c.getDefaultLocked() or name in dependent:
+        continue
+    low, high = c.getRangeMin(), c.getRangeMax()
+    if max(abs(low), abs(high)) > 1e3:
+        bound = math.pi if c.getMotionType() == 1 else 1.0
+        low, high = max(low, -bound), min(high, bound)
+    free.append((c, low, high))
+bodies = model.getBodySet()
+markers = model.getMarkerSet()
+poses = []
+for _ in range(request["poses"]):
+    for c, low, high in free:
+        c.setValue(state, float(rng.uniform(low, high)), False)
+    for _ in range(len(couplers)):  # chained couplers settle in as many passes
+        for independent, name, function in couplers:
+            x = osim.Vector(len(independent), 0.0)
+            for i, n in enumerate(independent):
+                x.set(i, coords.get(n).getValue(state))
+            coords.get(name).setValue(state, function.calcValue(x), False)
+    model.realizePosition(state)
+    values = [coords.get(k).getValue(state) for k in range(len(names))]
+    body_out = {}
+    for k in range(bodies.getSize()):
+        b = bodies.get(k)
+        X = b.getTransformInGround(state)
+        R, p = X.R().asMat33(), X.p()
+        body_out[b.getName()] = ([p.get(i) for i in range(3)],
+                                 [[R.get(i, j) for j in range(3)] for i in range(3)])
+    marker_out = {}
+    for k in range(markers.getSize()):
+        m = markers.get(k)
+        g = m.getLocationInGround(state)
+        marker_out[m.getName()] = [g.get(i) for i in range(3)]
+    assembled = osim.State(state)
+    model.assemble(assembled)
+    moved = max((abs(coords.get(k).getValue(assembled) - values[k])
+                 for k in range(len(names))), default=0.0)
+    poses.append({"values": values, "bodies": body_out, "markers": marker_out,
+                  "assembly_moved": moved})
+json.dump({"names": names, "dependent": sorted(dependent), "poses": poses},
+          open(sys.argv[2], "w"))
+'''
+
+
+def opensim_poses(python: str, model: Path, poses: int, seed: int) -> dict:
+    """OpenSim's random poses of ``model`` (see the module): names, poses with values, bodies,
+    markers. Raises RuntimeError with OpenSim's last line of error output when it fails."""
+    with tempfile.TemporaryDirectory() as folder:
+        request, answer = Path(folder, "request.json"), Path(folder, "answer.json")
+        request.write_text(json.dumps({"model": str(model.resolve()), "poses": poses,
+                                       "seed": seed}))
+        done = subprocess.run([python, "-c", OPENSIM_SIDE, str(request), str(answer)],
+                              capture_output=True, text=True, cwd=folder,
+                              env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
+        if done.returncode != 0 or not answer.exists():
+            lines = (done.stderr or done.stdout).strip().splitlines() or ["no output"]
+            raise RuntimeError(f"OpenSim failed: {lines[-1]}")
+        return json.loads(answer.read_text())
+
+
+def rotation_angle_deg(A: np.ndarray, B: np.ndarray) -> float:
+    """The angle (deg) of the rotation Aᵀ B, from ‖A − B‖_F = 2√2 sin(angle/2)."""
+    chord = float(np.linalg.norm(A - B)) / (2.0 * np.sqrt(2.0))
+    return float(np.degrees(2.0 * np.arcsin(min(chord, 1.0))))
+
+
+def compare(model: Model, reference: dict) -> dict:
+    """fccgrb's forward kinematics of ``model`` at OpenSim's poses: the largest differences
+    (see module)."""
+    system = compile_system(model, angles="coordinate")
+    functions = system.functions
+    assert functions is not None  # an imported model has moving joints
+    names = [a.name for a in model.angles]
+    their = reference["names"]
+    if sorted(names) != sorted(their):
+        raise RuntimeError(f"coordinates differ: fccgrb only {sorted(set(names) - set(their))}, "
+                           f"OpenSim only {sorted(set(their) - set(names))}")
+    order = [their.index(n) for n in names]
+    points = [(tp.body, tp.point) for tp in model.tracked_points]
+    bodies = [b.name for b in model.bodies]
+    worst = {"origin_mm": 0.0, "rotation_deg": 0.0, "marker_mm": 0.0, "coordinate": 0.0,
+             "assembly_moved": 0.0}
+    differing: set[str] = set()
+    for pose in reference["poses"]:
+        values = np.asarray(pose["values"], dtype=float)[order]
+        theta = values.copy()
+        for _, k, independent, function in functions.couplings:
+            theta[k] = function.terms(float(theta[independent]) if independent >= 0 else 0.0)[0]
+        gap = np.abs(theta - values)
+        worst["coordinate"] = max(worst["coordinate"], float(gap.max(initial=0.0)))
+        differing.update(n for n, g in zip(names, gap, strict=True) if g > 1e-9)
+        worst["assembly_moved"] = max(worst["assembly_moved"], pose["assembly_moved"])
+        q = pose_from_coordinates(system, theta)
+        for body in bodies:
+            r, axes = (np.asarray(a, dtype=float) for a in pose["bodies"][body])
+            ours = q[system.layout.q_slice(body)].reshape(4, 3)
+            worst["origin_mm"] = max(worst["origin_mm"], 1e3 * float(np.linalg.norm(ours[0] - r)))
+            worst["rotation_deg"] = max(worst["rotation_deg"],
+                                        rotation_angle_deg(ours[1:].T, axes))
+        if points:
+            ours = system.point_positions(q, points)
+            theirs = np.array([pose["markers"][p] for _, p in points], dtype=float)
+            worst["marker_mm"] = max(worst["marker_mm"],
+                                     1e3 * float(np.linalg.norm(ours - theirs, axis=1).max()))
+    ground = sum(1 for m in model.ground.points if m in reference["poses"][0]["markers"])
+    return {**worst, "differing": sorted(differing), "bodies": len(bodies),
+            "markers": len(points), "ground_markers": ground, "coordinates": len(names)}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("models", nargs="+", type=Path)
+    parser.add_argument("--opensim-python", default=sys.executable)
+    parser.add_argument("--poses", type=int, default=20)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args(argv)
+    print(f"load: {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} {os.getloadavg()[2]:.2f}")
+    print("| model | bodies | markers | coords | origin mm | rotation deg | marker mm | "
+          "coord diff | assemble moved | differing coordinates |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    refused = []
+    for path in args.models:
+        started = time.perf_counter()
+        try:
+            model = load_model(path)
+        except InputError as error:
+            refused.append(f"{path}: fccgrb: {error}")
+            continue
+        try:
+            row = compare(model, opensim_poses(args.opensim_python, path, args.poses, args.seed))
+        except RuntimeError as error:
+            refused.append(f"{path}: {error}")
+            continue
+        differing = ", ".join(row["differing"]) or "-"
+        print(f"| {path} | {row['bodies']} | {row['markers']} | {row['coordinates']} | "
+              f"{row['origin_mm']:.2e} | {row['rotation_deg']:.2e} | {row['marker_mm']:.2e} | "
+              f"{row['coordinate']:.1e} | {row['assembly_moved']:.1e} | {differing} |"
+              f"  ({time.perf_counter() - started:.1f} s)", flush=True)
+    for line in refused:
+        print(f"not compared: {line}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
