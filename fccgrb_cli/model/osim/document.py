@@ -275,13 +275,17 @@ def _function_element(r: _Reader, element: ET.Element, parents: list[ET.Element]
             return SimmSpline(x, y)
         if tag == "PiecewiseLinearFunction":
             return PiecewiseLinear(x, y)
-        degree = int(r.scalar(element, "degree", parents, 5))
+        # OpenSim writes the degree as half_order m (degree 2m − 1) and has no default for it
+        half_order = r.scalar(element, "half_order", parents)
         smoothing = r.scalar(element, "error_variance", parents, 0.0)
-        if degree not in (1, 3, 5, 7) or smoothing != 0.0:
-            r.fail(where, f"expected degree 1, 3, 5 or 7 and no smoothing (error_variance 0), "
-                          f"got degree {degree}, error_variance {smoothing:g}")
-        if len(x) < (degree + 1) // 2:
-            r.fail(where, f"expected at least {(degree + 1) // 2} points for degree {degree}")
+        if half_order not in (1, 2, 3, 4) or smoothing != 0.0:
+            r.fail(where, f"expected half_order 1, 2, 3 or 4 (degree 1, 3, 5 or 7) and no "
+                          f"smoothing (error_variance 0), got half_order {half_order:g}, "
+                          f"error_variance {smoothing:g}")
+        degree = 2 * int(half_order) - 1
+        if len(x) < degree + 1:  # OpenSim's gcvspl needs 2m points
+            r.fail(where, f"expected at least {degree + 1} points for half_order "
+                          f"{int(half_order)}, got {len(x)}")
         return NaturalSpline(x, y, degree)
     r.fail(where, f"unknown function type {tag} (known: {', '.join(FUNCTION_TAGS)})")
 

@@ -15,10 +15,10 @@ mathematics OpenSim documents for the element of the same name:
   point (f″ = 0).
 * ``NaturalCubicSpline`` and ``natCubicSpline`` (2.x/3.x names): read as a ``SimmSpline``, as
   OpenSim reads them (it renames both on reading: that old spline was not a natural one).
-* ``GCVSpline`` of odd degree 2m − 1 with no smoothing: the natural interpolating spline of that
-  degree, which is ``Σ c_i |x − x_i|^(2m−1) + p(x)`` with p of degree m − 1 and
-  ``Σ c_i x_i^k = 0`` for k < m; outside the points it is the polynomial of degree m − 1 its end
-  piece continues into (derivatives m … 2m − 2 vanish at the ends).
+* ``GCVSpline`` of odd degree 2m − 1 (m its ``half_order``) with no smoothing: the natural
+  interpolating spline of that degree, which is ``Σ c_i |x − x_i|^(2m−1) + p(x)`` with p of
+  degree m − 1 and ``Σ c_i x_i^k = 0`` for k < m; outside the points it is the polynomial of
+  degree m − 1 its end piece continues into (derivatives m … 2m − 2 vanish at the ends).
 * ``MultiplierFunction``: ``scale · f(x)``.
 
 Every one of them is a polynomial piece by piece, inside and outside its points: ``pieces()``
