@@ -13,10 +13,12 @@ every body's origin and rotation in the ground and every marker's position in th
 how far ``Model.assemble`` moves the coordinates from there (a check that the couplers were
 set as OpenSim's assembly sets them).
 
-fccgrb reads the same file (``fccgrb_cli.model.load_model``), takes OpenSim's values of the
-coordinates no coupling of its own sets, computes the rest from its couplings (coupler
-functions and locked values, one pass in the model's order, as its initial guess does), places
-the bodies by ``pose_from_coordinates`` and reads the markers by ``system.point_positions``.
+fccgrb reads the same file (``fccgrb_cli.model.load_model``), places the bodies at OpenSim's
+values of all coordinates by ``pose_from_coordinates`` and reads the markers by
+``system.point_positions``: the forward kinematics alone. Apart from it, fccgrb computes the
+coordinates its couplings set (coupler functions and locked values, one pass in the model's
+order, as its initial guess does) from OpenSim's values of the others, and they are compared
+with OpenSim's.
 
 Per model one row: the largest body-origin difference (mm), body-rotation difference (deg, the
 angle of R_fccgrbᵀ R_OpenSim, from ‖ΔR‖_F so that it keeps its precision near zero) and
@@ -161,7 +163,7 @@ def compare(model: Model, reference: dict) -> dict:
         worst["coordinate"] = max(worst["coordinate"], float(gap.max(initial=0.0)))
         differing.update(n for n, g in zip(names, gap, strict=True) if g > 1e-9)
         worst["assembly_moved"] = max(worst["assembly_moved"], pose["assembly_moved"])
-        q = pose_from_coordinates(system, theta)
+        q = pose_from_coordinates(system, values)
         for body in bodies:
             r, axes = (np.asarray(a, dtype=float) for a in pose["bodies"][body])
             ours = q[system.layout.q_slice(body)].reshape(4, 3)
