@@ -53,6 +53,9 @@ FUNCTION_TAGS = ("Constant", "LinearFunction", "SimmSpline", "NaturalCubicSpline
 # Old names OpenSim reads as a SimmSpline (Object::renameType in its osimCommon registration:
 # the old NaturalCubicSpline was not a natural spline), so a 2.x/3.x knee evaluates as there.
 SIMM_SPLINE_TAGS = ("SimmSpline", "NaturalCubicSpline", "natCubicSpline")
+# OpenSim refuses a CustomJoint two of whose rotation (or translation) axes have a cross product
+# shorter than this (CustomJoint::extendFinalizeFromProperties).
+COLLINEAR = 1e-5
 # Standard joints as SpatialTransforms: per coordinate, (rotation or translation, axis).
 X, Y, Z = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
 STANDARD_JOINTS: dict[str, tuple[tuple[str, Vec3], ...]] = {
@@ -361,6 +364,13 @@ def _spatial_transform(r: _Reader, joint: ET.Element, parents: list[ET.Element],
                 r.fail(r.where([*parents, joint], transform), f"expected a TransformAxis named "
                                                               f"{kind}{k}")
             out.append(_transform_axis(r, element, inside, kind, coordinate_names))
+    for first in (0, 3):  # as OpenSim's CustomJoint checks them, constant axes included
+        for a, b in ((0, 1), (0, 2), (1, 2)):
+            if np.linalg.norm(np.cross(out[first + a].axis, out[first + b].axis)) < COLLINEAR:
+                kind = out[first].kind
+                r.fail(r.where([*parents, joint], transform),
+                       f"{kind}{a + 1} and {kind}{b + 1} have collinear axes, which OpenSim "
+                       f"refuses (|a × b| < {COLLINEAR:g})")
     return tuple(out)
 
 
