@@ -1,13 +1,15 @@
 """Forward kinematics of OpenSim models: fccgrb's imported model beside OpenSim itself.
 
     python benchmarks/opensim_fk.py MODEL.osim [MODEL.osim ...] --opensim-python PATH
-        [--poses 20] [--seed 0]
+        [--poses 20] [--seed 0] [--widen 0]
 
 For each model, OpenSim (in the Python given by ``--opensim-python``, one subprocess per model,
 JSON across) draws ``--poses`` random poses: every unlocked coordinate that no enforced
 CoordinateCouplerConstraint sets uniform in its range (a range wider than ±1e3 is taken as
-±π rad or ±1 m), locked ones at their default, each coupler's dependent set by OpenSim's own
-coupler function of its independent value (repeated until chained couplers settle), with
+±π rad or ±1 m; ``--widen f`` widens it by f times its width at both ends, to reach the
+functions outside their points), locked ones at their default, each coupler's dependent set
+by OpenSim's own coupler function of its independent value (repeated until chained couplers
+settle), with
 ``Coordinate.setValue`` without enforcing constraints. It reports every coordinate's value,
 every body's origin and rotation in the ground and every marker's position in the ground, and
 how far ``Model.assemble`` moves the coordinates from there (a check that the couplers were
@@ -18,13 +20,14 @@ values of all coordinates by ``pose_from_coordinates`` and reads the markers by
 ``system.point_positions``: the forward kinematics alone. Apart from it, fccgrb computes the
 coordinates its couplings set (coupler functions and locked values, one pass in the model's
 order, as its initial guess does) from OpenSim's values of the others, and they are compared
-with OpenSim's.
+with OpenSim's; so are its coordinates' default values with the ones OpenSim's ``initSystem``
+assembles (couplers applied).
 
 Per model one row: the largest body-origin difference (mm), body-rotation difference (deg, the
 angle of R_fccgrbᵀ R_OpenSim, from ‖ΔR‖_F so that it keeps its precision near zero) and
-marker difference (mm) over the poses, the largest coordinate difference and the coordinates
-that differ by more than 1e-9 (rad or m). A model fccgrb refuses gets its one-line reason.
-Markers fixed in the ground are left out (they do not move). A model older than OpenSim 4
+marker difference (mm) over the poses, the largest coordinate and default difference and the
+coordinates that differ by more than 1e-9 (rad or m). A model fccgrb refuses gets its one-line
+reason. Markers fixed in the ground are left out (they do not move). A model older than OpenSim 4
 (Version below 40000) gets a second row: fccgrb and OpenSim both reading the 4.x file OpenSim
 writes of it. OpenSim rounds such a model's joint offsets to 6 significant digits in its
 conversion on reading, which fccgrb does not do; the second row tells that rounding (~1e-4 mm)
@@ -62,6 +65,7 @@ model = osim.Model(request["model"])
 state = model.initSystem()
 coords = model.getCoordinateSet()
 names = [coords.get(k).getName() for k in range(coords.getSize())]
+defaults = [coords.get(k).getValue(state) for k in range(len(names))]  # as initSystem assembles
 couplers = []
 constraints = model.getConstraintSet()
 for k in range(constraints.getSize()):
@@ -82,7 +86,8 @@ for k, name in enumerate(names):
     if max(abs(low), abs(high)) > 1e3:
         bound = math.pi if c.getMotionType() == 1 else 1.0
         low, high = max(low, -bound), min(high, bound)
-    free.append((c, low, high))
+    margin = request["widen"] * (high - low)
+    free.append((c, low - margin, high + margin))
 bodies = model.getBodySet()
 markers = model.getMarkerSet()
 poses = []
@@ -115,7 +120,7 @@ for _ in range(request["poses"]):
                  for k in range(len(names))), default=0.0)
     poses.append({"values": values, "bodies": body_out, "markers": marker_out,
                   "assembly_moved": moved})
-json.dump({"names": names, "dependent": sorted(dependent), "poses": poses},
+json.dump({"names": names, "dependent": sorted(dependent), "poses": poses, "defaults": defaults},
           open(sys.argv[2], "w"))
 if request["written"]:
     model.printToXML(request["written"])
@@ -123,14 +128,15 @@ if request["written"]:
 
 
 def opensim_poses(python: str, model: Path, poses: int, seed: int,
-                  written: Path | None = None) -> dict:
+                  written: Path | None = None, widen: float = 0.0) -> dict:
     """OpenSim's random poses of ``model`` (see the module): names, poses with values, bodies,
     markers; with ``written``, the model as OpenSim writes it (4.x) saved there. Raises
     RuntimeError with OpenSim's error line when it fails."""
     with tempfile.TemporaryDirectory() as folder:
         request, answer = Path(folder, "request.json"), Path(folder, "answer.json")
         request.write_text(json.dumps({"model": str(model.resolve()), "poses": poses,
-                                       "seed": seed, "written": str(written or "")}))
+                                       "seed": seed, "written": str(written or ""),
+                                       "widen": widen}))
         done = subprocess.run([python, "-c", OPENSIM_SIDE, str(request), str(answer)],
                               capture_output=True, text=True, cwd=folder,
                               env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
@@ -170,8 +176,12 @@ def compare(model: Model, reference: dict) -> dict:
     points = [(tp.body, tp.point) for tp in model.tracked_points]
     bodies = [b.name for b in model.bodies]
     worst = {"origin_mm": 0.0, "rotation_deg": 0.0, "marker_mm": 0.0, "coordinate": 0.0,
-             "assembly_moved": 0.0}
+             "assembly_moved": 0.0, "default": 0.0}
     differing: set[str] = set()
+    ours_default = np.array([a.default for a in model.angles])
+    gap = np.abs(ours_default - np.asarray(reference["defaults"], dtype=float)[order])
+    worst["default"] = float(gap.max(initial=0.0))
+    differing.update(f"{n} (default)" for n, g in zip(names, gap, strict=True) if g > 1e-9)
     for pose in reference["poses"]:
         values = np.asarray(pose["values"], dtype=float)[order]
         theta = values.copy()
@@ -204,11 +214,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--opensim-python", default=sys.executable)
     parser.add_argument("--poses", type=int, default=20)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--widen", type=float, default=0.0,
+                        help="draw from each range widened by this fraction of it at both ends "
+                             "(functions outside their points)")
     args = parser.parse_args(argv)
     print(f"load: {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} {os.getloadavg()[2]:.2f}")
     print("| model | bodies | markers | coords | origin mm | rotation deg | marker mm | "
-          "coord diff | assemble moved | differing coordinates |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "coord diff | default diff | assemble moved | differing coordinates |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     refused = []
     for path in args.models:
         started = time.perf_counter()
@@ -221,10 +234,11 @@ def main(argv: list[str] | None = None) -> int:
             written = Path(folder, path.name) if older_than_4(path) else None
             try:
                 reference = opensim_poses(args.opensim_python, path, args.poses, args.seed,
-                                          written)
+                                          written, args.widen)
                 rows = [(str(path), compare(model, reference))]
                 if written is not None:  # both read OpenSim's 4.x conversion
-                    again = opensim_poses(args.opensim_python, written, args.poses, args.seed)
+                    again = opensim_poses(args.opensim_python, written, args.poses, args.seed,
+                                          widen=args.widen)
                     rows.append((f"{path} as OpenSim writes it", compare(load_model(written),
                                                                          again)))
             except RuntimeError as error:
@@ -234,7 +248,7 @@ def main(argv: list[str] | None = None) -> int:
             differing = ", ".join(row["differing"]) or "-"
             print(f"| {name} | {row['bodies']} | {row['markers']} | {row['coordinates']} | "
                   f"{row['origin_mm']:.2e} | {row['rotation_deg']:.2e} | "
-                  f"{row['marker_mm']:.2e} | {row['coordinate']:.1e} | "
+                  f"{row['marker_mm']:.2e} | {row['coordinate']:.1e} | {row['default']:.1e} | "
                   f"{row['assembly_moved']:.1e} | {differing} |"
                   f"  ({time.perf_counter() - started:.1f} s)", flush=True)
     for line in refused:
