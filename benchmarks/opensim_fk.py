@@ -203,9 +203,8 @@ def compare(model: Model, reference: dict) -> dict:
             theirs = np.array([pose["markers"][p] for _, p in points], dtype=float)
             worst["marker_mm"] = max(worst["marker_mm"],
                                      1e3 * float(np.linalg.norm(ours - theirs, axis=1).max()))
-    ground = sum(1 for m in model.ground.points if m in reference["poses"][0]["markers"])
     return {**worst, "differing": sorted(differing), "bodies": len(bodies),
-            "markers": len(points), "ground_markers": ground, "coordinates": len(names)}
+            "markers": len(points), "coordinates": len(names)}
 
 
 def main(argv: list[str] | None = None) -> int:
