@@ -48,7 +48,11 @@ def unobserved(model: Model) -> list[str]:
     for joint in model.moving_joints:
         if seen_beyond(joint.child):
             moving.update(joint.transform.coordinates)
-    moving.update(c.independent for c in model.couplings if c.dependent in moving)
+    grown = True
+    while grown:  # down a chain of couplings, whatever their order
+        before = len(moving)
+        moving.update(c.independent for c in model.couplings if c.dependent in moving)
+        grown = len(moving) > before
     return [c.name for c in model.angles if c.name not in moving and c.name not in held]
 
 

@@ -82,11 +82,15 @@ def moving_initial_guess(system: System, targets: np.ndarray) -> np.ndarray:
     wanted = targets[:n_points][seen]
     dependent = {row[1] for row in functions.couplings}
     free = np.array([k for k in range(functions.n_coordinates) if k not in dependent], dtype=int)
+    # held values first (a held coordinate may be a coupler's independent), then the couplers,
+    # which the importer orders down their chains
+    held = [c for c in functions.couplings if c[2] < 0]
+    coupled = [c for c in functions.couplings if c[2] >= 0]
 
     def coordinates(values: np.ndarray) -> np.ndarray:
         theta = functions.defaults.copy()
         theta[free] = values
-        for _, k, independent, function in functions.couplings:
+        for _, k, independent, function in held + coupled:
             theta[k] = function.terms(float(theta[independent]) if independent >= 0 else 0.0)[0]
         return theta
 

@@ -47,8 +47,15 @@ IGNORED = frozenset({"ForceSet", "ControllerSet", "ProbeSet", "ContactGeometrySe
                      "ComponentSet", "WrapObjectSet", "VisibleObject", "attached_geometry",
                      "ModelVisualPreferences", "credits", "publications", "defaults",
                      "FrameGeometry", "GeometrySet", "AnalysisSet"})
-FUNCTION_TAGS = ("Constant", "LinearFunction", "SimmSpline", "NaturalCubicSpline", "GCVSpline",
-                 "PiecewiseLinearFunction", "PolynomialFunction", "MultiplierFunction")
+FUNCTION_TAGS = ("Constant", "LinearFunction", "SimmSpline", "NaturalCubicSpline", "natCubicSpline",
+                 "GCVSpline", "PiecewiseLinearFunction", "PolynomialFunction",
+                 "MultiplierFunction")
+# Old names OpenSim reads as a SimmSpline (Object::renameType in its osimCommon registration:
+# the old NaturalCubicSpline was not a natural spline), so a 2.x/3.x knee evaluates as there.
+SIMM_SPLINE_TAGS = ("SimmSpline", "NaturalCubicSpline", "natCubicSpline")
+# OpenSim refuses a CustomJoint two of whose rotation (or translation) axes have a cross product
+# shorter than this (CustomJoint::extendFinalizeFromProperties).
+COLLINEAR = 1e-5
 # Standard joints as SpatialTransforms: per coordinate, (rotation or translation, axis).
 X, Y, Z = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
 STANDARD_JOINTS: dict[str, tuple[tuple[str, Vec3], ...]] = {
@@ -265,21 +272,23 @@ def _function_element(r: _Reader, element: ET.Element, parents: list[ET.Element]
         if inner is None:
             r.fail(where, "expected a function")
         return Multiplier(inner, r.scalar(element, "scale", parents, 1.0))
-    if tag in ("SimmSpline", "NaturalCubicSpline", "PiecewiseLinearFunction", "GCVSpline"):
+    if tag in (*SIMM_SPLINE_TAGS, "PiecewiseLinearFunction", "GCVSpline"):
         x, y = _knots(r, element, parents)
-        if tag == "SimmSpline":
+        if tag in SIMM_SPLINE_TAGS:
             return SimmSpline(x, y)
         if tag == "PiecewiseLinearFunction":
             return PiecewiseLinear(x, y)
-        if tag == "NaturalCubicSpline":
-            return NaturalSpline(x, y, 3)
-        degree = int(r.scalar(element, "degree", parents, 5))
+        # OpenSim writes the degree as half_order m (degree 2m − 1) and has no default for it
+        half_order = r.scalar(element, "half_order", parents)
         smoothing = r.scalar(element, "error_variance", parents, 0.0)
-        if degree not in (1, 3, 5, 7) or smoothing != 0.0:
-            r.fail(where, f"expected degree 1, 3, 5 or 7 and no smoothing (error_variance 0), "
-                          f"got degree {degree}, error_variance {smoothing:g}")
-        if len(x) < (degree + 1) // 2:
-            r.fail(where, f"expected at least {(degree + 1) // 2} points for degree {degree}")
+        if half_order not in (1, 2, 3, 4) or smoothing != 0.0:
+            r.fail(where, f"expected half_order 1, 2, 3 or 4 (degree 1, 3, 5 or 7) and no "
+                          f"smoothing (error_variance 0), got half_order {half_order:g}, "
+                          f"error_variance {smoothing:g}")
+        degree = 2 * int(half_order) - 1
+        if len(x) < degree + 1:  # OpenSim's gcvspl needs 2m points
+            r.fail(where, f"expected at least {degree + 1} points for half_order "
+                          f"{int(half_order)}, got {len(x)}")
         return NaturalSpline(x, y, degree)
     r.fail(where, f"unknown function type {tag} (known: {', '.join(FUNCTION_TAGS)})")
 
@@ -355,6 +364,13 @@ def _spatial_transform(r: _Reader, joint: ET.Element, parents: list[ET.Element],
                 r.fail(r.where([*parents, joint], transform), f"expected a TransformAxis named "
                                                               f"{kind}{k}")
             out.append(_transform_axis(r, element, inside, kind, coordinate_names))
+    for first in (0, 3):  # as OpenSim's CustomJoint checks them, constant axes included
+        for a, b in ((0, 1), (0, 2), (1, 2)):
+            if np.linalg.norm(np.cross(out[first + a].axis, out[first + b].axis)) < COLLINEAR:
+                kind = out[first].kind
+                r.fail(r.where([*parents, joint], transform),
+                       f"{kind}{a + 1} and {kind}{b + 1} have collinear axes, which OpenSim "
+                       f"refuses (|a × b| < {COLLINEAR:g})")
     return tuple(out)
 
 
@@ -688,9 +704,36 @@ def parse_osim_root(root: ET.Element, source: str) -> OsimModel:
             if name not in names:
                 r.fail(f"{where}/ConstraintSet/{coupler.name}", f"coordinate {name!r} is not "
                                                                f"one of the model's")
+    couplers = _chain_order(r, couplers, f"{where}/ConstraintSet")
     return OsimModel(_name(model), source, gravity, tuple(bodies), tuple(joints),
                      tuple(coordinates), tuple(_markers(r, model, top, known)), tuple(couplers),
                      tuple(sorted(r.ignored)))
+
+
+def _chain_order(r: _Reader, couplers: list[Coupler], where: str) -> list[Coupler]:
+    """The couplers in document order, except that each comes after the coupler that sets its
+    independent coordinate: one pass in this order sets every dependent of a chain from values
+    already set, as OpenSim's assembly sets them. Refuses a coordinate that two couplers set
+    and couplers that form a loop (no pass can set them)."""
+    setter: dict[str, Coupler] = {}
+    for coupler in couplers:
+        if coupler.dependent in setter:
+            r.fail(f"{where}/{coupler.name}", f"coordinate {coupler.dependent!r} is already the "
+                                              f"dependent of {setter[coupler.dependent].name}")
+        setter[coupler.dependent] = coupler
+    out: list[Coupler] = []
+    for coupler in couplers:
+        chain: list[Coupler] = []  # this coupler, then the ones it waits for, not yet placed
+        at: Coupler | None = coupler
+        while at is not None and at not in out:
+            if at in chain:
+                loop = [c.name for c in chain[chain.index(at):]]
+                r.fail(f"{where}/{at.name}", f"the coupler constraints form a loop: "
+                                             f"{' → '.join([*loop, loop[0]])}")
+            chain.append(at)
+            at = setter.get(at.independent)
+        out.extend(reversed(chain))
+    return out
 
 
 def _tree(r: _Reader, joints: list[OsimJoint], bodies: list[OsimBody], where: str) -> None:

@@ -13,12 +13,12 @@ mathematics OpenSim documents for the element of the same name:
   derivative on the first and last interval equals that of the cubic through the four points at
   that end (three points: a parabola; two: a line); outside the points, the tangent at the end
   point (f″ = 0).
-* ``NaturalCubicSpline``: the interpolating cubic spline with f″ = 0 at both ends, a straight
-  line outside.
-* ``GCVSpline`` of odd degree 2m − 1 with no smoothing: the natural interpolating spline of that
-  degree, which is ``Σ c_i |x − x_i|^(2m−1) + p(x)`` with p of degree m − 1 and
-  ``Σ c_i x_i^k = 0`` for k < m; outside the points it is the polynomial of degree m − 1 its end
-  piece continues into (derivatives m … 2m − 2 vanish at the ends).
+* ``NaturalCubicSpline`` and ``natCubicSpline`` (2.x/3.x names): read as a ``SimmSpline``, as
+  OpenSim reads them (it renames both on reading: that old spline was not a natural one).
+* ``GCVSpline`` of odd degree 2m − 1 (m its ``half_order``) with no smoothing: the natural
+  interpolating spline of that degree, which is ``Σ c_i |x − x_i|^(2m−1) + p(x)`` with p of
+  degree m − 1 and ``Σ c_i x_i^k = 0`` for k < m; outside the points it is the polynomial of
+  degree m − 1 its end piece continues into (derivatives m … 2m − 2 vanish at the ends).
 * ``MultiplierFunction``: ``scale · f(x)``.
 
 Every one of them is a polynomial piece by piece, inside and outside its points: ``pieces()``
@@ -253,8 +253,8 @@ class SimmSpline(_Cubic):
 
 @dataclass(frozen=True)
 class NaturalSpline(Function):
-    """The natural interpolating spline of odd degree 2m − 1 through the points (m = 2: OpenSim's
-    NaturalCubicSpline; GCVSpline of degree 2m − 1 without smoothing), written as
+    """The natural interpolating spline of odd degree 2m − 1 through the points (OpenSim's
+    GCVSpline of degree 2m − 1 without smoothing), written as
     ``Σ c_i |x − x_i|^(2m−1) + Σ_k<m p_k x^k`` with ``Σ c_i x_i^k = 0`` for k < m."""
 
     x: tuple[float, ...]
