@@ -14,7 +14,10 @@ that they run in about a minute on two cores. ``long`` (``pytest --hypothesis-pr
 random seeds, ten times the examples, for local runs.
 """
 
+import importlib.util
 import os
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -38,6 +41,29 @@ os.environ["FCCGRB_BACKGROUND_COMPILE"] = "0"
 # trials spill them all the same, so that they take the path a long trial takes (test_spill
 # checks the default apart)
 os.environ["FCCGRB_SPILL_MB"] = "0"
+
+
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Where the kernels are not compiled yet (a fresh clone), compile them once before the
+    tests, their passes split over two processes: otherwise each test process compiles every
+    kernel it meets, the same ones twice under ``-n 2`` (126 s of a cold run's 355). Not in
+    an xdist worker (its controller did it), nor without numba, nor where some kernel is
+    compiled already (the tests then compile what is missing, as before)."""
+    if hasattr(config, "workerinput") or importlib.util.find_spec("numba") is None:
+        return
+    from fccgrb_cli.core import kernel_cache
+
+    folder = kernel_cache.configure()
+    if folder is None or kernel_cache.compiled_here(folder):
+        return
+    groups = (("nrm-wls", "nrm-wls --smooth auto"), ("cno-sqp",))
+    script = "import sys; from fccgrb_cli.pipeline.precompile import precompile; " \
+             "precompile(passes=sys.argv[1:])"
+    workers = [subprocess.Popen([sys.executable, "-c", script, *group]) for group in groups]
+    for worker in workers:
+        worker.wait()
 
 
 # whole modules, or single tests (their node id without parameters)

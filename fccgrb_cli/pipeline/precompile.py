@@ -8,7 +8,7 @@ from __future__ import annotations
 import os
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -66,16 +66,19 @@ PASSES: dict[str, dict[str, Any]] = {  # pass name -> SolveOptions fields
     "nrm-wls --smooth auto": {"method": "nrm-wls", "smooth": "auto"}}
 
 
-def precompile(report: Callable[[str, float], None] | None = None) -> float:
-    """Run every compiled path on 12 synthesized frames of the built-in pendulum; ``report``
-    gets (pass, seconds) after each (``PASSES``); returns the total seconds."""
+def precompile(report: Callable[[str, float], None] | None = None,
+               passes: Sequence[str] = tuple(PASSES)) -> float:
+    """Run every compiled path (or those of ``passes``, names of ``PASSES``) on 12 synthesized
+    frames of the built-in pendulum; ``report`` gets (pass, seconds) after each; returns the
+    total seconds."""
     started = time.perf_counter()
     model = parse_model(BUILT_IN, "built-in pendulum")
     truth = synthesize(model, duration=0.12, rate=100.0)
     trial = Trial("built-in pendulum (synthesized)", truth.labels, truth.markers, truth.rate)
-    for name, choices in PASSES.items():
+    for name in passes:
         begun = time.perf_counter()
-        solve_trial(model, trial, SolveOptions(**choices, engine="compiled", events="none"))
+        solve_trial(model, trial, SolveOptions(**PASSES[name], engine="compiled",
+                                               events="none"))
         if report is not None:
             report(name, time.perf_counter() - begun)
     return time.perf_counter() - started
