@@ -197,8 +197,9 @@ def test_check_takes_opensims_gait_model():
 
     result = run_cli("check", IK_DIR / "subject01_simbody.osim")
     assert result.exit_code == 0, result.stderr
-    # 23 coordinates, the two toes (no marker on them) held: 21 degrees of freedom
-    assert "rank 146: 21 degrees of freedom" in result.stdout
+    # 23 coordinates, the two toes (no marker on them) held at their defaults in a solve
+    assert "rank 146: 23 degrees of freedom, 2 of them held at their default values" \
+        in result.stdout
     assert "MC Jacobian rank 167 of 167" in result.stdout
     assert "redundant equations: none" in result.stdout
 
@@ -258,3 +259,22 @@ def test_a_clamped_coordinate_outside_its_range_flags_its_frames():
     found = clamped_range(model, theta, index)
     assert found.frames.tolist() == [False, False, True, True]
     assert "rx" in found.detail and "outside its range" in found.detail
+
+
+@pytest.mark.parametrize("held", [0, 2])
+def test_check_counts_every_coordinate_and_says_which_a_solve_holds(tmp_path, held):
+    # 8 coordinates (the free thigh's 6, the knee and the patella); with every marker moved onto
+    # the thigh none sees the knee or the patella, which a solve then holds at their defaults
+    from cli_helpers import run_cli
+
+    text = knee_model()
+    if held:
+        head, markers = text.split("<MarkerSet>")
+        text = head + "<MarkerSet>" + markers.replace("/bodyset/shank", "/bodyset/thigh")
+    path = tmp_path / "knee.osim"
+    path.write_text(text, encoding="utf-8")
+    result = run_cli("check", path)
+    assert result.exit_code == 0, result.stderr
+    line = next(x for x in result.stdout.splitlines() if "topological equations" in x)
+    assert ": 8 degrees of freedom" in line
+    assert (f", {held} of them held at their default values" in line) == bool(held)

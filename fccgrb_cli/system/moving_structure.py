@@ -21,7 +21,8 @@ def analyse_moving(model: Model, report_type):
     """The :class:`StructureReport` (``report_type``) of a model with moving joints; raises
     InputError when the joints do not determine the bodies from the coordinates. The tracking
     rank is that of a solve: coordinates no tracked marker moves held at their defaults."""
-    mc = compile_system(holding_unobserved(model)[0], angles="coordinate", track=True)
+    held_model, held = holding_unobserved(model)
+    mc = compile_system(held_model, angles="coordinate", track=True)
     Jm = mc.jacobian(mc.pose())
     top = mc.masks()["topology"]
     nb = mc.layout.n_body_q
@@ -39,7 +40,8 @@ def analyse_moving(model: Model, report_type):
     redundant = dependent_rows(Jm[top], labels) if extra > 0 else ()
     return report_type(
         n_bodies=len(model.bodies), nq=ad.nq, n_topology_rows=int(top.sum()),
-        topology_rank=top_rank, dof=mc.nq - top_rank, n_angles=len(model.angles),
+        topology_rank=top_rank, dof=mc.nq - top_rank + len(held), held=len(held),
+        n_angles=len(model.angles),
         ad_rank=rank_of(J), redundant=redundant,
         n_tracking_rows=int(mc.masks()["tracking"].sum()), mc_rank=rank_of(Jm),
         nq_mixed=mc.nq, floating=(),

@@ -35,6 +35,7 @@ class StructureReport:
     nq_mixed: int
     floating: tuple[str, ...] = ()
     n_distances: int = 0
+    held: int = 0  # coordinates no tracked marker moves, held at their defaults in a solve
 
     def lines(self) -> list[str]:
         out = [
@@ -42,7 +43,9 @@ class StructureReport:
             f"topological equations {self.n_topology_rows}, rank {self.topology_rank}: "
             f"{self.dof} degrees of freedom"
             + (f" (6 each for the floating bases {', '.join(self.floating)})"
-               if self.floating else ""),
+               if self.floating else "")
+            + (f", {self.held} of them held at their default values in a solve (no tracked "
+               f"marker moves them)" if self.held else ""),
             (f"angular coordinates {self.n_angles - self.n_distances}, distance coordinates "
              f"{self.n_distances}" if self.n_distances else
              f"angular coordinates {self.n_angles}")
