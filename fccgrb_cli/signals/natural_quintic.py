@@ -14,15 +14,17 @@ With δ = (f_{i+1} − f_i)/h, the third and fourth derivatives at the interval'
 (sympy; a test checks them against the polynomial). The spline is C⁴: f‴ and f⁗ agree on
 both sides of every inner sample; natural: f‴ = f⁗ = 0 at both ends. That is 2n equations in
 the 2n unknowns, banded (three entries either side of the diagonal, unknowns interleaved
-d_0, e_0, d_1, ...), solved by banded Gaussian elimination with partial pivoting, every signal a
-right-hand side of the same matrix. scipy's ``make_interp_spline(k=5)`` builds the same spline
-from B-splines; its import costs ~0.3 s of every inverse dynamics command, this solve ~10 µs
-a sample.
+d_0, e_0, d_1, ...), solved by LAPACK's banded Gaussian elimination with partial pivoting
+(dgbsv), every signal a right-hand side of the same matrix. scipy's ``make_interp_spline(k=5)``
+builds the same spline from B-splines; importing it costs ~0.3 s of every inverse dynamics
+command.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from fccgrb_cli.core.blas import lapack
 
 __all__ = ["natural_quintic"]
 
@@ -83,40 +85,17 @@ def natural_quintic(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 def _banded_solve(bands: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     """A x = rhs for A of band KL below, KU above (``bands[r, c − r + KL] = A[r, c]``; entries
-    outside the matrix zero): Gaussian elimination with partial pivoting over a window of the
-    KL + 1 rows that can hold the pivot and the KL + KU + 1 columns they can reach (pivoting
-    fills U up to KL + KU above its diagonal), then back substitution. ``numpy.linalg.LinAlgError``
-    for a singular A."""
-    N, width = bands.shape
-    m = rhs.shape[1]
-    window = np.zeros((KL + 1, width))
-    right = np.zeros((KL + 1, m))
-    for r in range(min(KL + 1, N)):  # rows 0..KL, each from column 0
-        shift = KL - r
-        window[r, :width - shift] = bands[r, shift:]
-        right[r] = rhs[r]
-    upper = np.empty((N, width))
-    y = np.empty((N, m))
-    for j in range(N):
-        pivot = int(np.argmax(np.abs(window[:, 0])))
-        if window[pivot, 0] == 0.0:
-            raise np.linalg.LinAlgError("natural_quintic: singular equations")
-        if pivot:
-            window[[0, pivot]] = window[[pivot, 0]]
-            right[[0, pivot]] = right[[pivot, 0]]
-        factors = window[1:, 0] / window[0, 0]
-        window[1:] -= factors[:, None] * window[0]
-        right[1:] -= factors[:, None] * right[0]
-        upper[j], y[j] = window[0], right[0]
-        window[:-1, :-1] = window[1:, 1:]
-        window[:-1, -1] = 0.0
-        right[:-1] = right[1:]
-        entering = j + KL + 1
-        if entering < N:
-            window[-1], right[-1] = bands[entering], rhs[entering]
-        else:
-            window[-1], right[-1] = 0.0, 0.0
-    x = np.zeros((N + width, m))
-    for j in range(N - 1, -1, -1):
-        x[j] = (y[j] - upper[j, 1:] @ x[j + 1:j + width]) / upper[j, 0]
-    return x[:N]
+    outside the matrix zero): LAPACK's dgbsv (Gaussian elimination with partial pivoting on
+    the band) through scipy's compiled module (``core.blas.lapack``, without the
+    ``scipy.linalg`` package's import). ``numpy.linalg.LinAlgError`` for a singular A."""
+    N = len(bands)
+    # LAPACK's band storage: ab[KL + KU + r − c, c] = A[r, c], KL more rows for the fill-in
+    ab = np.zeros((2 * KL + KU + 1, N))
+    for offset in range(-KL, KU + 1):  # c − r
+        rows = np.arange(max(0, -offset), min(N, N - offset))
+        ab[KL + KU - offset, rows + offset] = bands[rows, offset + KL]
+    x, info = lapack.dgbsv(KL, KU, ab, rhs)[2:]
+    if info:
+        raise np.linalg.LinAlgError("natural_quintic: singular equations" if info > 0 else
+                                    f"dgbsv: illegal argument {-info}")
+    return x
