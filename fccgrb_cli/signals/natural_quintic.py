@@ -66,7 +66,8 @@ def natural_quintic(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarra
     right = ((np.stack([-24 / r**2, -3 / r, -36 / r**2, 9 / r], axis=1), 60 / r**2),
              (np.stack([-168 / r**3, -24 / r**2, -192 / r**3, 36 / r**2], axis=1), 360 / r**3))
     N = 2 * n
-    bands = np.zeros((N, KL + KU + 1))
+    # LAPACK's band storage: ab[KL + KU + r − c, c] = A[r, c], KL more rows for the fill-in
+    ab = np.zeros((2 * KL + KU + 1, N))
     rhs = np.zeros((N, columns.shape[1]))
     k = np.arange(n - 1)
     # rows 2i (f‴) and 2i + 1 (f⁗) at sample i: (interval i − 1 at its right end) − (interval
@@ -75,25 +76,19 @@ def natural_quintic(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarra
         for row, (block, delta) in enumerate(ends):
             at = 2 * at_sample + row
             for j in range(4):
-                bands[at, 2 * k + j - at + KL] += sign * block[:, j]
+                ab[KL + KU + at - (2 * k + j), 2 * k + j] += sign * block[:, j]
             rhs[at] -= sign * delta[:, None] * slope
-    solution = _banded_solve(bands, rhs)
+    solution = _banded_solve(ab, rhs)
     first = solution[0::2].reshape(y.shape)
     second = (solution[1::2] / scale).reshape(y.shape)
     return first, second
 
 
-def _banded_solve(bands: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """A x = rhs for A of band KL below, KU above (``bands[r, c − r + KL] = A[r, c]``; entries
-    outside the matrix zero): LAPACK's dgbsv (Gaussian elimination with partial pivoting on
-    the band) through scipy's compiled module (``core.blas.lapack``, without the
-    ``scipy.linalg`` package's import). ``numpy.linalg.LinAlgError`` for a singular A."""
-    N = len(bands)
-    # LAPACK's band storage: ab[KL + KU + r − c, c] = A[r, c], KL more rows for the fill-in
-    ab = np.zeros((2 * KL + KU + 1, N))
-    for offset in range(-KL, KU + 1):  # c − r
-        rows = np.arange(max(0, -offset), min(N, N - offset))
-        ab[KL + KU - offset, rows + offset] = bands[rows, offset + KL]
+def _banded_solve(ab: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """A x = rhs for A of band KL below, KU above, in LAPACK's band storage ``ab``: LAPACK's
+    dgbsv (Gaussian elimination with partial pivoting on the band) through scipy's compiled
+    module (``core.blas.lapack``, without the ``scipy.linalg`` package's import).
+    ``numpy.linalg.LinAlgError`` for a singular A."""
     x, info = lapack.dgbsv(KL, KU, ab, rhs)[2:]
     if info:
         raise np.linalg.LinAlgError("natural_quintic: singular equations" if info > 0 else
