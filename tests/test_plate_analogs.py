@@ -5,6 +5,7 @@ and the shared recorded files; and what it leaves to ezc3d."""
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -107,3 +108,17 @@ def test_kistler_and_incomplete_parameters_left_to_ezc3d(tmp_path: Path) -> None
     c3d = ezc3d.c3d(str(path))
     del c3d["parameters"]["FORCE_PLATFORM"]["CORNERS"]
     assert platforms(c3d) is None
+
+
+def test_coincident_corners_give_nan_as_ezc3d_without_a_warning(tmp_path: Path) -> None:
+    path = generated(tmp_path / "plates.c3d", [2, 1], 0)
+    c3d = ezc3d.c3d(str(path))
+    c3d["parameters"]["FORCE_PLATFORM"]["CORNERS"]["value"] = np.zeros((3, 4, 2))
+    c3d.write(str(path))
+    theirs = ezc3d.c3d(str(path), extract_forceplat_data=True)["data"]["platform"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        mine = platforms(ezc3d.c3d(str(path)))
+    assert mine is not None
+    for a, b in zip(mine, theirs, strict=True):
+        assert np.isnan(a["force"]).all() and np.isnan(np.asarray(b["force"])).all()

@@ -117,7 +117,8 @@ def _axes(corners: np.ndarray) -> np.ndarray:
     y = corners[:, 0] - corners[:, 3]
     z = np.cross(x, y)
     y = np.cross(z, x)
-    return np.column_stack([v / np.linalg.norm(v) for v in (x, y, z)])
+    with np.errstate(divide="ignore", invalid="ignore"):  # coincident corners: NaN, as ezc3d
+        return np.column_stack([v / np.linalg.norm(v) for v in (x, y, z)])
 
 
 def _loads(kind: int, channels: np.ndarray, calibration: np.ndarray | None,
