@@ -131,3 +131,34 @@ def test_a_markers_window_is_the_trials_own_clock(tmp_path):
     rows = read_storage(motion).time
     assert rows[0] == pytest.approx(0.5) and rows[-1] == pytest.approx(0.75)
     assert len(rows) == 16  # 60 Hz: 0.5, 0.5167, …, 0.75
+
+
+@pytest.mark.skipif(not IK_DIR.is_dir(), reason="../shared/data/opensim not here")
+def test_an_ik_setups_accuracy_is_the_tolerance_unless_typed(tmp_path):
+    """An IK setup's ``accuracy`` (OpenSim: the solution's absolute accuracy) is the solve's
+    tolerance on ‖Δq‖∞; ``--tol`` typed beside the setup wins. A looser tolerance stops the
+    frames earlier and moves the coordinates by the order of that tolerance (a bound on the
+    last step, not on the error: Gauss–Newton converges linearly here; 4e-4 rad at 1e-4 on one
+    hip frame, 4e-6 at OpenSim's 1e-5, RMS 20 times less)."""
+    setup = tmp_path / "setup.xml"
+    text = (IK_DIR / "subject01_Setup_InverseKinematics.xml").read_text()
+    for name in ("subject01_simbody.osim", "gait2354_IK_Tasks_uniform.xml",
+                 "subject01_synthetic_marker_data.trc"):
+        text = text.replace(name, str(IK_DIR / name))
+    setup.write_text(text.replace("<accuracy>1e-5</accuracy>", "<accuracy>1e-4</accuracy>"))
+    runs = {}
+    for label, typed in (("setup", ()), ("typed", ("--tol", "1e-10"))):
+        results = tmp_path / f"{label}.h5"
+        done = run_cli("solve", "--opensim-setup", setup, *typed, "--no-dynamics", "-o",
+                       results)
+        assert done.exit_code == 0, done.output
+        from fccgrb_cli.api import read_results
+
+        (run,) = read_results(results).values()
+        runs[label] = run.result
+    loose, strict = runs["setup"], runs["typed"]
+    assert loose.tol == 1e-4 and strict.tol == 1e-10
+    assert loose.converged.all() and strict.converged.all()
+    assert loose.iterations.mean() < strict.iterations.mean() - 0.5
+    moved = np.abs(loose.theta - strict.theta)
+    assert 0 < moved.max() < 1e-3 and np.sqrt(np.mean(moved ** 2)) < 1e-4

@@ -124,6 +124,7 @@ HOSTILE = {
     "nan time": ({"time": "nan 1"}, "time_range: expected a finite number"),
     "huge accuracy": ({"accuracy": "1e400"}, "accuracy: expected a finite number"),
     "zero accuracy": ({"accuracy": "0"}, "accuracy: expected a positive accuracy"),
+    "accuracy above 1": ({"accuracy": "2"}, "accuracy: expected a positive accuracy of at most 1"),
     "negative weight": ({"weight": "-1"}, "IKMarkerTask[name=RASI]/weight: expected a weight of "
                                           "at least 0, got -1"),
     "weight word": ({"weight": "heavy"}, "IKMarkerTask[name=RASI]/weight: expected a number"),

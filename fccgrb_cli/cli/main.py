@@ -268,9 +268,9 @@ def _trial_paths(patterns: tuple[str, ...]) -> list[str]:
 @click.option("--opensim-setup", type=click.Path(dir_okay=False), default=None,
               metavar="SETUP.xml",
               help="Run an OpenSim IK or ID setup as its tool would: its model, marker file "
-                   "or coordinates file, task set, external loads, time range and low-pass "
-                   "cutoff (files relative to the setup's folder). What is typed beside it "
-                   "wins; MODEL and TRIAL may then be left out.")
+                   "or coordinates file, task set, external loads, time range, accuracy (as "
+                   "--tol) and low-pass cutoff (files relative to the setup's folder). What is "
+                   "typed beside it wins; MODEL and TRIAL may then be left out.")
 @click.option("--coordinates", type=click.Path(dir_okay=False), default=None, metavar="FILE",
               help="Inverse dynamics only, as OpenSim's ID tool: the model's coordinates from "
                    "FILE (.mot/.sto: OpenSim's IK output or `fccgrb export --format mot`; "
@@ -320,7 +320,10 @@ def solve(model: str | None, trials: tuple[str, ...], opensim_setup: str | None,
     if opensim_setup is not None:
         from fccgrb_cli.pipeline.opensim_setup import setup_inputs
 
-        found = setup_inputs(opensim_setup, model, trials, coordinates, chosen)
+        context = click.get_current_context()
+        typed = frozenset(name for name in options if context.get_parameter_source(name)
+                          not in (None, click.core.ParameterSource.DEFAULT))
+        found = setup_inputs(opensim_setup, model, trials, coordinates, chosen, typed)
         model, trials, coordinates, chosen = (found.model, found.trials, found.coordinates,
                                               found.options)
         in_degrees = found.in_degrees

@@ -235,9 +235,9 @@ def read_ik_setup(path: str | Path) -> IKSetup:
     else:
         tasks = _task_set(element, [tool.root, tool.element], tool.source)
     accuracy = tool.number("accuracy")
-    if accuracy is not None and accuracy <= 0:
-        raise InputError(f"{tool.here('accuracy')}: expected a positive accuracy, got "
-                         f"{accuracy:g}")
+    if accuracy is not None and not 0 < accuracy <= 1:
+        raise InputError(f"{tool.here('accuracy')}: expected a positive accuracy of at most 1 "
+                         f"(m and rad: the solve's tolerance on ‖Δq‖∞), got {accuracy:g}")
     weight = tool.number("constraint_weight")
     if weight is not None and weight < 0:
         raise InputError(f"{tool.here('constraint_weight')}: expected a weight of at least "

@@ -1,13 +1,15 @@
 """An OpenSim setup file run as OpenSim's tool runs it (``fccgrb solve --opensim-setup
 SETUP.xml``): what the setup names becomes the solve's inputs and options.
 
-An IK setup gives the model, the marker file (the trial), the task set's marker weights and
-the time range; an ID setup the model, the coordinates file, the external loads, the
-coordinates' low-pass cutoff, ``coordinates_in_degrees`` (where the file's header is silent)
-and the time range. What the command line states beside the setup wins (a MODEL or TRIAL
-argument, ``--coordinates``, ``--loads``, ``--tasks``, ``--filter-cutoff``, ``--from``,
-``--to``); the setup fills the rest. Outputs stay fccgrb's (``-o`` results file); the file the
-setup names for its output is said with the export command that writes it."""
+An IK setup gives the model, the marker file (the trial), the task set's marker weights, the
+time range and its ``accuracy`` (OpenSim: the solution's absolute accuracy), which becomes the
+solve's tolerance on ‖Δq‖∞ (``--tol``, m and rad); an ID setup the model, the coordinates
+file, the external loads, the coordinates' low-pass cutoff, ``coordinates_in_degrees`` (where
+the file's header is silent) and the time range. What the command line states beside the setup
+wins (a MODEL or TRIAL argument, ``--coordinates``, ``--loads``, ``--tasks``,
+``--filter-cutoff``, ``--from``, ``--to``, ``--tol``); the setup fills the rest. Outputs stay
+fccgrb's (``-o`` results file); the file the setup names for its output is said with the
+export command that writes it."""
 
 from __future__ import annotations
 
@@ -36,8 +38,11 @@ class SetupInputs:
 
 
 def setup_inputs(path: str, model: str | None, trials: tuple[str, ...],
-                 coordinates: str | None, options: SolveOptions) -> SetupInputs:
-    """The setup ``path`` merged under what the command line gave (module docstring)."""
+                 coordinates: str | None, options: SolveOptions,
+                 typed: frozenset[str] = frozenset()) -> SetupInputs:
+    """The setup ``path`` merged under what the command line gave (module docstring);
+    ``typed``: the options typed on the command line (SolveOptions' field names), for those
+    whose default cannot be told from a typed value."""
     setup = read_setup(path)
     chosen_model = model or _named(setup.model_file, path, "model_file")
     window: dict[str, Any] = {}  # SolveOptions fields
@@ -75,6 +80,8 @@ def setup_inputs(path: str, model: str | None, trials: tuple[str, ...],
     if not options.hold and holds:
         extra["hold"] = holds
     notes += said
+    if "tol" not in typed and setup.accuracy is not None:
+        extra["tol"] = setup.accuracy
     if setup.output_motion_file is not None:
         notes.append(f"{path}: output_motion_file: write it with fccgrb export RESULTS.h5 "
                      f"--format mot -o {setup.output_motion_file}")
