@@ -24,6 +24,7 @@ from fccgrb_cli.opensim.storage import read_storage as fc_storage
 from fccgrb_cli.pipeline.coordinates import coordinates_run
 from fccgrb_cli.pipeline.options import SolveOptions
 from fccgrb_cli.signals.opensim_lowpass import lowpass_padded
+from fccgrb_cli.solvers.engine import numba_available
 from fccgrb_cli.system.compiled import compile_system
 from fccgrb_cli.system.moving_pose import pose_from_coordinates
 from tests.osim_text import knee_model
@@ -95,6 +96,65 @@ def test_coordinate_forces_balance_the_power_of_the_motion(seed, loaded):
         assert np.abs(tau).max() > 1.0  # the check is not of zeros
         if loaded:
             assert abs(supplied) > 1.0  # and the load does work
+
+
+@pytest.mark.skipif(not numba_available(), reason="numba is not installed")
+@pytest.mark.parametrize("seed", [None, 0, 3, 4])
+def test_the_compiled_inverse_is_the_numpy_one(seed):
+    """``coordinate_inverse`` through the compiled kernels (the rates, the multipliers, the
+    coordinates' forces and the misfit; the poses of every frame at once) gives the numpy
+    reference's frame-by-frame numbers, on the knee and on generated models (random transforms,
+    splines, a coupler) with two loads on two bodies, over frames that move the coordinates far
+    from their defaults; a frame with a NaN rate is left NaN and changes no other frame."""
+    from fccgrb_cli.dynamics.moving import coordinate_inverse
+
+    text = knee_model() if seed is None else random_model_text(seed)
+    model = parse_osim_model(text, "model.osim")
+    system = compile_system(model, angles="coordinate")
+    tracking = compile_system(model, angles="coordinate", track=True)
+    rng = np.random.default_rng(11 if seed is None else seed)
+    n, k = 40, len(model.angles)
+    t = np.linspace(0, 1, n)[:, None]
+    amplitude, rate = rng.uniform(0.1, 0.6, k), rng.uniform(1.0, 3.0, k)
+    theta = system.functions.defaults + amplitude * np.sin(rate * t)
+    theta_d = amplitude * rate * np.cos(rate * t)
+    theta_dd = -amplitude * rate**2 * np.sin(rate * t)
+    theta_dd[17, 0] = np.nan
+    loads = [ExternalLoad(f"load{j}", body.name, rng.normal(size=(n, 3)) * 40.0,
+                          rng.normal(size=(n, 3)) * 0.3, rng.normal(size=(n, 3)) * 4.0)
+             for j, body in enumerate(model.bodies[-2:])]
+    (q, qd, qdd), reference = coordinate_inverse(system, theta, theta_d, theta_dd, loads)
+    (q2, qd2, qdd2), compiled = coordinate_inverse(system, theta, theta_d, theta_dd, loads,
+                                                   kernels=tracking)
+    assert np.allclose(q2, q, rtol=0, atol=1e-12)
+    ok = np.ones(n, dtype=bool)
+    ok[17] = False
+    for name in ("lam", "joint_moments", "kinetic", "potential", "external_power"):
+        ours, theirs = getattr(compiled, name)[ok], getattr(reference, name)[ok]
+        scale = max(1.0, float(np.abs(theirs).max()))
+        assert np.allclose(ours, theirs, rtol=0, atol=1e-9 * scale), name
+    assert np.allclose(qd2[ok], qd[ok], rtol=0, atol=1e-10)
+    assert np.allclose(qdd2[ok], qdd[ok], rtol=0, atol=1e-9)
+    assert np.all(compiled.residual[ok] < 1e-8)
+    assert np.isnan(compiled.joint_moments[17]).all() and np.isnan(compiled.lam[17]).all()
+    assert np.abs(reference.joint_moments[ok]).max() > 1.0
+    assert np.abs(reference.external_power[ok]).max() > 1.0
+
+
+@pytest.mark.parametrize("seed", [None, 1, 2])
+def test_poses_of_many_frames_are_those_of_each(seed):
+    """``pose_from_coordinates`` of frames × n_θ (every joint's transform evaluated on all frames
+    at once from the functions' polynomial pieces) equals it frame by frame (the rows' own
+    transform terms), inside and outside the splines' points."""
+    text = knee_model() if seed is None else random_model_text(seed)
+    system = compile_system(parse_osim_model(text, "model.osim"), angles="coordinate")
+    rng = np.random.default_rng(5)
+    theta = system.functions.defaults + rng.uniform(-2.5, 2.5, (30, len(system.model.angles)))
+    many = pose_from_coordinates(system, theta)
+    each = np.array([pose_from_coordinates(system, row) for row in theta])
+    assert many.shape == each.shape == (30, system.nq)
+    assert np.allclose(many, each, rtol=0, atol=1e-13)
+    assert np.ptp(many[:, :system.layout.n_body_q], axis=0).max() > 0.1
 
 
 def test_opensims_lowpass_keeps_lines_and_halves_its_cutoff():

@@ -30,7 +30,7 @@ from fccgrb_cli.dynamics.mass import gravity_forces, mass_matrix
 from fccgrb_cli.system.compiled import Drive, System
 from fccgrb_cli.system.moving_pose import pose_from_coordinates
 
-__all__ = ["coordinate_forces", "coordinate_inverse", "forces_from_coordinates"]
+__all__ = ["coordinate_forces", "coordinate_inverse", "forces_from_coordinates", "ready_inverse"]
 
 
 def coordinate_forces(system: System, theta: np.ndarray, theta_d: np.ndarray,
@@ -58,14 +58,22 @@ def coordinate_forces(system: System, theta: np.ndarray, theta_d: np.ndarray,
 
 
 def coordinate_inverse(system: System, theta: np.ndarray, theta_d: np.ndarray,
-                       theta_dd: np.ndarray, loads: Sequence[ExternalLoad] = ()
+                       theta_dd: np.ndarray, loads: Sequence[ExternalLoad] = (), *,
+                       kernels: System | None = None
                        ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], InverseDynamics]:
     """:func:`coordinate_forces` with what it passes through: the mixed coordinates q = [x, θ]
     and their rates (frames × nq each; SI), and the inverse dynamics: λ of the topological rows,
     τ, the kinetic (½ ẋᵀMẋ) and potential (−gᵀx) energies (J), the loads' power (W) and the
     residual ‖Φ_xᵀλ − (g + Q − Mẍ)‖ of the least-squares multipliers (N; zero when the rows'
     forces balance the bodies' exactly, as they do for a model whose coordinates move every
-    body's six freedoms)."""
+    body's six freedoms).
+
+    ``kernels``: the same model compiled with its tracking rows (the solve's system, which the
+    compiled kernels take: ``system.sparse.supported``); the rates and the multipliers then run
+    in them (``kernels.rates_frames``, ``kernels.coordinate_multipliers_frames``: the same
+    equations, all frames in machine code). None: numpy, frame by frame (the reference)."""
+    if kernels is not None:
+        return _compiled_inverse(system, kernels, theta, theta_d, theta_dd, loads)
     M = mass_matrix(system.model)
     g = gravity_forces(system.model)
     layout = system.layout
@@ -107,6 +115,60 @@ def coordinate_inverse(system: System, theta: np.ndarray, theta_d: np.ndarray,
                               lam=lam, joint_moments=tau, kinetic=kinetic, potential=potential,
                               external_power=power, residual=residual)
     return (q, qd, qdd), inverse
+
+
+def _compiled_inverse(system: System, kernels: System, theta: np.ndarray,
+                      theta_d: np.ndarray, theta_dd: np.ndarray, loads: Sequence[ExternalLoad]
+                      ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], InverseDynamics]:
+    """:func:`coordinate_inverse` through the compiled kernels of ``kernels``."""
+    from fccgrb_cli.solvers.kernels import coordinate_multipliers_frames
+    from fccgrb_cli.solvers.rates import consistent_rates
+    from fccgrb_cli.system.sparse import sparse_of
+
+    M = mass_matrix(system.model)
+    g = gravity_forces(system.model)
+    nb = system.layout.n_body_q
+    theta = np.asarray(theta, dtype=float)
+    n = len(theta)
+    q = pose_from_coordinates(system, theta)
+    qd, qdd = consistent_rates(kernels, q, np.asarray(theta_d, dtype=float),
+                               np.asarray(theta_dd, dtype=float), compiled=True)
+    xd, xdd = qd[:, :nb], qdd[:, :nb]
+    frames = np.arange(n)
+    rhs = g - xdd @ M.T
+    power = np.zeros(n)
+    for load in loads:
+        at = system.layout.x_offset(load.body)
+        generalized = load.generalized(q[:, at:at + 12], frames)
+        rhs[:, at:at + 12] += generalized
+        power += np.einsum("fi,fi->f", generalized, xd[:, at:at + 12])
+    s = sparse_of(kernels)
+    lam = np.empty((n, len(s.top_rows)))
+    tau = np.empty_like(theta)
+    residual = np.empty(n)
+    args = (np.ascontiguousarray(q), np.ascontiguousarray(rhs), lam, tau, residual)
+    ready_inverse(kernels)
+    coordinate_multipliers_frames(s, *args)
+    names = tuple(c.name for c in system.model.angles)
+    inverse = InverseDynamics(angle_names=names, row_labels=tuple(system.labels),
+                              lam=lam, joint_moments=tau,
+                              kinetic=0.5 * np.einsum("fi,ij,fj->f", xd, M, xd),
+                              potential=-(q[:, :nb] @ g), external_power=power,
+                              residual=residual)
+    return (q, qd, qdd), inverse
+
+
+def ready_inverse(kernels: System) -> None:
+    """Load (or compile) the compiled inverse's own kernel for the types of ``kernels`` (a mixed
+    system with tracking; the types are those of every such system): ``fccgrb compile`` calls
+    it, whatever the model it compiles on."""
+    from fccgrb_cli.solvers.engine import ready
+    from fccgrb_cli.solvers.kernels import coordinate_multipliers_frames
+    from fccgrb_cli.system.sparse import sparse_of
+
+    empty = np.zeros((0, 0))
+    ready(coordinate_multipliers_frames, sparse_of(kernels), empty, empty, empty, empty,
+          np.zeros(0))
 
 
 class _Factor:

@@ -47,6 +47,25 @@ class Pieces:
         """The pieces of scale · f."""
         return Pieces(self.knots, self.origins, tuple(scale * c for c in self.coefficients))
 
+    def values(self, x: np.ndarray) -> np.ndarray:
+        """f at every x (any shape): each x's piece, then Horner's rule."""
+        x = np.asarray(x, dtype=float)
+        m = len(self.knots)
+        if m == 0:
+            piece = np.zeros(x.shape, dtype=int)
+        else:  # the knots at or below x; x on the last knot is in the last closed interval
+            piece = np.searchsorted(self.knots, x, side="right")
+            piece[x == self.knots[-1]] = m - 1
+        degree = max(len(c) for c in self.coefficients)
+        table = np.zeros((len(self.coefficients), degree))
+        for p, c in enumerate(self.coefficients):
+            table[p, :len(c)] = c
+        dx = x - self.origins[piece]
+        out = np.zeros(x.shape)
+        for j in range(degree - 1, -1, -1):
+            out = out * dx + table[piece, j]
+        return out
+
 
 class ScalarFunction(Protocol):
     """f(x) with f′ and f″ (OpenSim's functions, ``fccgrb_cli.model.osim.functions``), and

@@ -41,6 +41,7 @@ from fccgrb_cli.signals.butterworth import frames_needed
 from fccgrb_cli.solvers import KinematicResult, solve_ad
 from fccgrb_cli.solvers.ad.solve import stacked_drives
 from fccgrb_cli.solvers.determined import determined
+from fccgrb_cli.solvers.engine import use_kernels
 from fccgrb_cli.solvers.methods import Method, mixed_runs_compiled, solve_stretch
 from fccgrb_cli.solvers.mixed import recounted
 from fccgrb_cli.solvers.nrm.problem import unsolvable_text
@@ -504,8 +505,11 @@ def dynamics_stage(model: Model, trial: Trial, system: System, result: Kinematic
                             "with --plate): the generalized forces hold no ground reaction; "
                             "while the model touches the ground its weight shows on the base's "
                             "residual forces and the joint moments are not the subject's")
+        takes = supported(system)  # the solve's mixed system with tracking, or not
         return _coordinate_dynamics(model, result, parts, loads, options,
-                                    smoothed=smoothing is not None)
+                                    smoothed=smoothing is not None,
+                                    kernels=system if takes and use_kernels(options.engine,
+                                                                            takes) else None)
     if smoothing is not None and parts == [(0, n)]:
         loads = smoothing.smoothed_loads(loads, trial.rate)
         return smoothed_dynamics(model, result, smoothing.drives, loads=loads, tol=options.tol,
@@ -527,12 +531,15 @@ def dynamics_stage(model: Model, trial: Trial, system: System, result: Kinematic
 
 def _coordinate_dynamics(model: Model, result: KinematicResult,
                          parts: list[tuple[int, int]], loads: list[ExternalLoad],
-                         options: SolveOptions, smoothed: bool) -> Dynamics:
+                         options: SolveOptions, smoothed: bool,
+                         kernels: System | None = None) -> Dynamics:
     """The inverse dynamics of an imported model along its solved coordinates, on each stretch
     of ``parts``: θ low-passed at ``--filter-cutoff`` as OpenSim's ID tool does and
     differentiated through its quintic spline (``dynamics.moving.coordinate_rates``), or the
     smoother's θ, θ̇, θ̈ as they are (``smoothed``); the loads applied as given, as the tool
-    applies them (docs/opensim.md). Frames outside ``parts`` are NaN."""
+    applies them (docs/opensim.md). Frames outside ``parts`` are NaN. ``kernels``: the
+    solve's system, whose compiled kernels then run the rates and multipliers
+    (``dynamics.moving.coordinate_inverse``)."""
     from fccgrb_cli.dynamics.moving import coordinate_inverse, coordinate_rates
 
     system = compile_system(model, angles="coordinate")  # the topology alone: no tracking rows
@@ -546,7 +553,7 @@ def _coordinate_dynamics(model: Model, result: KinematicResult,
             rates = coordinate_rates(result.time[part], result.theta[part],
                                      options.filter_cutoff)
         some = [take(load, part, n) for load in loads]
-        (q, qd, qdd), inverse = coordinate_inverse(system, *rates, some)
+        (q, qd, qdd), inverse = coordinate_inverse(system, *rates, some, kernels=kernels)
         kinematics = replace(take(result, part, n), q=q, qd=qd, qdd=qdd, theta=rates[0],
                              theta_d=rates[1], theta_dd=rates[2])
         pieces.append((part, Dynamics(kinematics, inverse, tuple(some),

@@ -555,14 +555,7 @@ def rates_frames(s: SparseSystem, q_all: np.ndarray, theta_d: np.ndarray,
         jacobian(s, q, F, values)
         _moved_to_rhs(s, values, gamma, theta_d[f], rhs, zero_first=True)
         normal_equations(s, values, rhs, w, N, g)
-        for k in range(nq - nb):  # θ fixed: its row and column of N become the identity
-            p = inverse[nb + k]
-            for j in range(s.first[p], p):
-                N[p, j] = 0.0
-            for i in range(p + 1, nq):
-                if s.first[i] <= p:
-                    N[i, p] = 0.0
-            N[p, p] = 1.0
+        _theta_fixed(s, N)
         for j in range(len(base_cols)):
             p = inverse[base_cols[j]]
             N[p, p] += 1.0
@@ -590,6 +583,78 @@ def rates_frames(s: SparseSystem, q_all: np.ndarray, theta_d: np.ndarray,
         for p in range(nq):
             qdd[f, s.perm[p]] = out[p]
         qdd[f, nb:] = theta_dd[f]
+
+
+@njit(cache=True)
+def _theta_fixed(s: SparseSystem, N: np.ndarray) -> None:
+    """θ given: its rows and columns of the normal matrix N (lower triangle, factor order)
+    become the identity, leaving Φ_xᵀWΦ_x on the body columns."""
+    nq, nb = s.nq, s.nb
+    for k in range(nq - nb):
+        p = s.inverse[nb + k]
+        for j in range(s.first[p], p):
+            N[p, j] = 0.0
+        for i in range(p + 1, nq):
+            if s.first[i] <= p:
+                N[i, p] = 0.0
+        N[p, p] = 1.0
+
+
+@njit(cache=True)
+def coordinate_multipliers_frames(s: SparseSystem, q_all: np.ndarray, rhs: np.ndarray,
+                                  lam: np.ndarray, tau: np.ndarray, misfit: np.ndarray
+                                  ) -> None:
+    """The inverse dynamics of a mixed system along prescribed coordinates (dynamics/moving.py,
+    docs/opensim.md §5), every frame: the multipliers of the topological rows (``s.top_rows``,
+    in their order) λ = Φ_x (Φ_xᵀΦ_x)⁻¹ rhs, the minimum-norm solution of Φ_xᵀλ = rhs with
+    rhs = g_x + Q_x − M ẍ (frames × body columns); the coordinates' forces τ = Φ_θᵀλ; the
+    misfit ‖Φ_xᵀλ − rhs‖. Normal equations on NRM's envelope with the θ rows and columns set to
+    the identity (as rates_frames), so the θ columns of the solution are zero. Frames with a
+    NaN, or whose Φ_x loses column rank, are left NaN."""
+    nq, nb = s.nq, s.nb
+    n_rows = len(s.c_const) + len(s.dot_c)
+    F = np.empty(len(s.f0))
+    values = np.empty(len(s.j_col))
+    N, L = np.zeros((nq, nq)), np.zeros((nq, nq))
+    w, zero = np.zeros(n_rows), np.zeros(n_rows)
+    g, y, back = np.empty(nq), np.empty(nq), np.empty(nq)
+    for r in s.top_rows:
+        w[r] = 1.0
+    for f in range(len(q_all)):
+        lam[f] = np.nan
+        tau[f] = np.nan
+        misfit[f] = np.nan
+        q = q_all[f]
+        if not (np.isfinite(q).all() and np.isfinite(rhs[f]).all()):
+            continue
+        features(s, q, F)
+        jacobian(s, q, F, values)
+        normal_equations(s, values, zero, w, N, g)
+        _theta_fixed(s, N)
+        if not cholesky(s.first, N, L):
+            continue
+        g[:] = 0.0
+        for j in range(nb):
+            g[s.inverse[j]] = rhs[f, j]
+        substitute(s.first, L, g, y)
+        tau[f] = 0.0
+        back[:] = 0.0
+        for i in range(len(s.top_rows)):
+            r = s.top_rows[i]
+            acc = 0.0
+            for m in range(s.j_ptr[r], s.j_ptr[r + 1]):
+                acc += values[m] * y[s.j_col[m]]
+            lam[f, i] = acc
+            for m in range(s.j_ptr[r], s.j_ptr[r + 1]):
+                column = s.perm[s.j_col[m]]
+                if column >= nb:
+                    tau[f, column - nb] += values[m] * acc
+                else:
+                    back[column] += values[m] * acc
+        acc = 0.0
+        for j in range(nb):
+            acc += (back[j] - rhs[f, j]) ** 2
+        misfit[f] = np.sqrt(acc)
 
 
 @njit(cache=True)

@@ -60,6 +60,12 @@ class FunctionRows:
         self._last[:] = [key, second, out]
         return out
 
+    def transforms(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every moving joint's R_PC and p_PC at every frame of θ (frames × n_θ):
+        frames × joints × 3 × 3 and frames × joints × 3, joints in the order of
+        :attr:`joints`."""
+        return self._stacked.transforms(theta)
+
     @cached_property
     def _stacked(self) -> StackedTransforms:
         """The joints' transforms evaluated together (system/moving_batch.py)."""

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fccgrb_cli.model.spatial import skew3
+from fccgrb_cli.model.spatial import Pieces, skew3
 
 __all__ = ["StackedTransforms"]
 
@@ -22,6 +22,9 @@ class _Zero:
 
     def terms(self, x: float) -> tuple[float, float, float]:
         return 0.0, 0.0, 0.0
+
+    def pieces(self) -> Pieces:
+        return Pieces.polynomial([0.0])
 
 
 class StackedTransforms:
@@ -58,6 +61,7 @@ class StackedTransforms:
                 else:
                     self.tr_fn.append(_Zero())
         self.KK = self.K @ self.K
+        self._forms: dict[int, tuple] = {}  # id(function) -> (function, its pieces or None)
         self.rot_rows = self.first[:, None] + np.arange(9)
         self.tr_rows = self.first[:, None] + 9 + np.arange(3)
 
@@ -68,6 +72,35 @@ class StackedTransforms:
         values = np.array([f.terms(float(v)) for f, v in zip(functions, x, strict=True)])
         value, first, second = (values[:, i].reshape(slots.shape) for i in range(3))
         return value, first, second
+
+    def transforms(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """R_PC (frames × joints × 3 × 3) and p_PC (frames × joints × 3) of every joint at
+        every frame of θ (frames × n_θ): the values of :meth:`add`'s rows, all frames at once."""
+        theta = np.asarray(theta, dtype=float)
+        a = self._frame_amounts(self.rot_fn, self.rot_slot, theta)   # frames × J × 3
+        s, c = np.sin(a)[..., None, None], (1.0 - np.cos(a))[..., None, None]
+        R = np.eye(3) + s * self.K + c * self.KK                     # frames × J × 3 × 3 × 3
+        b = self._frame_amounts(self.tr_fn, self.tr_slot, theta)
+        return R[:, :, 0] @ R[:, :, 1] @ R[:, :, 2], np.einsum("fjm,jmi->fji", b, self.t)
+
+    def _frame_amounts(self, functions: list, slots: np.ndarray, theta: np.ndarray
+                       ) -> np.ndarray:
+        x = np.where(slots >= 0, theta[:, np.maximum(slots, 0)], 0.0)  # frames × J × 3
+        out = np.empty_like(x)
+        for k, function in enumerate(functions):
+            j, axis = divmod(k, 3)
+            out[:, j, axis] = self._values(function, x[:, j, axis])
+        return out
+
+    def _values(self, function, x: np.ndarray) -> np.ndarray:
+        """f at every x (frames,): by its polynomial pieces (found once per function), or one
+        x at a time where it has none."""
+        if id(function) not in self._forms:
+            self._forms[id(function)] = (function, function.pieces())
+        form = self._forms[id(function)][1]
+        if form is not None:
+            return form.values(x)
+        return np.array([function.terms(float(v))[0] for v in x])
 
     def add(self, theta: np.ndarray, second: bool, h: np.ndarray, h1: np.ndarray,
             h2: np.ndarray) -> None:

@@ -71,38 +71,47 @@ _WALKS: weakref.WeakKeyDictionary[System, tuple[_Step, ...]] = weakref.WeakKeyDi
 
 
 def pose_from_coordinates(system: System, theta: np.ndarray) -> np.ndarray:
-    """q (system.nq,) with every body where the coordinates θ (rad, m) put it and, for a mixed
-    system, θ itself in the coordinates' slots.
+    """q with every body where the coordinates θ (rad, m) put it and, for a mixed system, θ
+    itself in the coordinates' slots; at one pose or at many.
 
     Parameters
     ----------
     system
         A compiled model with moving joints (``system.functions`` set).
     theta
-        The coordinates in the order of ``model.angles`` (n_θ,).
+        The coordinates in the order of ``model.angles``: (n_θ,), or (frames × n_θ).
 
     Returns
     -------
     numpy.ndarray
-        The system coordinates q: [r, u, v, w] per body, then θ when mixed.
+        The system coordinates q ((nq,), or frames × nq): [r, u, v, w] per body, then θ when
+        mixed.
     """
     functions = system.functions
     assert functions is not None  # a model with moving joints has their function rows
     theta = np.asarray(theta, dtype=float)
-    # every joint's transform at once: rows first..first+8 hold R_PC, the next three p_PC
-    h = functions.terms(theta, second=False)[0]
-    placed = {GROUND: (np.eye(3), np.zeros(3))}
-    q = system.layout.pose_q(system.model)
+    frames = theta.reshape(-1, theta.shape[-1])
+    n = len(frames)
+    if theta.ndim == 1:  # the rows' h at this θ, which its Φ_q and γ then reuse (.terms)
+        h = functions.terms(theta, second=False)[0]
+        first = np.array([joint[0] for joint in functions.joints], dtype=int)
+        R_PC = h[first[:, None] + np.arange(9)].reshape(1, -1, 3, 3)
+        p_PC = h[first[:, None] + 9 + np.arange(3)].reshape(1, -1, 3)
+    else:  # every frame's transforms at once
+        R_PC, p_PC = functions.transforms(frames)  # frames × joints × (3 × 3, 3)
+    placed = {GROUND: (np.broadcast_to(np.eye(3), (n, 3, 3)), np.zeros((n, 3)))}
+    q = np.tile(system.layout.pose_q(system.model), (n, 1))
     for step in _walk(system):
-        first = functions.joints[step.joint][0]
         R_body, r_body = placed[step.parent]
         R_P, o_P = R_body @ step.parent_axes, r_body + R_body @ step.parent_origin
-        R_C, o_C = R_P @ h[first:first + 9].reshape(3, 3), o_P + R_P @ h[first + 9:first + 12]
+        R_C = R_P @ R_PC[:, step.joint]
+        o_C = o_P + np.einsum("fij,fj->fi", R_P, p_PC[:, step.joint])
         R_child = R_C @ step.child_axes.T
         r_child = o_C - R_child @ step.child_origin
         placed[step.child] = (R_child, r_child)
-        full = np.concatenate([r_child, R_child[:, 0], R_child[:, 1], R_child[:, 2]])
-        q[step.block] = full[: step.block.stop - step.block.start]
+        full = np.concatenate([r_child, R_child[:, :, 0], R_child[:, :, 1], R_child[:, :, 2]],
+                              axis=1)
+        q[:, step.block] = full[:, : step.block.stop - step.block.start]
     if system.mixed:
-        q[system.layout.n_body_q:] = theta
-    return q
+        q[:, system.layout.n_body_q:] = frames
+    return q.reshape(*theta.shape[:-1], system.nq)

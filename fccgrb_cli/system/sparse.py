@@ -90,12 +90,13 @@ def supported(system: System) -> bool:
 def compilable(system: System) -> bool:
     """Every kernel, the classical model's too (driven frames, the multipliers, the smoother's
     linearization): fully-defined bodies (x is q's body part) and no moving joint. A model
-    with moving joints (an imported OpenSim model) has its smoothing and inverse dynamics
-    in the numpy reference engine, which a line on stderr says once per process."""
+    with moving joints (an imported OpenSim model) has its smoothing in the numpy reference
+    engine, which a line on stderr says once per process (its inverse dynamics, along its
+    coordinates, runs in the mixed system's kernels: dynamics/moving.py)."""
     if system.functions is not None:
         _tell_once("the compiled kernels take moving joints (an imported OpenSim model) in "
-                   "the mixed-coordinate solves only: the numpy reference engine runs its "
-                   "smoothing and inverse dynamics")
+                   "the mixed-coordinate solves and the inverse dynamics: the numpy "
+                   "reference engine runs its smoothing")
         return False
     return _fully_defined(system)
 
