@@ -154,3 +154,52 @@ def test_batches_load_each_kernel_once_per_process(tmp_path):
                    "--engine", "compiled")
     assert loads and len(set(loads)) == len(loads), sorted(loads)
     assert len({pid for pid, _ in loads}) == 1
+
+
+_LIGHT = """
+from numba.core import base
+refreshed = []
+full = base.BaseContext.refresh
+base.BaseContext.refresh = lambda self: refreshed.append(1) or full(self)
+from fccgrb_cli.pipeline.precompile import precompile
+precompile()
+print("refreshed" if refreshed else "light")
+"""
+
+
+@pytest.mark.skipif(not numba_available(), reason="numba is not installed")
+def test_kernels_load_without_numbas_full_refresh(tmp_path):
+    """Every compiled path (``fccgrb compile``'s passes: NRM, the optimizers, the smoother, the
+    classical and the imported model's inverse dynamics) runs in a fresh process whose kernels
+    all came from the cache on the light path (``engine.light_loads``: numba's context never
+    refreshed), and a solve writes the same bits as one in a process that
+    refreshed numba's context in full first."""
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "FCCGRB_BACKGROUND_COMPILE": "0"}
+    subprocess.run([sys.executable, "-c", _LIGHT], capture_output=True, text=True, env=env)
+    done = subprocess.run([sys.executable, "-c", _LIGHT], capture_output=True, text=True,
+                          env=env)  # the cache warm: every kernel loads
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["light"], done.stdout
+    outputs = []
+    for first in ("", "from numba.core.registry import cpu_target; "
+                      "cpu_target.target_context.refresh(); "):
+        out = tmp_path / f"r{len(outputs)}.h5"
+        code = (f"import sys; {first}from fccgrb_cli.entry import run; sys.argv = ['fccgrb', "
+                f"'solve', {str(MODEL)!r}, {str(TRIAL)!r}, '--perturb', '30', '--engine', "
+                f"'compiled', '-o', {str(out)!r}]; run()")
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                              env=env)
+        assert done.returncode == 0, done.stderr
+        outputs.append(out)
+    import h5py
+    import numpy as np
+
+    with h5py.File(outputs[0]) as a, h5py.File(outputs[1]) as b:
+        (name,) = a["runs"]
+        for key in ("q", "qd", "qdd", "joint_moments", "lambda", "iterations"):
+            assert np.array_equal(a["runs"][name][key][()], b["runs"][name][key][()],
+                                  equal_nan=True), key
