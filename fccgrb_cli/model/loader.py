@@ -5,7 +5,8 @@ Every rejection is one :class:`InputError` line: ``FILE: KEY.PATH: expected …,
 
 from __future__ import annotations
 
-import functools
+import collections
+import dataclasses
 import math
 from collections.abc import Callable
 from pathlib import Path
@@ -631,14 +632,29 @@ def _calibrated(r: _Reader, doc: dict) -> CalibrationRecord | None:
 
 def parse_model(text: str, source: str = "<model>") -> Model:
     """Validate a model given as YAML text (or an OpenSim ``.osim`` document, which a run
-    stores as its model text); ``source`` names it in error messages. The same text and source
-    are parsed once per process (a Model is immutable): a solve parses its model file and then
-    the run's copy of it, and a study's worker the same subject's model for each of its trials
-    (~25 ms each for a calibrated lower-limb model)."""
-    return _parse_model(text, source)
+    stores as its model text); ``source`` names it in error messages (and is the model's
+    ``source``). The same text is parsed once per process (a Model is immutable; :func:`kept`):
+    a solve loads its model file and then rebuilds the run's model from its copy of the text
+    when it writes, and a study's worker parses the same subject's model for each of its trials
+    (~25 ms each for a calibrated lower-limb model or an OpenSim gait model)."""
+    model = _PARSED.get(text)
+    if model is None:
+        model = kept(_parse_model(text, source))
+    return model if model.source == source else dataclasses.replace(model, source=source)
 
 
-@functools.lru_cache(maxsize=8)
+_PARSED: collections.OrderedDict[str, Model] = collections.OrderedDict()  # text -> model
+
+
+def kept(model: Model) -> Model:
+    """``model``, remembered by its text for :func:`parse_model` (the last 8 texts)."""
+    _PARSED[model.text] = model
+    _PARSED.move_to_end(model.text)
+    while len(_PARSED) > 8:
+        _PARSED.popitem(last=False)
+    return model
+
+
 def _parse_model(text: str, source: str) -> Model:
     if text.lstrip().startswith("<"):
         from fccgrb_cli.model.osim.convert import parse_osim_model
@@ -694,5 +710,5 @@ def load_model(path: str | Path) -> Model:
     if str(path).lower().endswith(".osim"):
         from fccgrb_cli.model.osim.convert import load_osim
 
-        return load_osim(path)
+        return kept(load_osim(path))
     return parse_model(read_text(path, "model file"), str(path))
