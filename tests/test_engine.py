@@ -203,3 +203,27 @@ def test_kernels_load_without_numbas_full_refresh(tmp_path):
         for key in ("q", "qd", "qdd", "joint_moments", "lambda", "iterations"):
             assert np.array_equal(a["runs"][name][key][()], b["runs"][name][key][()],
                                   equal_nan=True), key
+
+
+@pytest.mark.parametrize(("code", "status", "said"), [(None, 0, ""), (3, 3, ""),
+                                                       ("'no such file'", 1, "no such file")])
+def test_the_program_leaves_with_its_status_its_output_and_its_cleanup(tmp_path, code, status,
+                                                                        said):
+    """``entry.leave`` (the program's exit without the interpreter's teardown) keeps what an
+    ordinary exit does: the status (a text said on stderr, then 1), stdout's buffered output,
+    and the atexit handlers (a temporary folder still open is removed)."""
+    import os
+    import subprocess
+    import sys
+
+    script = ("import tempfile; from fccgrb_cli.entry import leave; "
+              "folder = tempfile.TemporaryDirectory(); print(folder.name); "
+              f"print('buffered', end=''); leave({code})")
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}  # stdout buffered
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          env=env)
+    folder, rest = done.stdout.split("\n", 1)
+    assert done.returncode == status
+    assert rest == "buffered"
+    assert done.stderr.strip() == said
+    assert not Path(folder).exists()
