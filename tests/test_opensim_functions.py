@@ -132,3 +132,21 @@ def test_closed_forms_of_the_simple_functions():
     assert pl.terms(2.0) == pytest.approx((1.5, -0.5, 0.0))
     assert pl.terms(4.0) == pytest.approx((0.5, -0.5, 0.0))
     assert pl.terms(-1.0) == pytest.approx((-2.0, 2.0, 0.0))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_pieces_give_every_functions_values_at_many_points(seed):
+    """``Pieces.values`` (a pose of many frames at once) equals each function's own ``terms``
+    inside, on and outside its knots, whatever the shape of the points given (to 1e-10 of
+    its largest value: a natural spline's pieces are expanded exactly from its |x − x_i|^k
+    form, which loses more to rounding)."""
+    x, _ = knots(seed)
+    points = np.concatenate([inside(x), x, [x[0] - 0.7, x[-1] + 0.9, x[-1]]])
+    for f in all_functions(seed):
+        values = f.pieces().values(points)
+        expected = np.array([f.terms(float(t))[0] for t in points])
+        scale = 1e-10 * max(1.0, float(np.abs(expected).max()))
+        assert np.allclose(values, expected, rtol=0, atol=scale), f
+        assert f.pieces().values(points.reshape(-1, 1)).shape == (len(points), 1)
+        assert f.pieces().values(np.float64(x[-1])) == pytest.approx(f.terms(x[-1])[0],
+                                                                      rel=0, abs=scale)

@@ -54,8 +54,8 @@ class Pieces:
         if m == 0:
             piece = np.zeros(x.shape, dtype=int)
         else:  # the knots at or below x; x on the last knot is in the last closed interval
-            piece = np.searchsorted(self.knots, x, side="right")
-            piece[x == self.knots[-1]] = m - 1
+            piece = np.where(x == self.knots[-1], m - 1,
+                             np.searchsorted(self.knots, x, side="right"))
         degree = max(len(c) for c in self.coefficients)
         table = np.zeros((len(self.coefficients), degree))
         for p, c in enumerate(self.coefficients):
