@@ -34,7 +34,7 @@ GAIT_TRIAL = ROOT.parent / "shared" / "data" / "c3d" / "Qualisys.c3d"
 CALIBRATE = ["calibrate", str(ROOT / "configs" / "models" / "lower_limb.yaml"), str(GAIT_TRIAL),
              "--mass", "67", "-o", "personal.yaml"]
 GAIT = ["solve", "personal.yaml", str(GAIT_TRIAL), "--method", "nrm-wls", "--filter-cutoff", "6"]
-ENTRY = "import sys; from fccgrb_cli.cli.main import main; sys.exit(main())"
+ENTRY = "from fccgrb_cli.entry import run; run()"
 
 
 def command() -> list[str]:
