@@ -25,6 +25,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import h5py
@@ -139,6 +140,16 @@ def test_report_lists_each_trial_with_its_frames_and_flags(walking_reference: Pa
                     assert frames == 0
                     assert label in clear, (label, clear)
     assert "group control: 1 subjects (A)" in result.output
+    from fccgrb_cli.batch.study.store import read_study
+
+    full, tables_only = read_study(walking_reference), read_study(walking_reference,
+                                                                     trial_gait=False)
+    trials = [t for s in full.subjects for t in s.solved]
+    assert trials and all(t.gait is not None for t in trials)
+    assert all(t.gait is None for s in tables_only.subjects for t in s.solved)
+    assert repr(tables_only) == repr(replace(full, subjects=tuple(
+        replace(s, solved=tuple(replace(t, gait=None) for t in s.solved))
+        for s in full.subjects)))
 
 
 def _run_cycles(h5: h5py.File, run: str, side: str) -> tuple[np.ndarray, np.ndarray, list]:

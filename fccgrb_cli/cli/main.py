@@ -813,7 +813,7 @@ def batch(study: str, output: str | None, workers: int, scheduler: str | None, f
     with cluster_executor(scheduler) as executor:
         outcome = run_study(spec, out, Executors(workers, executor),
                             accept_truncated=accept_truncated, progress=progress)
-    click.echo(study_tables(read_study(out)))
+    click.echo(study_tables(read_study(out, trial_gait=False)))
     failed = outcome.failed_trials
     calibrations = len(outcome.failures) - failed
     click.echo(f"wrote {out}: {outcome.solved} trials solved now, {outcome.kept} already done, "
@@ -896,7 +896,7 @@ def report(results: str, fmt: str, table: str | None, html_folder: str | None,
         from fccgrb_cli.batch.study.store import read_study
         from fccgrb_cli.batch.study.tables import study_tables
 
-        click.echo(study_tables(read_study(results)))
+        click.echo(study_tables(read_study(results, trial_gait=False)))
         return
     own, rows = collect(results)
     click.echo(render(table if table is not None else own, rows, fmt=fmt), nl=False)
