@@ -106,12 +106,13 @@ def test_the_compiled_inverse_is_the_numpy_one(seed):
     reference's frame-by-frame numbers, on the knee and on generated models (random transforms,
     splines, a coupler) with two loads on two bodies, over frames that move the coordinates far
     from their defaults; a frame with a NaN rate is left NaN and changes no other frame."""
-    from fccgrb_cli.dynamics.moving import coordinate_inverse
+    from fccgrb_cli.dynamics.moving import _same_rows, coordinate_inverse
 
     text = knee_model() if seed is None else random_model_text(seed)
     model = parse_osim_model(text, "model.osim")
     system = compile_system(model, angles="coordinate")
     tracking = compile_system(model, angles="coordinate", track=True)
+    assert _same_rows(system, tracking)  # the kernels run (else the numpy path, twice)
     rng = np.random.default_rng(11 if seed is None else seed)
     n, k = 40, len(model.angles)
     t = np.linspace(0, 1, n)[:, None]

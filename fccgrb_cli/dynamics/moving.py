@@ -72,7 +72,7 @@ def coordinate_inverse(system: System, theta: np.ndarray, theta_d: np.ndarray,
     compiled kernels take: ``system.sparse.supported``); the rates and the multipliers then run
     in them (``kernels.rates_frames``, ``kernels.coordinate_multipliers_frames``: the same
     equations, all frames in machine code). None: numpy, frame by frame (the reference)."""
-    if kernels is not None:
+    if kernels is not None and _same_rows(system, kernels):
         return _compiled_inverse(system, kernels, theta, theta_d, theta_dd, loads)
     M = mass_matrix(system.model)
     g = gravity_forces(system.model)
@@ -156,6 +156,18 @@ def _compiled_inverse(system: System, kernels: System, theta: np.ndarray,
                               potential=-(q[:, :nb] @ g), external_power=power,
                               residual=residual)
     return (q, qd, qdd), inverse
+
+
+def _same_rows(system: System, kernels: System) -> bool:
+    """Whether ``kernels`` (with tracking) has ``system``'s coordinates and, as its topological
+    rows in their order, ``system``'s rows: the multipliers the kernels give are then λ of
+    ``system``'s rows (else the numpy reference runs)."""
+    from fccgrb_cli.system.sparse import sparse_of
+
+    rows = sparse_of(kernels).top_rows
+    return (kernels.nq == system.nq and len(rows) == system.n_rows
+            and all(kernels.labels[r] == label for r, label in zip(rows, system.labels,
+                                                                    strict=True)))
 
 
 def ready_inverse(kernels: System) -> None:
