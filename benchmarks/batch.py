@@ -2,7 +2,7 @@
 trials, whole command wall time (start-up, calibrations, solves with the inverse dynamics, the
 study file) and per trial.
 
-    python benchmarks/batch.py [--trials 50] [--workers 2] [--keep]
+    python benchmarks/batch.py [--trials 50] [--workers 2] [--keep] [--opensim-python PYTHON]
 
 The study: ten subjects of five trials each, alternately an adult (Qualisys.c3d, 200 Hz, 340
 frames; lower-limb template, calibrated from its first trial, 67 kg) and a child
@@ -108,6 +108,10 @@ def main() -> None:
     parser.add_argument("--keep", action="store_true", help="Keep the temporary folder.")
     parser.add_argument("--no-breakdown", action="store_true",
                         help="Leave out where a trial's time goes.")
+    parser.add_argument("--opensim-python", default=None, metavar="PYTHON",
+                        help="a Python where `import opensim` works: OpenSim 4.6's IK + ID tools "
+                             "(two processes) on its synthetic trial, before and after the "
+                             "batch, per frame beside the batch's")
     args = parser.parse_args()
     for path in (ADULT, CHILD, CHILD_STATIC):
         if not path.exists():
@@ -118,9 +122,11 @@ def main() -> None:
         out = folder / "study.h5"
         command = [*fccgrb(), "batch", str(study), "-o", str(out), "--workers",
                    str(args.workers)]
+        peer = [_opensim_per_frame(args.opensim_python)] if args.opensim_python else []
         started = time.perf_counter()
         done = subprocess.run(command, capture_output=True, text=True, check=False)
         wall = time.perf_counter() - started
+        peer += [_opensim_per_frame(args.opensim_python)] if args.opensim_python else []
         if done.returncode != 0:
             raise SystemExit(f"fccgrb batch exited with {done.returncode}:\n{done.stderr}")
         with h5py.File(out, "r") as h5:
@@ -137,6 +143,11 @@ def main() -> None:
               f"{'solve s min':>12} {'solve s max':>12} {'trials/min':>11}")
         print(f"{wall:13.1f} {wall / n:12.2f} {solve.mean():13.2f} {solve.min():12.2f} "
               f"{solve.max():12.2f} {60 * n / wall:11.1f}")
+        if peer:
+            ms = 1e3 * wall / frames.sum()
+            print(f"per frame: the batch {ms:.2f} ms; OpenSim's IK + ID tools on its synthetic "
+                  f"trial {min(peer):.2f} ms (best of before and after); OpenSim / batch "
+                  f"{min(peer) / ms:.1f}")
         if not args.no_breakdown:
             breakdown(study, out)
         if args.keep:
@@ -144,6 +155,23 @@ def main() -> None:
     finally:
         if not args.keep:
             shutil.rmtree(folder, ignore_errors=True)
+
+
+def _opensim_per_frame(python: str) -> float:
+    """ms per frame of OpenSim's IK tool then its ID tool, each in a fresh process, on its
+    synthetic trial (``opensim_tools.py``'s runs: start-up, the model's and markers' reading,
+    the writing included)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import opensim_tools
+
+    with tempfile.TemporaryDirectory() as scratch:
+        folder = Path(scratch)
+        for item in opensim_tools.TRIAL.iterdir():
+            (folder / item.name).symlink_to(item)
+        ik, _ = opensim_tools._opensim(python, "ik", folder)
+        identity, _ = opensim_tools._opensim(python, "id", folder)
+        _, seconds = opensim_tools._opensim(python, "solver", folder)
+    return 1e3 * (ik + identity) / seconds["frames"]
 
 
 # A trial's stages in a worker: (label, the functions whose cumulative time is the stage's)

@@ -361,7 +361,13 @@ def study(ws: Workspace) -> list[Artifact]:
 
 
 def bench_batch(ws: Workspace) -> list[Artifact]:
+    """The 50-trial study; with FCCGRB_OPENSIM_PYTHON (a Python that has ``opensim``), OpenSim's
+    IK + ID tools per frame in the same run beside it."""
     _need_gait_trial()
+    python = os.environ.get("FCCGRB_OPENSIM_PYTHON")
+    if python and subprocess.run([python, "-c", "import opensim"],
+                                 capture_output=True).returncode == 0:
+        return _bench_console(ws, "bench-batch", f"batch.py --opensim-python {python}")
     return _bench_console(ws, "bench-batch", "batch.py")
 
 
