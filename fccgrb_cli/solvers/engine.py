@@ -139,5 +139,5 @@ def light_loads() -> bool:
         return None  # the guard swallowed an I/O error: not in the cache
 
     load_overload.light = True  # type: ignore[attr-defined]
-    cache.load_overload = load_overload
+    cache.load_overload = load_overload  # type: ignore[method-assign]  # numba's own class
     return True
