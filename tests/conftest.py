@@ -97,11 +97,27 @@ SLOW = (
 )
 
 
+# Of the slow tests, those that kill, signal or race real processes (a race on the first cell
+# written, a full disk, a signal at a chosen moment): CI runs the other slow tests in two
+# processes (-m "slow and not alone" -n 2) and these after them, one at a time (-m alone).
+ALONE = (
+    "tests/test_faults.py",
+    "tests/test_batch.py::test_killed_batch_resumes_and_equals_an_uninterrupted_run",
+    "tests/test_sweep.py::test_killed_sweep_resumes_with_the_missing_cells",
+)
+
+
+def _listed(node: str, listed: tuple[str, ...]) -> bool:
+    return any(node == entry or node.startswith(f"{entry}::") for entry in listed)
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
         node = item.nodeid.split("[")[0]
-        if any(node == slow or node.startswith(f"{slow}::") for slow in SLOW):
+        if _listed(node, SLOW):
             item.add_marker(pytest.mark.slow)
+        if _listed(node, ALONE):
+            item.add_marker(pytest.mark.alone)
 
 
 @pytest.fixture(scope="session")
