@@ -88,3 +88,25 @@ def test_the_background_compile_removes_its_lock(tmp_path, monkeypatch):
     with pytest.raises(RuntimeError):
         precompile.background_main(str(lock))
     assert not lock.exists()
+
+
+def test_the_background_compile_builds_this_package_whatever_the_folder(tmp_path):
+    """The background compile's program imports the package this process runs, not another
+    copy in the current folder (the README's first command runs from the repository's root,
+    next to the sources, while the installed package is what ``fccgrb`` runs)."""
+    import subprocess
+    import sys
+
+    import fccgrb_cli
+    from fccgrb_cli.pipeline.precompile import background_code
+
+    decoy = tmp_path / "fccgrb_cli"
+    decoy.mkdir()
+    (decoy / "__init__.py").write_text("")
+    prelude = background_code(tmp_path / ".compiling").split("; from ")[0]
+    done = subprocess.run([sys.executable, "-c", f"{prelude}; import fccgrb_cli; "
+                           "print(fccgrb_cli.__file__)"], capture_output=True, text=True,
+                          cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert Path(done.stdout.strip()) == Path(fccgrb_cli.__file__)
+    assert "background_main" in background_code(tmp_path / ".compiling")

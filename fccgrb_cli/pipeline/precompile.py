@@ -117,8 +117,7 @@ def compile_in_background(folder: Path) -> bool:
         lock.write_text(str(os.getpid()))
     except OSError:
         return False
-    code = ("import sys; from fccgrb_cli.pipeline.precompile import background_main; "
-            f"sys.exit(background_main({str(lock)!r}))")
+    code = background_code(lock)
     try:
         subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.DEVNULL,
                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
@@ -127,6 +126,19 @@ def compile_in_background(folder: Path) -> bool:
         lock.unlink(missing_ok=True)
         return False
     return True
+
+
+def background_code(lock: Path) -> str:
+    """The background compile's ``python -c`` program. It imports this very package, put first
+    on its path: with ``-c`` Python puts the current folder first, and a user who runs the
+    README's first command from the repository's root has the package's sources there, a
+    second copy whose kernels (their cache named by their own place and digest) are not the
+    installed package's: the background compile filled that copy's cache, and every later
+    command found its own empty and started again."""
+    home = str(Path(__file__).resolve().parents[2])  # the folder holding fccgrb_cli
+    return (f"import sys; sys.path.insert(0, {home!r}); "
+            "from fccgrb_cli.pipeline.precompile import background_main; "
+            f"sys.exit(background_main({str(lock)!r}))")
 
 
 def background_main(lock: str) -> int:
