@@ -367,7 +367,9 @@ def bench_batch(ws: Workspace) -> list[Artifact]:
     python = os.environ.get("FCCGRB_OPENSIM_PYTHON")
     if python and subprocess.run([python, "-c", "import opensim"],
                                  capture_output=True).returncode == 0:
-        return _bench_console(ws, "bench-batch", f"batch.py --opensim-python {python}")
+        out = ws.run(f"python benchmarks/batch.py --opensim-python {python}", cwd=ROOT)
+        return [ReadmeBlock("bench-batch", "```console\n$ python benchmarks/batch.py "
+                                           f"--opensim-python PYTHON\n{out}\n```")]
     return _bench_console(ws, "bench-batch", "batch.py")
 
 
