@@ -505,11 +505,11 @@ def dynamics_stage(model: Model, trial: Trial, system: System, result: Kinematic
                             "with --plate): the generalized forces hold no ground reaction; "
                             "while the model touches the ground its weight shows on the base's "
                             "residual forces and the joint moments are not the subject's")
-        takes = supported(system)  # the solve's mixed system with tracking, or not
+        # the solve's system, when its kernels take it (mixed, with tracking), runs them
+        compiled = supported(system) and use_kernels(options.engine, True)
         return _coordinate_dynamics(model, result, parts, loads, options,
                                     smoothed=smoothing is not None,
-                                    kernels=system if takes and use_kernels(options.engine,
-                                                                            takes) else None)
+                                    kernels=system if compiled else None)
     if smoothing is not None and parts == [(0, n)]:
         loads = smoothing.smoothed_loads(loads, trial.rate)
         return smoothed_dynamics(model, result, smoothing.drives, loads=loads, tol=options.tol,

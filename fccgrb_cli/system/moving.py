@@ -63,8 +63,13 @@ class FunctionRows:
     def transforms(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Every moving joint's R_PC and p_PC at every frame of θ (frames × n_θ):
         frames × joints × 3 × 3 and frames × joints × 3, joints in the order of
-        :attr:`joints`."""
-        return self._stacked.transforms(theta)
+        :attr:`joints`. At one θ (n_θ,), one frame of them from the rows' h (:meth:`terms`,
+        which that pose's Φ_q and γ then reuse)."""
+        stacked = self._stacked
+        if np.ndim(theta) == 1:
+            h = self.terms(theta, second=False)[0]
+            return h[stacked.rot_rows].reshape(1, -1, 3, 3), h[stacked.tr_rows][None]
+        return stacked.transforms(theta)
 
     @cached_property
     def _stacked(self) -> StackedTransforms:

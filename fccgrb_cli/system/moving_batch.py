@@ -10,6 +10,8 @@ products instead of a Python loop per joint. The amounts' functions are still ca
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 
 from fccgrb_cli.model.spatial import Pieces, skew3
@@ -61,7 +63,6 @@ class StackedTransforms:
                 else:
                     self.tr_fn.append(_Zero())
         self.KK = self.K @ self.K
-        self._forms: dict[int, tuple] = {}  # id(function) -> (function, its pieces or None)
         self.rot_rows = self.first[:, None] + np.arange(9)
         self.tr_rows = self.first[:, None] + 9 + np.arange(3)
 
@@ -77,30 +78,31 @@ class StackedTransforms:
         """R_PC (frames × joints × 3 × 3) and p_PC (frames × joints × 3) of every joint at
         every frame of θ (frames × n_θ): the values of :meth:`add`'s rows, all frames at once."""
         theta = np.asarray(theta, dtype=float)
-        a = self._frame_amounts(self.rot_fn, self.rot_slot, theta)   # frames × J × 3
+        rotations, translations = self._pieces
+        a = self._frame_amounts(self.rot_fn, rotations, self.rot_slot, theta)  # frames × J × 3
         s, c = np.sin(a)[..., None, None], (1.0 - np.cos(a))[..., None, None]
         R = np.eye(3) + s * self.K + c * self.KK                     # frames × J × 3 × 3 × 3
-        b = self._frame_amounts(self.tr_fn, self.tr_slot, theta)
+        b = self._frame_amounts(self.tr_fn, translations, self.tr_slot, theta)
         return R[:, :, 0] @ R[:, :, 1] @ R[:, :, 2], np.einsum("fjm,jmi->fji", b, self.t)
 
-    def _frame_amounts(self, functions: list, slots: np.ndarray, theta: np.ndarray
+    @cached_property
+    def _pieces(self) -> tuple[list, list]:
+        """Every rotation's and translation's function as polynomial pieces (None: it has
+        none), found once for :meth:`transforms`."""
+        return [f.pieces() for f in self.rot_fn], [f.pieces() for f in self.tr_fn]
+
+    @staticmethod
+    def _frame_amounts(functions: list, pieces: list, slots: np.ndarray, theta: np.ndarray
                        ) -> np.ndarray:
+        """Every axis's amount at every frame (frames × J × 3): by its function's pieces, or
+        one x at a time where it has none."""
         x = np.where(slots >= 0, theta[:, np.maximum(slots, 0)], 0.0)  # frames × J × 3
         out = np.empty_like(x)
-        for k, function in enumerate(functions):
+        for k, (function, form) in enumerate(zip(functions, pieces, strict=True)):
             j, axis = divmod(k, 3)
-            out[:, j, axis] = self._values(function, x[:, j, axis])
+            out[:, j, axis] = form.values(x[:, j, axis]) if form is not None else \
+                [function.terms(float(v))[0] for v in x[:, j, axis]]
         return out
-
-    def _values(self, function, x: np.ndarray) -> np.ndarray:
-        """f at every x (frames,): by its polynomial pieces (found once per function), or one
-        x at a time where it has none."""
-        if id(function) not in self._forms:
-            self._forms[id(function)] = (function, function.pieces())
-        form = self._forms[id(function)][1]
-        if form is not None:
-            return form.values(x)
-        return np.array([function.terms(float(v))[0] for v in x])
 
     def add(self, theta: np.ndarray, second: bool, h: np.ndarray, h1: np.ndarray,
             h2: np.ndarray) -> None:

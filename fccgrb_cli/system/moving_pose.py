@@ -92,13 +92,7 @@ def pose_from_coordinates(system: System, theta: np.ndarray) -> np.ndarray:
     theta = np.asarray(theta, dtype=float)
     frames = theta.reshape(-1, theta.shape[-1])
     n = len(frames)
-    if theta.ndim == 1:  # the rows' h at this θ, which its Φ_q and γ then reuse (.terms)
-        h = functions.terms(theta, second=False)[0]
-        first = np.array([joint[0] for joint in functions.joints], dtype=int)
-        R_PC = h[first[:, None] + np.arange(9)].reshape(1, -1, 3, 3)
-        p_PC = h[first[:, None] + 9 + np.arange(3)].reshape(1, -1, 3)
-    else:  # every frame's transforms at once
-        R_PC, p_PC = functions.transforms(frames)  # frames × joints × (3 × 3, 3)
+    R_PC, p_PC = functions.transforms(theta)  # frames × joints × (3 × 3, 3)
     placed = {GROUND: (np.broadcast_to(np.eye(3), (n, 3, 3)), np.zeros((n, 3)))}
     q = np.tile(system.layout.pose_q(system.model), (n, 1))
     for step in _walk(system):
