@@ -363,6 +363,25 @@ def test_trc_round_trip(tmp_path: Path, units: str) -> None:
     assert listing(tmp_path) == ["x.trc"]
 
 
+def test_trc_header_with_several_tabs_between_values(tmp_path: Path) -> None:
+    """A header whose values' line puts two tabs (and spaces) between its fields where the
+    keys' line has one, as opensim-models' Rajagopal walk does, reads as OpenSim reads it: empty
+    header fields are skipped (a data row's are gaps, kept)."""
+    rng = np.random.default_rng(3)
+    markers = rng.uniform(-1.0, 1.0, (12, 3, 3))
+    markers[4, 1] = np.nan
+    path = tmp_path / "tabs.trc"
+    write_trial(path, ["A", "B", "C"], markers, 100.0, "mm")
+    lines = path.read_text(encoding="utf-8").split("\n")
+    lines[2] = "\t\t".join(f"  {v}" for v in lines[2].split("\t"))  # the keys' line as it was
+    spaced = tmp_path / "spaced.trc"
+    spaced.write_text("\n".join(lines), encoding="utf-8")
+    plain, wide = read_trial(path), read_trial(spaced)
+    assert wide.labels == plain.labels and wide.rate == plain.rate == 100.0
+    np.testing.assert_array_equal(wide.markers, plain.markers)
+    assert np.isnan(wide.markers[4, 1]).all()
+
+
 def test_trc_in_metres_solves_to_the_c3d_angles(trials: dict[str, Synth],
                                                 tmp_path: Path) -> None:
     synth = trials["five_bar"]

@@ -225,8 +225,10 @@ def read_trc(path: Path, accept_truncated: bool = False) -> Trial:
     lines = text.splitlines()
     if len(lines) < 5 or not lines[0].startswith("PathFileType"):
         raise InputError(f"{path}: line 1: expected a TRC header starting with 'PathFileType'")
-    keys, values = lines[1].split("\t"), lines[2].split("\t")
-    header = dict(zip((k.strip() for k in keys), (v.strip() for v in values), strict=False))
+    # OpenSim's TRC reader skips empty fields in the header's two lines (several tabs between
+    # values, as in opensim-models' Rajagopal walk); its data rows keep them (a missing marker)
+    keys, values = ([f.strip() for f in line.split("\t") if f.strip()] for line in lines[1:3])
+    header = dict(zip(keys, values, strict=False))
     rate = _rate(_header_number(header, "DataRate", float, path), path, "line 3: DataRate")
     n_markers = _header_number(header, "NumMarkers", int, path)
     if n_markers < 1:
