@@ -1,7 +1,8 @@
 """The ``fccgrb`` program's entry point: the signal handlers first (``fccgrb_cli.core.scratch``), so
 that a Ctrl-C while numpy, h5py and click are still loading already ends the program with one
-line and status 130, then the command line (``fccgrb_cli.cli.main``), then the exit without the
-interpreter's teardown (:func:`leave`)."""
+line and status 130; then the command, in this install's warm server when one is up
+(``fccgrb_cli.cli.server``), else here (``fccgrb_cli.cli.main``), leaving a server for the next
+commands; then the exit without the interpreter's teardown (:func:`leave`)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,22 @@ import sys
 
 
 def run() -> None:
+    environ = dict(os.environ)
+    from fccgrb_cli.core import scratch
+
+    scratch.install()
+    from fccgrb_cli.cli import server
+
+    served = server.attempt(sys.argv, environ)
+    if served is not None:
+        leave(served)
+    code = command()
+    server.offer(environ)
+    leave(code)
+
+
+def command() -> object:
+    """The command line's command in this process: its exit code (SystemExit's)."""
     from fccgrb_cli.core import scratch
 
     scratch.install()
@@ -20,8 +37,16 @@ def run() -> None:
     try:
         main()
     except SystemExit as done:
-        leave(done.code)
-    leave(0)
+        return done.code
+    return 0
+
+
+def serve(path: str) -> None:
+    """The process of a server of commands (``fccgrb_cli.cli.server``) on the socket
+    ``path``: each command it forks ends as :func:`run`'s do (:func:`leave`)."""
+    from fccgrb_cli.cli import server
+
+    server.serve(path, lambda: leave(command()), server.warm_up)
 
 
 def leave(code: object) -> None:

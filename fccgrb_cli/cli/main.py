@@ -499,11 +499,12 @@ def _solve_one(model: Model, path: str, options: SolveOptions, accept_truncated:
 
 def _report_kernels() -> None:
     """How long this process spent loading (or compiling) the compiled kernels, on stderr: a
-    one-time cost per process that no ms/frame includes."""
+    one-time cost per process that no ms/frame includes. Nothing where they were loaded already
+    (a command forked by the warm server, ``cli.server``: a few ms)."""
     from fccgrb_cli.solvers.engine import KernelClock
 
     seconds, compiled = KernelClock.take()
-    if seconds:
+    if seconds >= 0.005 or compiled:
         what = "compiled" if compiled else "loaded"
         click.echo(f"fccgrb: compiled kernels {what} in {seconds:.2f} s (once per process; not "
                    "in ms/frame)", err=True)
@@ -519,6 +520,31 @@ def compile_command() -> None:
 
     total = precompile(lambda method, seconds: click.echo(f"{method}: {seconds:.1f} s"))
     click.echo(f"compiled kernels ready ({total:.1f} s)")
+
+
+@main.command("server")
+@click.option("--stop", is_flag=True, help="End every fccgrb server of yours (the commands "
+              "they run finish first); the next command runs in its own process and leaves a "
+              "fresh one.")
+@reports_input_errors
+def server_command(stop: bool) -> None:
+    """The warm servers that run your commands (one per install and environment; each ends
+    after 10 minutes without a command; FCCGRB_SERVER=0 turns them off): their process ids
+    and sockets, or --stop them. See docs/performance.md."""
+    from fccgrb_cli.cli import server
+
+    if stop:
+        stopped = server.stop()
+        click.echo(f"stopped {len(stopped)} fccgrb server(s)"
+                   + (f": {', '.join(map(str, stopped))}" if stopped else ""))
+        return
+    found = server.servers()
+    if not server.enabled():
+        click.echo("fccgrb servers are turned off here (FCCGRB_SERVER=0, or not Linux)")
+    if not found:
+        click.echo("no fccgrb server is up")
+    for pid, path in found:
+        click.echo(f"{pid}  {path}")
 
 
 def _show(run: Run, output: str) -> None:

@@ -1,0 +1,332 @@
+"""The warm server (``fccgrb_cli.cli.server``): a command through it is the command run alone
+(results, output, exit status, errors, folder, umask, environment), signals reach the command
+and deaths on either side end the other, a changed package is never served, and the server ends
+when idle. Real processes: the suite's other tests run with the server turned off
+(tests/conftest.py), these turn it on in a private folder of sockets."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+MODEL = ROOT / "configs" / "models" / "five_bar.yaml"
+SAMPLE = ROOT / "sample_data" / "five_bar.c3d"
+# the command line of `fccgrb`, its exit status and what it said, plus whether a server ran it
+ATTEMPT = textwrap.dedent("""
+    import os, sys
+    from fccgrb_cli.cli import server
+    code = server.attempt(["fccgrb", *sys.argv[1:]], dict(os.environ))
+    sys.stderr.write("SERVED\\n" if code is not None else "NOT SERVED\\n")
+    sys.stderr.flush()
+    os._exit(0 if code is None else code)
+""")
+
+
+def served_env(folder: Path, **extra: str) -> dict[str, str]:
+    env = {**os.environ, "FCCGRB_SERVER": "1", "XDG_RUNTIME_DIR": str(folder), **extra}
+    env.pop("PYTHONUNBUFFERED", None)
+    return env
+
+
+def socket_of(env: dict[str, str]) -> Path:
+    code = "import os; from fccgrb_cli.cli import server; print(server.socket_path(os.environ))"
+    done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                          text=True, check=True)
+    return Path(done.stdout.strip())
+
+
+def wait_for(condition, seconds: float, what: str) -> None:
+    end = time.monotonic() + seconds
+    while not condition():
+        if time.monotonic() > end:
+            raise AssertionError(f"{what}: not within {seconds} s")
+        time.sleep(0.05)
+
+
+def start(env: dict[str, str], body: str | None = None, **options: object) -> subprocess.Popen:
+    """A server on ``env``'s socket: the real one (``entry.serve``), or, with ``body``, one
+    whose command is that Python code (then its exit status 0) and whose warm-up is nothing,
+    ``options`` given to ``server.serve`` (``root``, ``idle``)."""
+    path = socket_of(env)
+    if body is None:
+        code = f"from fccgrb_cli.entry import serve; serve({str(path)!r})"
+    else:
+        code = "\n".join([
+            "import os, sys, time", "from pathlib import Path",
+            "from fccgrb_cli.cli import server", "from fccgrb_cli.entry import leave",
+            "def command():", textwrap.indent(textwrap.dedent(body).strip(), "    "),
+            "    leave(0)",
+            f"server.serve({str(path)!r}, command, lambda: None, **{options!r})"])
+    process = subprocess.Popen([sys.executable, "-c", code], env=env, cwd="/",
+                               start_new_session=True)
+    wait_for(lambda: path.exists() or process.poll() is not None, 180, "the server's socket")
+    assert process.poll() is None, "the server ended at once"
+    return process
+
+
+def stop(process: subprocess.Popen) -> None:
+    if process.poll() is None:
+        process.kill()
+        process.wait()
+
+
+def fccgrb(env: dict[str, str], *args: str, cwd: Path, **options) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-c", ATTEMPT, *args], env=env, cwd=cwd,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            **options)
+
+
+def finish(process: subprocess.Popen) -> tuple[int, str, str]:
+    out, err = process.communicate(timeout=120)
+    return process.returncode, out, err
+
+
+def alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+@pytest.fixture(scope="module")
+def warm(tmp_path_factory: pytest.TempPathFactory):
+    """The real server, warmed up (every module, every kernel), for the module's tests."""
+    pytest.importorskip("numba")
+    env = served_env(tmp_path_factory.mktemp("sockets"))
+    process = start(env)
+    yield env
+    stop(process)
+
+
+def _without_times(path: Path) -> dict[str, np.ndarray]:
+    out = {}
+    with h5py.File(path) as handle:
+        def keep(name, item):
+            if isinstance(item, h5py.Dataset) and not name.endswith("time_s"):
+                out[name] = item[()]
+        handle.visititems(keep)
+    return out
+
+
+def test_a_served_solve_equals_the_solve_in_its_own_process(warm, tmp_path: Path) -> None:
+    args = ["solve", str(MODEL), str(SAMPLE), "--perturb", "30"]
+    alone = subprocess.run([sys.executable, "-c", "from fccgrb_cli.entry import run; run()",
+                            *args, "-o", "alone.h5"], env={**warm, "FCCGRB_SERVER": "0"},
+                           cwd=tmp_path, capture_output=True, text=True, check=True)
+    code, out, err = finish(fccgrb(warm, *args, "-o", "served.h5", cwd=tmp_path))
+    assert (code, err.splitlines()[-1]) == (0, "SERVED"), err
+    first, second = _without_times(tmp_path / "alone.h5"), _without_times(tmp_path / "served.h5")
+    assert first.keys() == second.keys() and len(first) > 20
+    for name, value in first.items():
+        assert np.array_equal(value, second[name], equal_nan=value.dtype.kind in "fc"), name
+    # the summary's row but its ms/frame, then the same "wrote" line
+    row = [line.split() for line in out.splitlines()], [line.split()
+                                                        for line in alone.stdout.splitlines()]
+    assert row[0][1][:2] + row[0][1][3:] == row[1][1][:2] + row[1][1][3:]
+    assert out.splitlines()[-1] == alone.stdout.splitlines()[-1].replace("alone", "served")
+
+
+def test_a_served_error_is_one_line_and_status_2(warm, tmp_path: Path) -> None:
+    code, out, err = finish(fccgrb(warm, "solve", "missing.yaml", str(SAMPLE), cwd=tmp_path))
+    lines = err.splitlines()
+    assert code == 2 and out == "" and lines[-1] == "SERVED"
+    assert len(lines) == 2 and lines[0].startswith("fccgrb: error:") and "missing.yaml" in lines[0]
+
+
+def test_the_command_has_the_callers_folder_umask_and_environment(warm, tmp_path: Path) -> None:
+    process = fccgrb(warm, "solve", str(MODEL), str(SAMPLE), "-o", "here.h5", cwd=tmp_path,
+                     preexec_fn=lambda: os.umask(0o077))
+    assert finish(process)[0] == 0
+    assert (tmp_path / "here.h5").stat().st_mode & 0o777 == 0o600
+    for columns in ("50", "160"):  # an environment variable the server's key leaves out
+        env = {**warm, "COLUMNS": columns}
+        code, out, err = finish(fccgrb(env, "solve", "--help", cwd=tmp_path))
+        alone = subprocess.run([sys.executable, "-c", "from fccgrb_cli.entry import run; run()",
+                                "solve", "--help"], env={**env, "FCCGRB_SERVER": "0"},
+                               capture_output=True, text=True, check=True)
+        assert code == 0 and err.splitlines() == ["SERVED"] and out == alone.stdout
+
+
+@pytest.fixture
+def toy(tmp_path: Path):
+    """Start servers whose command is given code; all are stopped after the test."""
+    started = []
+    env = served_env(tmp_path / "sockets")
+    (tmp_path / "sockets").mkdir()
+
+    def make(body: str, **options: object) -> subprocess.Popen:
+        started.append(start(env, body, **options))
+        return started[-1]
+
+    make.env = env  # type: ignore[attr-defined]
+    yield make
+    for process in started:
+        stop(process)
+
+
+def test_streams_and_exit_status_are_the_command_lines(toy, tmp_path: Path) -> None:
+    toy("""
+        data = sys.stdin.read()
+        print(f"read {len(data)} characters in {os.getcwd()}")
+        sys.stderr.write("to stderr\\n")
+        leave(3)
+    """)
+    process = fccgrb(toy.env, cwd=tmp_path, stdin=subprocess.PIPE)
+    out, err = process.communicate("x" * 100_000, timeout=60)
+    assert process.returncode == 3
+    assert out == f"read 100000 characters in {tmp_path}\n"
+    assert err == "to stderr\nSERVED\n"
+
+
+@pytest.mark.parametrize("name", ["SIGINT", "SIGTERM", "SIGHUP"])
+def test_a_signal_to_the_command_line_reaches_the_command(toy, tmp_path: Path,
+                                                          name: str) -> None:
+    toy("""
+        from fccgrb_cli.core import scratch
+        scratch.install()
+        scratch.create(os.getcwd(), "being-written-", ".h5")
+        print("ready", flush=True)
+        time.sleep(60)
+    """)
+    process = fccgrb(toy.env, cwd=tmp_path)
+    assert process.stdout.readline() == "ready\n"
+    process.send_signal(getattr(signal, name))
+    code, _, err = finish(process)
+    number = getattr(signal, name)
+    assert code == 128 + number
+    assert f"interrupted by {name}" in err
+    assert not list(tmp_path.glob("being-written-*"))  # removed, as without a server
+
+
+def test_a_command_killed_by_a_signal_kills_its_command_line(toy, tmp_path: Path) -> None:
+    toy("os.kill(os.getpid(), 9)")
+    code, _, _ = finish(fccgrb(toy.env, cwd=tmp_path))
+    assert code == -9
+
+
+def test_a_dead_command_line_ends_its_command(toy, tmp_path: Path) -> None:
+    toy("""
+        Path('pid').write_text(str(os.getpid()))
+        time.sleep(60)
+    """)
+    process = fccgrb(toy.env, cwd=tmp_path)
+    wait_for((tmp_path / "pid").exists, 30, "the command's pid")
+    pid = int((tmp_path / "pid").read_text())
+    process.kill()
+    process.wait()
+    wait_for(lambda: not alive(pid), 10, "the command's end")
+
+
+def test_a_dead_server_ends_its_commands_and_the_command_line_says_so(toy,
+                                                                    tmp_path: Path) -> None:
+    server = toy("""
+        Path('pid').write_text(str(os.getpid()))
+        time.sleep(60)
+    """)
+    process = fccgrb(toy.env, cwd=tmp_path)
+    wait_for((tmp_path / "pid").exists, 30, "the command's pid")
+    pid = int((tmp_path / "pid").read_text())
+    server.kill()
+    code, _, err = finish(process)
+    assert code == 1 and "the fccgrb server ended before the command did" in err
+    wait_for(lambda: not alive(pid), 10, "the command's end")
+
+
+def test_a_changed_package_is_never_served(toy, tmp_path: Path) -> None:
+    package = tmp_path / "package"
+    package.mkdir()
+    (package / "module.py").write_text("x = 1\n")
+    server = toy("print('served')", root=str(package))
+    code, out, err = finish(fccgrb(toy.env, cwd=tmp_path))
+    assert (code, out, err) == (0, "served\n", "SERVED\n")
+    (package / "module.py").write_text("x = 2\n")  # an edit, an upgrade
+    code, out, err = finish(fccgrb(toy.env, cwd=tmp_path))
+    assert (code, out, err) == (0, "", "NOT SERVED\n")
+    assert server.wait(timeout=30) == 0  # and it ended: the next command starts a fresh one
+    assert not socket_of(toy.env).exists()
+
+
+def test_an_idle_server_ends_and_a_second_one_does_not_start(toy, tmp_path: Path) -> None:
+    server = toy("print('first')", idle=3.0)
+    path = socket_of(toy.env)
+    second = subprocess.run([sys.executable, "-c", "from fccgrb_cli.cli import server; "
+                             f"server.serve({str(path)!r}, print, print)"], env=toy.env,
+                            timeout=60, check=True, capture_output=True, text=True)
+    assert second.stdout == ""  # neither warmed up nor served: the lock is held
+    assert int(path.with_suffix(".lock").read_text()) == server.pid
+    assert finish(fccgrb(toy.env, cwd=tmp_path))[1] == "first\n"
+    assert server.wait(timeout=30) == 0
+    assert not path.exists()
+
+
+def test_the_key_names_what_is_read_before_a_command_runs(tmp_path: Path) -> None:
+    from fccgrb_cli.cli import server
+
+    base = {"PATH": "/usr/bin", "HOME": "/home/someone", "TERM": "xterm"}
+    first = server.key(base)
+    for name, value in (("NUMBA_CACHE_DIR", "/x"), ("PYTHONHASHSEED", "0"), ("LANG", "C"),
+                        ("OPENBLAS_NUM_THREADS", "2"), ("FCCGRB_SPILL_MB", "1"),
+                        ("HOME", "/home/other"), ("XDG_CACHE_HOME", "/c"), ("LD_PRELOAD", "x")):
+        assert server.key({**base, name: value}) != first, name
+    for name, value in (("TERM", "dumb"), ("COLUMNS", "50"), ("PWD", "/tmp"), ("PATH", "/bin")):
+        assert server.key({**base, name: value}) == first, name
+    # a folder of sockets others may open is not used
+    env = {"XDG_RUNTIME_DIR": str(tmp_path)}
+    assert server.folder(env) == tmp_path / f"fccgrb-{os.getuid()}"
+    (tmp_path / f"fccgrb-{os.getuid()}").chmod(0o755)
+    assert server.folder(env) is None
+    assert not server.enabled({"FCCGRB_SERVER": "0"}) and not server.enabled(
+        {"FCCGRB_SERVER": "off"})
+
+
+def test_a_command_leaves_a_server_unless_turned_off(tmp_path: Path) -> None:
+    pytest.importorskip("numba")
+    run = [sys.executable, "-c", "from fccgrb_cli.entry import run; run()", "solve",
+           str(MODEL), str(SAMPLE), "-o", "out.h5", "--replace"]
+    off = served_env(tmp_path / "off", FCCGRB_SERVER="0")
+    subprocess.run(run, env=off, cwd=tmp_path, check=True, capture_output=True)
+    assert not (tmp_path / "off").exists() or not list((tmp_path / "off").rglob("*.sock"))
+    env = served_env(tmp_path / "on")
+    (tmp_path / "on").mkdir()
+    first = subprocess.run(run, env=env, cwd=tmp_path, check=True, capture_output=True,
+                           text=True)
+    assert "kernels loaded" in first.stderr  # in its own process
+    path = socket_of(env)
+    wait_for(path.exists, 180, "the server left by the command")
+    pid = int(path.with_suffix(".lock").read_text())
+    try:
+        code, _, err = finish(fccgrb(env, *run[3:], cwd=tmp_path))
+        assert (code, err.splitlines()[-1]) == (0, "SERVED"), err
+        assert alive(pid)
+    finally:
+        os.kill(pid, signal.SIGKILL)
+
+
+def test_stop_lets_running_commands_finish_then_ends_the_server(toy, tmp_path: Path) -> None:
+    from fccgrb_cli.cli import server
+
+    process = toy("""
+        print("started", flush=True)
+        time.sleep(1.0)
+        print("finished")
+    """)
+    running = fccgrb(toy.env, cwd=tmp_path)
+    assert running.stdout.readline() == "started\n"
+    assert [pid for pid, _ in server.servers(toy.env)] == [process.pid]
+    assert server.stop(toy.env) == [process.pid]
+    code, out, err = finish(running)
+    assert (code, out, err) == (0, "finished\n", "SERVED\n")
+    assert process.wait(timeout=30) == 0
+    assert server.servers(toy.env) == [] and not socket_of(toy.env).exists()
+    assert finish(fccgrb(toy.env, cwd=tmp_path))[2] == "NOT SERVED\n"
