@@ -15,7 +15,10 @@ written into a copy of the original C3D so that its force plates and events stay
 perturb`` writes the markers alone). Options as the README's gait example (NRM-WLS, 6 Hz).
 'per trial' is the whole batch's wall time over the trials; 'solve s' each trial's own solve in
 its worker (the study file's /timings), mean and range. Run it on a quiet machine: the figures
-are wall clock. Speed goals live here, never in tests.
+are wall clock. Speed goals live here, never in tests. The batch runs in its own process
+(``FCCGRB_SERVER=0``, as a first command), then again through the warm server a command leaves
+behind (``benchmarks/served.py``: the batch's own start-up saved, and its workers, forked from it,
+start with the kernels loaded).
 
 Then where a trial's time goes (``--no-breakdown`` leaves it out): one adult's and one child's
 trial solved again in this process as a worker solves them (``solve_trial_cell``: read the
@@ -37,6 +40,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+from served import ALONE, warm_server
 
 import h5py
 import numpy as np
@@ -123,12 +128,10 @@ def main() -> None:
         command = [*fccgrb(), "batch", str(study), "-o", str(out), "--workers",
                    str(args.workers)]
         peer = [_opensim_per_frame(args.opensim_python)] if args.opensim_python else []
-        started = time.perf_counter()
-        done = subprocess.run(command, capture_output=True, text=True, check=False)
-        wall = time.perf_counter() - started
+        wall = _timed(command, ALONE)
+        with warm_server() as env:  # the same study again, as a command's second run
+            served = _timed([*command[:4], str(folder / "served.h5"), *command[5:]], env)
         peer += [_opensim_per_frame(args.opensim_python)] if args.opensim_python else []
-        if done.returncode != 0:
-            raise SystemExit(f"fccgrb batch exited with {done.returncode}:\n{done.stderr}")
         with h5py.File(out, "r") as h5:
             solve = np.array([t.attrs["solve_s"] for t in h5["timings"].values()])
             frames = np.array([len(r["theta"]) for r in h5["runs"].values()])
@@ -143,11 +146,13 @@ def main() -> None:
               f"{'solve s min':>12} {'solve s max':>12} {'trials/min':>11}")
         print(f"{wall:13.1f} {wall / n:12.2f} {solve.mean():13.2f} {solve.min():12.2f} "
               f"{solve.max():12.2f} {60 * n / wall:11.1f}")
+        print(f"the same batch through the warm server (a command's second run): {served:.1f} s")
         if peer:
-            ms = 1e3 * wall / frames.sum()
-            print(f"per frame: the batch {ms:.2f} ms; OpenSim's IK + ID tools on its synthetic "
-                  f"trial {min(peer):.2f} ms (best of before and after); OpenSim / batch "
-                  f"{min(peer) / ms:.1f}")
+            for what, seconds in (("the batch", wall), ("through the server", served)):
+                ms = 1e3 * seconds / frames.sum()
+                print(f"per frame: {what} {ms:.2f} ms; OpenSim's IK + ID tools on its "
+                      f"synthetic trial {min(peer):.2f} ms (best of before and after); "
+                      f"OpenSim / fccgrb {min(peer) / ms:.1f}")
         if not args.no_breakdown:
             breakdown(study, out)
         if args.keep:
@@ -155,6 +160,16 @@ def main() -> None:
     finally:
         if not args.keep:
             shutil.rmtree(folder, ignore_errors=True)
+
+
+def _timed(command: list[str], env: dict) -> float:
+    """Wall seconds of ``command`` (exit status checked)."""
+    started = time.perf_counter()
+    done = subprocess.run(command, capture_output=True, text=True, check=False, env=env)
+    wall = time.perf_counter() - started
+    if done.returncode != 0:
+        raise SystemExit(f"fccgrb batch exited with {done.returncode}:\n{done.stderr}")
+    return wall
 
 
 def _opensim_per_frame(python: str) -> float:

@@ -19,12 +19,14 @@ package index) put it, each tool in a fresh process as ``opensim-cmd run-tool`` 
   runs them; and, the stricter peer, both tools in one process.
 
 fccgrb runs ``fccgrb solve --opensim-setup SETUP.xml --filter-cutoff 6 -o out.h5`` in a fresh
-process (start-up, the kernels' load, the solve, the angles low-passed at 6 Hz as OpenSim's ID
-tool does, the rates, the inverse dynamics, the results file): its wall, and
-its per-frame kinematic solve as its own summary prints it (``ms/frame``), for NRM-WLS and
-CNO-SQP, and with ``--no-dynamics`` (the IK alone, against OpenSim's IK tool). Both sides solve
-to the setup's ``accuracy`` (1e-5: OpenSim's assembler accuracy; fccgrb's tolerance on ‖Δq‖∞);
-NRM-WLS's per-frame figure is also given at fccgrb's own default, ``--tol 1e-10``.
+process of its own (``FCCGRB_SERVER=0``, as a command's first run; start-up, the kernels' load, the
+solve, the angles low-passed at 6 Hz as OpenSim's ID tool does, the rates, the inverse dynamics, the
+results file): its wall, and its per-frame kinematic solve as its own summary prints it
+(``ms/frame``), for NRM-WLS and CNO-SQP, and with ``--no-dynamics`` (the IK alone, against OpenSim's
+IK tool). Both sides solve to the setup's ``accuracy`` (1e-5: OpenSim's assembler accuracy; fccgrb's
+tolerance on ‖Δq‖∞); NRM-WLS's per-frame figure is also given at fccgrb's own default, ``--tol
+1e-10``. NRM-WLS's whole commands are also timed through the warm server a command leaves behind (a
+command's second run onwards; ``benchmarks/served.py``).
 
 Timings: best of ``--repeat`` runs of each, one after another in the same minutes (read the
 ratios; state the machine's load, which the script prints before and after).
@@ -41,6 +43,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+from served import ALONE, warm_server
 
 ROOT = Path(__file__).resolve().parents[1]
 TRIAL = ROOT.parent / "shared" / "data" / "opensim" / "ik_gait2354_synthetic"
@@ -104,10 +108,10 @@ print(json.dumps(out))
 '''
 
 
-def _wall(command: list[str], cwd: Path) -> tuple[float, str]:
+def _wall(command: list[str], cwd: Path, env: dict | None = None) -> tuple[float, str]:
     """Wall seconds of a fresh process and what it printed on stdout (exit status checked)."""
     started = time.perf_counter()
-    done = subprocess.run(command, cwd=cwd, capture_output=True, text=True)
+    done = subprocess.run(command, cwd=cwd, capture_output=True, text=True, env=env)
     wall = time.perf_counter() - started
     if done.returncode:
         sys.exit(f"{' '.join(command[:3])}…: exit {done.returncode}\n{done.stderr[-2000:]}")
@@ -119,14 +123,16 @@ def _opensim(python: str, tool: str, folder: Path) -> tuple[float, dict]:
     return wall, json.loads(out.strip().splitlines()[-1])
 
 
-def _fccgrb(folder: Path, method: str, dynamics: bool, *extra: str) -> tuple[float, float]:
-    """Wall seconds of ``fccgrb solve`` and the ms/frame its summary prints."""
+def _fccgrb(folder: Path, method: str, dynamics: bool, *extra: str,
+            env: dict = ALONE) -> tuple[float, float]:
+    """Wall seconds of ``fccgrb solve`` (in its own process unless ``env`` is a warm
+    server's) and the ms/frame its summary prints."""
     results = folder / "out.h5"
     results.unlink(missing_ok=True)
     command = [shutil.which("fccgrb") or "fccgrb", "solve", "--opensim-setup", SETUP,
                "--method", method, "-o", str(results), *extra]
     command += ["--filter-cutoff", "6"] if dynamics else ["--no-dynamics"]
-    wall, out = _wall(command, folder)
+    wall, out = _wall(command, folder, env)
     lines = out.splitlines()
     header = next(k for k, line in enumerate(lines) if "ms/frame" in line)
     column = lines[header].split().index("ms/frame")
@@ -155,7 +161,7 @@ def main() -> None:
     def keep(key: str, value: float) -> None:
         best[key] = min(best.get(key, float("inf")), value)
 
-    with tempfile.TemporaryDirectory() as scratch:
+    with tempfile.TemporaryDirectory() as scratch, warm_server() as served:
         folder = Path(scratch)
         for item in TRIAL.iterdir():
             (folder / item.name).symlink_to(item)
@@ -180,6 +186,9 @@ def main() -> None:
                     keep(f"{method} ms", ms)
             _, ms = _fccgrb(folder, "nrm-wls", False, "--tol", "1e-10")
             keep("strict ms", ms)
+            for dynamics in (False, True):
+                keep(f"served {dynamics} wall", _fccgrb(folder, "nrm-wls", dynamics,
+                                                        env=served)[0])
     print(f"load after: {_load()}", file=sys.stderr)
     solver_ms = 1e3 * best["os solver"] / frames
     tool_ms = 1e3 * best["os ik run"] / frames
@@ -196,6 +205,13 @@ def main() -> None:
               f"{two / both:.2f} |")
         print(f"| IK + ID, one OpenSim process, {method} | {best['os both wall']:.2f} | "
               f"{both:.2f} | {best['os both wall'] / both:.2f} |")
+    ik, both = best["served False wall"], best["served True wall"]
+    print(f"| IK alone, nrm-wls, through fccgrb's warm server | {best['os ik wall']:.2f} | "
+          f"{ik:.2f} | {best['os ik wall'] / ik:.2f} |")
+    print(f"| IK + ID, two tool processes, nrm-wls, through fccgrb's warm server | {two:.2f} | "
+          f"{both:.2f} | {two / both:.2f} |")
+    print(f"| IK + ID, one OpenSim process, nrm-wls, through fccgrb's warm server | "
+          f"{best['os both wall']:.2f} | {both:.2f} | {best['os both wall'] / both:.2f} |")
     print("\n| IK per frame | ms/frame | timing ratio OpenSim's solver / this |")
     print("|---|---|---|")
     print(f"| OpenSim InverseKinematicsSolver (assemble, track) | {solver_ms:.2f} | 1.00 |")

@@ -1,13 +1,15 @@
-"""Wall time of whole commands, start-up included: the README's first solve (the bundled
-five-bar sample, P30, NRM-WLS, inverse dynamics, HDF5 out), the same with ``--engine numpy``
-(what loading numba and its compiled kernels costs against the numpy engine's slower frames),
-the docs' gait solve (the shared Qualisys walking trial, 340 frames, the lower-limb template
-calibrated as docs/gait.md does, with the dynamics; skipped without ``../shared/data``) and
-``fccgrb --help``, each the best of ``--repeat`` fresh processes (what ``/usr/bin/time -f %e``
-reports) with its CPU time (user + system, which suffers less from other work on the machine),
-then where a solve's time goes: the interpreter and the imports of each whole command
-(``python -X importtime``: the sum over top-level imports, and the heaviest of other packages
-and of the command's own top-level modules) and the steps of one in-process solve.
+"""Wall time of whole commands, start-up included: the README's first solve (the bundled five-bar
+sample, P30, NRM-WLS, inverse dynamics, HDF5 out), the same with ``--engine numpy`` (what loading
+numba and its compiled kernels costs against the numpy engine's slower frames), the docs' gait
+solve (the shared Qualisys walking trial, 340 frames, the lower-limb template calibrated as
+docs/gait.md does, with the dynamics; skipped without ``../shared/data``) and ``fccgrb --help``,
+each the best of ``--repeat`` fresh processes (what ``/usr/bin/time -f %e`` reports) with its CPU
+time (user + system, which suffers less from other work on the machine): first each command in
+its own process (``FCCGRB_SERVER=0``: a command's first run, or with the server turned off), then
+through the warm server a command leaves behind (its second run onwards: docs/performance.md,
+"Start-up"); then where a solve's time goes: the interpreter and the imports of each whole
+command (``python -X importtime``: the sum over top-level imports, and the heaviest of other
+packages and of the command's own top-level modules) and the steps of one in-process solve.
 
     python benchmarks/startup.py [--repeat 5]
 
@@ -26,6 +28,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+from served import ALONE, warm_server
 
 ROOT = Path(__file__).resolve().parents[1]
 SOLVE = ["solve", str(ROOT / "configs" / "models" / "five_bar.yaml"),
@@ -53,14 +57,15 @@ def importtime_command(script: list[str]) -> list[str]:
     return [sys.executable, "-X", "importtime", *body]
 
 
-def run(args: list[str], cwd: Path) -> tuple[float, float, str]:
-    """Wall and CPU (user + system) seconds of one run of ``args``, and its stderr; a failing
-    run stops the benchmark."""
+def run(args: list[str], cwd: Path, env: dict | None = None) -> tuple[float, float, str]:
+    """Wall and CPU (user + system) seconds of one run of ``args`` (in its own process unless
+    ``env`` says otherwise), and its stderr; a failing run stops the benchmark."""
     for stale in cwd.glob("*.h5"):
         stale.unlink()
     with tempfile.TemporaryFile("w+") as err:
         started = time.perf_counter()
-        child = subprocess.Popen(args, cwd=cwd, stdout=subprocess.DEVNULL, stderr=err)
+        child = subprocess.Popen(args, cwd=cwd, stdout=subprocess.DEVNULL, stderr=err,
+                                 env=ALONE if env is None else env)
         _, status, usage = os.wait4(child.pid, 0)
         wall = time.perf_counter() - started
         child.returncode = os.waitstatus_to_exitcode(status)
@@ -71,9 +76,10 @@ def run(args: list[str], cwd: Path) -> tuple[float, float, str]:
     return wall, usage.ru_utime + usage.ru_stime, text
 
 
-def best(args: list[str], repeat: int, cwd: Path) -> tuple[float, float]:
+def best(args: list[str], repeat: int, cwd: Path, env: dict | None = None
+         ) -> tuple[float, float]:
     """Best wall and best CPU seconds over ``repeat`` fresh processes of ``args``."""
-    times = [run(args, cwd)[:2] for _ in range(repeat)]
+    times = [run(args, cwd, env)[:2] for _ in range(repeat)]
     return min(wall for wall, _ in times), min(cpu for _, cpu in times)
 
 
@@ -151,6 +157,9 @@ def main() -> None:
                           [*GAIT, "-o", "gait.h5"]))
         cases.append(("fccgrb --help", ["--help"]))
         walls = [(name, *best([*fccgrb, *case], args.repeat, cwd)) for name, case in cases]
+        with warm_server() as env:
+            served = [(name, *best([*fccgrb, *case], args.repeat, cwd, env))
+                      for name, case in cases if "--engine" not in case]
         bare = best([sys.executable, "-c", "pass"], args.repeat, cwd)
         profiles = [(name, import_profile(importtime_command(fccgrb) + case, cwd))
                     for name, case in cases if case[0] == "solve" and "--engine" not in case]
@@ -158,6 +167,10 @@ def main() -> None:
           f"{load[0]:.2f} before, {os.getloadavg()[0]:.2f} after (2 busy cores = 2.0):")
     print(f"  {'':64} {'wall s':>7} {'CPU s':>7}")
     for name, wall, cpu in [*walls, ("python -c pass (the interpreter alone)", *bare)]:
+        print(f"  {name:64} {wall:7.3f} {cpu:7.3f}")
+    print("the same commands through the warm server (a command's second run onwards; CPU s is "
+          "the command line's, not the server's fork):")
+    for name, wall, cpu in served:
         print(f"  {name:64} {wall:7.3f} {cpu:7.3f}")
     for name, (total, others, own) in profiles:
         print(f"imports of {name.split(' (')[1].split(':')[0]} (-X importtime, "
