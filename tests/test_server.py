@@ -330,3 +330,16 @@ def test_stop_lets_running_commands_finish_then_ends_the_server(toy, tmp_path: P
     assert process.wait(timeout=30) == 0
     assert server.servers(toy.env) == [] and not socket_of(toy.env).exists()
     assert finish(fccgrb(toy.env, cwd=tmp_path))[2] == "NOT SERVED\n"
+
+
+def test_an_ignored_signal_stays_ignored(toy, tmp_path: Path) -> None:
+    toy("""
+        print("started", flush=True)
+        time.sleep(1.0)
+        print("finished")
+    """)
+    running = fccgrb(toy.env, cwd=tmp_path,
+                     preexec_fn=lambda: signal.signal(signal.SIGHUP, signal.SIG_IGN))  # nohup
+    assert running.stdout.readline() == "started\n"
+    running.send_signal(signal.SIGHUP)
+    assert finish(running) == (0, "finished\n", "SERVED\n")

@@ -46,11 +46,13 @@ import struct
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 __all__ = ["IDLE", "SETTING", "attempt", "key", "offer", "serve", "source_stamp"]
 
 SETTING = "FCCGRB_SERVER"  # "0", "off", "no" or "false": never use nor leave a server
 IDLE = 600.0  # s without a command before the server ends
+MOST = 3  # servers of one user at once (each environment its own, ~200 MB each)
 PACKAGE = Path(__file__).resolve().parents[1]
 # environment variables read before a command runs (imports, numba's and BLAS's set-up,
 # the interpreter's start, the cache folders): a server serves commands that agree on them
@@ -159,8 +161,11 @@ class _Forward:
     def __init__(self) -> None:
         self.pid = 0
         self.pending: list[int] = []
+        # a signal this process ignores (nohup, a background job) stays ignored: the command
+        # would have ignored it
         self.previous = {name: signal.signal(getattr(signal, name), self.forward)
-                         for name in FORWARDED}
+                         for name in FORWARDED
+                         if signal.getsignal(getattr(signal, name)) is not signal.SIG_IGN}
 
     def forward(self, signum: int, frame) -> None:
         if not self.pid:
@@ -207,8 +212,8 @@ def _follow(link: socket.socket) -> int:
         return 1
     code = os.waitstatus_to_exitcode(status)
     if code < 0:  # killed by a signal: die of the same one, as the command did
-        for name in FORWARDED:
-            signal.signal(getattr(signal, name), signal.SIG_DFL)
+        with contextlib.suppress(ValueError, OSError):
+            signal.signal(-code, signal.SIG_DFL)
         os.kill(os.getpid(), -code)
         return 128 - code
     return code
@@ -216,13 +221,14 @@ def _follow(link: socket.socket) -> int:
 
 def offer(environ: dict[str, str]) -> None:
     """After a command ran in its own process: start this install's server for ``environ``
-    in the background, unless one is up or starting, the server is turned off, or numba's
-    kernels are not compiled yet (a first run's background compile is under way: the server
-    would compile them again)."""
+    in the background, unless one is up or starting, the server is turned off, the user has
+    :data:`MOST` servers up already (of other environments), or numba's kernels are not
+    compiled yet (a first run's background compile is under way: the server would compile
+    them again)."""
     if not enabled(environ) or not _kernels_ready():
         return
     path = socket_path(environ)
-    if path is None or _locked(path):
+    if path is None or _locked(path) or len(servers(environ)) >= MOST:
         return
     import subprocess
 
@@ -323,7 +329,7 @@ def serve(path: str | Path, command: Callable[[], object], warm_up: Callable[[],
         begun = dict(os.environ)
         warm_up()
         own = {name: value for name, value in os.environ.items() if begun.get(name) != value}
-        _Server(path, command, Path(root), own).run(idle)
+        _Server(path, command, Path(root), own, lock).run(idle)
     finally:
         lock.close()
 
@@ -333,10 +339,11 @@ class _Server:
     connection each)."""
 
     def __init__(self, path: Path, command: Callable[[], object], root: Path,
-                 own: dict[str, str]) -> None:
+                 own: dict[str, str], lock) -> None:
         import selectors
 
         self.path, self.command, self.root, self.own = path, command, root, own
+        self.lock = lock  # closed in each command: a command outliving its server holds none
         self.stamp = source_stamp(root)
         self.listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         path.unlink(missing_ok=True)
@@ -458,6 +465,7 @@ class _Server:
             self.listener.close()
             self.wake.close()
             self.awake.close()
+            self.lock.close()
             for pidfd, (other, _) in self.running.items():
                 os.close(pidfd)
                 other.close()
@@ -535,7 +543,7 @@ def _reopen_streams(unbuffered: bool) -> None:
     for descriptor, old in ((0, sys.__stdin__), (1, sys.__stdout__), (2, sys.__stderr__)):
         raw = io.FileIO(descriptor, "rb" if descriptor == 0 else "wb", closefd=False)
         if descriptor == 0:
-            buffer: io.RawIOBase | io.BufferedIOBase = io.BufferedReader(raw)
+            buffer: Any = io.BufferedReader(raw)
         else:
             buffer = raw if unbuffered else io.BufferedWriter(raw)
         encoding = getattr(old, "encoding", None) or "utf-8"
@@ -545,8 +553,9 @@ def _reopen_streams(unbuffered: bool) -> None:
             buffer, encoding=encoding, errors=errors,
             line_buffering=descriptor == 2 or (descriptor == 1 and raw.isatty()),
             write_through=unbuffered and descriptor != 0))
-    sys.stdin, sys.stdout, sys.stderr = streams
-    sys.__stdin__, sys.__stdout__, sys.__stderr__ = streams
+    for name, stream in zip(("stdin", "stdout", "stderr"), streams, strict=True):
+        setattr(sys, name, stream)
+        setattr(sys, f"__{name}__", stream)  # what the interpreter made at start
 
 
 def warm_up() -> None:
