@@ -11,7 +11,11 @@ through the warm server a command leaves behind (its second run onwards: docs/pe
 command (``python -X importtime``: the sum over top-level imports, and the heaviest of other
 packages and of the command's own top-level modules) and the steps of one in-process solve.
 
-    python benchmarks/startup.py [--repeat 5]
+    python benchmarks/startup.py [--repeat 5] [--opensim-python PYTHON]
+
+With ``--opensim-python``, OpenSim 4.6's IK and ID tools on its own IK trial (two processes,
+start-up included, as ``benchmarks/opensim_tools.py`` runs them) are timed in the same run, and
+the gait solve's wall per frame is given beside theirs.
 
 Run it on a quiet machine: the figures are wall clock (the load average is printed before and
 after). Speed goals live here, never in tests.
@@ -37,6 +41,7 @@ SOLVE = ["solve", str(ROOT / "configs" / "models" / "five_bar.yaml"),
 GAIT_TRIAL = ROOT.parent / "shared" / "data" / "c3d" / "Qualisys.c3d"
 CALIBRATE = ["calibrate", str(ROOT / "configs" / "models" / "lower_limb.yaml"), str(GAIT_TRIAL),
              "--mass", "67", "-o", "personal.yaml"]
+GAIT_FRAMES = 340
 GAIT = ["solve", "personal.yaml", str(GAIT_TRIAL), "--method", "nrm-wls", "--filter-cutoff", "6"]
 ENTRY = "from fccgrb_cli.entry import run; run()"
 
@@ -106,6 +111,25 @@ def import_profile(args: list[str], cwd: Path, count: int = 8
     return total, sorted(others, reverse=True)[:count], sorted(own, reverse=True)[:count]
 
 
+def opensim_per_frame(python: str, repeat: int) -> tuple[float, int]:
+    """OpenSim's IK and ID tools, each in its own process as ``opensim-cmd run-tool`` runs
+    them, on its IK regression trial (``benchmarks/opensim_tools.py``): the best of ``repeat``
+    of the two processes' wall over the trial's frames (ms) and the frames."""
+    from opensim_tools import TRIAL, _opensim
+
+    best_wall, frames = float("inf"), 0
+    with tempfile.TemporaryDirectory() as scratch:
+        folder = Path(scratch)
+        for item in TRIAL.iterdir():
+            (folder / item.name).symlink_to(item)
+        for _ in range(repeat):
+            ik, _ = _opensim(python, "ik", folder)
+            inverse, _ = _opensim(python, "id", folder)
+            best_wall = min(best_wall, ik + inverse)
+        frames = int(_opensim(python, "solver", folder)[1]["frames"])
+    return 1e3 * best_wall / frames, frames
+
+
 def solve_steps() -> list[tuple[str, float]]:
     """Seconds of each step of one solve of the sample in this (warm) process."""
     import fccgrb_cli  # noqa: F401  (first: pins BLAS to one thread before numpy loads)
@@ -142,6 +166,10 @@ def solve_steps() -> list[tuple[str, float]]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--opensim-python", default=None, metavar="PYTHON",
+                        help="a Python where `import opensim` works: OpenSim 4.6's IK and ID "
+                             "tools (two processes) on its own IK trial in the same run, per "
+                             "frame beside the gait solve's")
     args = parser.parse_args()
     fccgrb = command()
     env_note = "" if os.environ.get("OPENBLAS_NUM_THREADS") is None else " (BLAS threads set)"
@@ -161,6 +189,8 @@ def main() -> None:
             served = [(name, *best([*fccgrb, *case], args.repeat, cwd, env))
                       for name, case in cases if "--engine" not in case]
         bare = best([sys.executable, "-c", "pass"], args.repeat, cwd)
+        peer = opensim_per_frame(args.opensim_python, args.repeat) \
+            if args.opensim_python and GAIT_TRIAL.is_file() else None
         profiles = [(name, import_profile(importtime_command(fccgrb) + case, cwd))
                     for name, case in cases if case[0] == "solve" and "--engine" not in case]
     print(f"best of {args.repeat} fresh processes{env_note}; load average "
@@ -172,6 +202,15 @@ def main() -> None:
           "the command line's, not the server's fork):")
     for name, wall, cpu in served:
         print(f"  {name:64} {wall:7.3f} {cpu:7.3f}")
+    if peer is not None:
+        ms, frames = peer
+        print(f"per frame, start-up included: OpenSim's IK + ID tools (two processes) on its "
+              f"{frames}-frame IK trial {ms:.2f} ms, best of {args.repeat} in this run; the "
+              f"gait solve ({GAIT_FRAMES} frames):")
+        for what, rows in (("in its own process", walls), ("through the warm server", served)):
+            wall = next(w for name, w, _ in rows if name.startswith("fccgrb solve (docs/gait"))
+            print(f"  {what:26} {1e3 * wall / GAIT_FRAMES:6.2f} ms  "
+                  f"OpenSim / fccgrb {ms / (1e3 * wall / GAIT_FRAMES):5.1f}")
     for name, (total, others, own) in profiles:
         print(f"imports of {name.split(' (')[1].split(':')[0]} (-X importtime, "
               f"{total:.3f} s in all): heaviest of other packages, then of fccgrb_cli's:")

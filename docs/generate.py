@@ -628,7 +628,15 @@ def bench_long(ws: Workspace) -> list[Artifact]:
 
 
 def bench_startup(ws: Workspace) -> list[Artifact]:
-    return _bench_console(ws, "bench-startup", "startup.py")
+    """Whole commands' wall time; with FCCGRB_OPENSIM_PYTHON (a Python that has ``opensim``),
+    OpenSim's IK + ID tools per frame in the same run beside the gait solve's."""
+    python = os.environ.get("FCCGRB_OPENSIM_PYTHON")
+    if not python:
+        return _bench_console(ws, "bench-startup", "startup.py")
+    out = ws.run(f"python benchmarks/startup.py --opensim-python {shlex.quote(python)}",
+                 cwd=ROOT)
+    return [ReadmeBlock("bench-startup", "```console\n$ python benchmarks/startup.py "
+                        f"--opensim-python PYTHON\n{out}\n```")]
 
 
 def clean_margins(ws: Workspace) -> list[Artifact]:
