@@ -38,7 +38,7 @@ from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.model import load_model
 from fccgrb_cli.pipeline.synth import synthesize
 from fccgrb_cli.signals.artefact import perturb
-from fccgrb_cli.solvers.initial import initial_guess, rigid_fit
+from fccgrb_cli.solvers.initial import initial_guess, rigid_fit, rigid_fits
 from fccgrb_cli.solvers.nrm.solve import NrmSettings, solve_nrm
 from fccgrb_cli.system import Drive, compile_system
 
@@ -469,6 +469,22 @@ def test_rigid_fit_recovers_known_motion(n_points):
     np.testing.assert_allclose(R, R_true, rtol=0, atol=1e-12)
     np.testing.assert_allclose(r, r_true, rtol=0, atol=1e-12)
     assert abs(np.linalg.det(R) - 1.0) < 1e-12
+
+
+def test_rigid_fits_equal_rigid_fit_frame_by_frame():
+    """Many frames at once (the lab axes' marker cue), each the single fit's rotation: noisy
+    points, coplanar ones (det fixes the SVD's free direction) and a mirrored cloud (the best
+    proper rotation, not the reflection)."""
+    rng = np.random.default_rng(7)
+    for local in (rng.normal(scale=0.3, size=(5, 3)),
+                  np.column_stack([rng.normal(scale=0.3, size=(4, 2)), np.zeros(4)])):
+        frames = [local @ random_rotation(rng).T + rng.normal(size=3)
+                  + rng.normal(scale=0.01, size=local.shape) for _ in range(6)]
+        frames.append(local * np.array([1.0, 1.0, -1.0]))  # a mirror image
+        many = rigid_fits(local, np.array(frames))
+        for world, R in zip(frames, many, strict=True):
+            np.testing.assert_allclose(R, rigid_fit(local, world)[0], rtol=0, atol=1e-12)
+            assert abs(np.linalg.det(R) - 1.0) < 1e-12
 
 
 # --- 7. gaps -----------------------------------------------------------------------------------

@@ -205,7 +205,7 @@ def _pose_points(model: Model) -> np.ndarray:
 def marker_cue(model: Model, markers: np.ndarray, model_up: np.ndarray | None) -> Cue | None:
     """The model's up carried into the lab by its pose fitted to the tracked markers (frames ×
     tracked points × 3, NaN where unseen)."""
-    from fccgrb_cli.solvers.initial import rigid_fit
+    from fccgrb_cli.solvers.initial import rigid_fits
 
     if model_up is None or not model.tracked_points:
         return None
@@ -214,15 +214,19 @@ def marker_cue(model: Model, markers: np.ndarray, model_up: np.ndarray | None) -
     usable = np.flatnonzero(seen.sum(axis=1) >= 3)
     if not len(usable):
         return Cue("markers", None, "markers: no frame with three tracked markers")
-    ups = []
-    for f in usable[np.unique(np.linspace(0, len(usable) - 1, FIT_FRAMES).astype(int))]:
-        mask = seen[f]
+    frames = usable[np.unique(np.linspace(0, len(usable) - 1, FIT_FRAMES).astype(int))]
+    fitted = np.full((len(frames), 3), np.nan)
+    # the frames that see the same markers are fitted together (rigid_fits)
+    masks, group = np.unique(seen[frames], axis=0, return_inverse=True)
+    for g, mask in enumerate(masks):
         centred = local[mask] - local[mask].mean(axis=0)
         if np.linalg.svd(centred, compute_uv=False)[1] < MIN_SPREAD:
             continue
-        rotation, _ = rigid_fit(local[mask], markers[f, mask])
-        ups.append(rotation @ model_up)
-    if not ups:
+        members = np.flatnonzero(group.ravel() == g)
+        rotations = rigid_fits(local[mask], markers[frames[members]][:, mask])
+        fitted[members] = rotations @ model_up
+    ups = fitted[np.isfinite(fitted).all(axis=1)]
+    if not len(ups):
         return Cue("markers", None, "markers: the tracked markers seen lie on a line")
     mean = np.mean(ups, axis=0)
     agreement = float(np.linalg.norm(mean))

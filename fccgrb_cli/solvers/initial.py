@@ -36,6 +36,18 @@ def rigid_fit(local: np.ndarray, world: np.ndarray) -> tuple[np.ndarray, np.ndar
     return R, wc - R @ lc
 
 
+def rigid_fits(local: np.ndarray, world: np.ndarray) -> np.ndarray:
+    """The rotations R of :func:`rigid_fit` for one set of local points (k × 3) and many
+    frames of their world positions (frames × k × 3), at once (frames × 3 × 3)."""
+    centred = local - local.mean(axis=0)
+    H = np.matmul(centred.T, world - world.mean(axis=1, keepdims=True))
+    U, _, Vt = np.linalg.svd(H)
+    V, Ut = Vt.transpose(0, 2, 1), U.transpose(0, 2, 1)
+    D = np.tile(np.eye(3), (len(H), 1, 1))
+    D[:, 2, 2] = np.sign(np.linalg.det(V @ Ut))
+    return V @ D @ Ut
+
+
 def rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The smallest rotation taking direction a onto direction b."""
     a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
