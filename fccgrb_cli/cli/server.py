@@ -326,6 +326,11 @@ def serve(path: str | Path, command: Callable[[], object], warm_up: Callable[[],
     lock.write(f"{os.getpid()}\n")  # who serves: for `fccgrb server --stop`
     lock.flush()
     try:
+        os.close(os.pidfd_open(os.getpid()))  # Linux ≥ 5.3: how a command's end is seen
+    except OSError:
+        lock.close()
+        return
+    try:
         begun = dict(os.environ)
         warm_up()
         own = {name: value for name, value in os.environ.items() if begun.get(name) != value}
@@ -419,16 +424,20 @@ class _Server:
             pid = os.fork()
             if pid == 0:
                 self.child(link, request, descriptors)
-            pidfd = os.pidfd_open(pid)
-            link.sendall(_REPLY.pack(_STARTED, pid))
-        except OSError:
+        except OSError:  # no fork: nothing started, the command runs in its own process
             link.close()
             return True
         finally:
             for descriptor in descriptors:
                 os.close(descriptor)
+        pidfd = os.pidfd_open(pid)  # the server started only where pidfds work (serve)
         self.running[pidfd] = (link, pid)
         self.events.register(pidfd, selectors.EVENT_READ, ("ended", pid))
+        try:
+            link.sendall(_REPLY.pack(_STARTED, pid))
+        except OSError:  # the command line is gone: its command ends as on a hang-up
+            self.hung_up(link, pid)
+            return True
         self.events.register(link, selectors.EVENT_READ, ("hung up", pid))
         return True
 
