@@ -343,3 +343,41 @@ def test_an_ignored_signal_stays_ignored(toy, tmp_path: Path) -> None:
     assert running.stdout.readline() == "started\n"
     running.send_signal(signal.SIGHUP)
     assert finish(running) == (0, "finished\n", "SERVED\n")
+
+
+def test_a_command_with_interpreter_flags_leaves_a_server_with_them(tmp_path: Path) -> None:
+    """The flags are in the key: the server left for them must run with them (-X dev, -O,
+    -W error, -X utf8), and leaving it says nothing (no ResourceWarning under -X dev)."""
+    pytest.importorskip("numba")
+    flags = ["-X", "dev", "-W", "error::ResourceWarning"]
+    run = [sys.executable, *flags, "-c", "from fccgrb_cli.entry import run; run()", "solve",
+           str(MODEL), str(SAMPLE), "-o", "out.h5", "--replace"]
+    env = served_env(tmp_path / "on")
+    (tmp_path / "on").mkdir()
+    first = subprocess.run(run, env=env, cwd=tmp_path, check=True, capture_output=True,
+                           text=True)
+    assert "Warning" not in first.stderr, first.stderr
+    code = "import os; from fccgrb_cli.cli import server; print(server.socket_path(os.environ))"
+    path = Path(subprocess.run([sys.executable, *flags, "-c", code], env=env, text=True,
+                               capture_output=True, check=True).stdout.strip())
+    wait_for(path.exists, 180, "the server left by the command")
+    pid = int(path.with_suffix(".lock").read_text())
+    try:
+        arguments = Path(f"/proc/{pid}/cmdline").read_text().split("\0")
+        assert {"-Werror::ResourceWarning", "dev"} <= set(arguments), arguments
+        args = run[len(flags) + 3:]
+        done = subprocess.run([sys.executable, *flags, "-c", ATTEMPT, *args], env=env,
+                              cwd=tmp_path, capture_output=True, text=True, timeout=120)
+        assert (done.returncode, done.stderr.splitlines()[-1]) == (0, "SERVED"), done.stderr
+    finally:
+        os.kill(pid, signal.SIGKILL)
+
+
+def test_a_server_serves_only_the_socket_of_its_own_key(tmp_path: Path) -> None:
+    (tmp_path / "sockets").mkdir()
+    env = served_env(tmp_path / "sockets")
+    path = socket_of(env).with_name("0123456789abcdef.sock")  # another interpreter's, flags'
+    subprocess.run([sys.executable, "-c", "from fccgrb_cli.cli import server; "
+                    f"server.serve({str(path)!r}, print, lambda: print('warm'))"],
+                   env=env, timeout=60, check=True, capture_output=True, text=True)
+    assert not path.exists() and not path.with_suffix(".lock").exists()

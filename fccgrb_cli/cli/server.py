@@ -231,12 +231,17 @@ def offer(environ: dict[str, str]) -> None:
     if path is None or _locked(path) or len(servers(environ)) >= MOST:
         return
     import subprocess
+    import warnings
 
     home = str(PACKAGE.parent)
     code = (f"import sys; sys.path[0] = {home!r}; from fccgrb_cli.entry import serve; "
             f"serve({str(path)!r})")
-    with contextlib.suppress(OSError):
-        subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.DEVNULL,
+    # the command's own flags (-O, -W, -X dev, -X utf8, -B, ...): they are in the key
+    flags = subprocess._args_from_interpreter_flags()  # type: ignore[attr-defined]
+    with contextlib.suppress(OSError), warnings.catch_warnings():
+        # never waited for (it outlives the command): not a "still running" ResourceWarning
+        warnings.simplefilter("ignore", ResourceWarning)
+        subprocess.Popen([sys.executable, *flags, "-c", code], stdin=subprocess.DEVNULL,
                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                          start_new_session=True, env=environ, cwd="/")
 
@@ -316,6 +321,8 @@ def serve(path: str | Path, command: Callable[[], object], warm_up: Callable[[],
     import fcntl
 
     path = Path(path)
+    if path.stem != key(os.environ):
+        return  # not the interpreter (flags), limits or environment its commands have
     lock = open(path.with_suffix(".lock"), "a")  # noqa: SIM115  (held for the server's life)
     try:
         fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
