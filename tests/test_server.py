@@ -257,6 +257,29 @@ def test_a_changed_package_is_never_served(toy, tmp_path: Path) -> None:
     assert not socket_of(toy.env).exists()
 
 
+def test_a_package_changed_during_the_warm_up_is_never_served(tmp_path: Path) -> None:
+    """A file edited after the warm-up imported it but before the server listens: the
+    server must not take the edited files for those it runs."""
+    (tmp_path / "sockets").mkdir()
+    env = served_env(tmp_path / "sockets")
+    package = tmp_path / "package"
+    package.mkdir()
+    (package / "module.py").write_text("x = 1\n")
+    path = socket_of(env)
+    edit = f"lambda: Path({str(package / 'module.py')!r}).write_text('x = 22\\n')"
+    server = subprocess.Popen(
+        [sys.executable, "-c", "from pathlib import Path; from fccgrb_cli.cli import server; "
+         f"server.serve({str(path)!r}, lambda: print('stale'), {edit}, "
+         f"root={str(package)!r})"], env=env, cwd="/", start_new_session=True)
+    try:
+        wait_for(lambda: path.exists() or server.poll() is not None, 60, "the server's socket")
+        code, out, err = finish(fccgrb(env, cwd=tmp_path))
+        assert (code, out, err) == (0, "", "NOT SERVED\n")
+        assert server.wait(timeout=30) == 0
+    finally:
+        stop(server)
+
+
 def test_an_idle_server_ends_and_a_second_one_does_not_start(toy, tmp_path: Path) -> None:
     server = toy("print('first')", idle=3.0)
     path = socket_of(toy.env)

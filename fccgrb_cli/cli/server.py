@@ -334,9 +334,12 @@ def serve(path: str | Path, command: Callable[[], object], warm_up: Callable[[],
     lock.flush()
     try:
         begun = dict(os.environ)
+        # the files as they were before the warm-up imported them: one edited meanwhile is
+        # seen as changed, not taken as what was imported
+        stamp = source_stamp(Path(root))
         warm_up()
         own = {name: value for name, value in os.environ.items() if begun.get(name) != value}
-        _Server(path, command, Path(root), own, lock).run(idle)
+        _Server(path, command, Path(root), stamp, own, lock).run(idle)
     finally:
         lock.close()
 
@@ -345,13 +348,13 @@ class _Server:
     """The listening socket and the commands running (a pidfd and the command line's
     connection each)."""
 
-    def __init__(self, path: Path, command: Callable[[], object], root: Path,
+    def __init__(self, path: Path, command: Callable[[], object], root: Path, stamp: tuple,
                  own: dict[str, str], lock) -> None:
         import selectors
 
         self.path, self.command, self.root, self.own = path, command, root, own
         self.lock = lock  # closed in each command: a command outliving its server holds none
-        self.stamp = source_stamp(root)
+        self.stamp = stamp
         self.listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         path.unlink(missing_ok=True)
         self.listener.bind(str(path))
