@@ -404,3 +404,32 @@ def test_a_server_serves_only_the_socket_of_its_own_key(tmp_path: Path) -> None:
                     f"server.serve({str(path)!r}, print, lambda: print('warm'))"],
                    env=env, timeout=60, check=True, capture_output=True, text=True)
     assert not path.exists() and not path.with_suffix(".lock").exists()
+
+
+def _state(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0]
+    except OSError:
+        return "gone"
+
+
+def test_ctrl_z_stops_the_command_and_fg_resumes_it(toy, tmp_path: Path) -> None:
+    """Ctrl-Z (SIGTSTP) stops the command line; the command, running in the server's fork,
+    must stop with it (not write on while the shell says the job is stopped), and continue
+    with it (SIGCONT, `fg`)."""
+    toy("""
+        Path('pid').write_text(str(os.getpid()))
+        for tick in range(40):
+            print(tick, flush=True)
+            time.sleep(0.05)
+    """)
+    # its own process group in the test's session: not orphaned, so SIGTSTP stops it
+    process = fccgrb(toy.env, cwd=tmp_path, preexec_fn=os.setpgrp)
+    assert process.stdout.readline() == "0\n"
+    pid = int((tmp_path / "pid").read_text())
+    process.send_signal(signal.SIGTSTP)
+    wait_for(lambda: _state(process.pid) == "T", 10, "the command line stopped")
+    wait_for(lambda: _state(pid) == "T", 10, "the command stopped")
+    process.send_signal(signal.SIGCONT)
+    code, out, err = finish(process)
+    assert (code, out.split(), err) == (0, [str(tick) for tick in range(1, 40)], "SERVED\n")

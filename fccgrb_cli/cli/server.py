@@ -166,6 +166,23 @@ class _Forward:
         self.previous = {name: signal.signal(getattr(signal, name), self.forward)
                          for name in FORWARDED
                          if signal.getsignal(getattr(signal, name)) is not signal.SIG_IGN}
+        if signal.getsignal(signal.SIGTSTP) is not signal.SIG_IGN:
+            self.previous["SIGTSTP"] = signal.signal(signal.SIGTSTP, self.stop)
+
+    def stop(self, signum: int, frame) -> None:
+        """Ctrl-Z: the command stops with this process (as it would, being this process),
+        and continues with it (``fg``, ``bg``); where the kernel drops the stop (an orphaned
+        process group), neither stops."""
+        if not self.pid:
+            self.pending.append(signum)
+            return
+        with contextlib.suppress(OSError):
+            os.kill(self.pid, signal.SIGSTOP)
+        signal.signal(signal.SIGTSTP, signal.SIG_DFL)
+        os.kill(os.getpid(), signal.SIGTSTP)  # stopped here until SIGCONT
+        signal.signal(signal.SIGTSTP, self.stop)
+        with contextlib.suppress(OSError):
+            os.kill(self.pid, signal.SIGCONT)
 
     def forward(self, signum: int, frame) -> None:
         if not self.pid:
@@ -177,7 +194,7 @@ class _Forward:
     def started(self, pid: int) -> None:
         self.pid = pid
         for signum in self.pending:
-            self.forward(signum, None)
+            (self.stop if signum == signal.SIGTSTP else self.forward)(signum, None)
 
     def restore(self) -> None:
         """Not served: the handlers as they were, and a signal that came meanwhile
