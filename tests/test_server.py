@@ -433,3 +433,16 @@ def test_ctrl_z_stops_the_command_and_fg_resumes_it(toy, tmp_path: Path) -> None
     process.send_signal(signal.SIGCONT)
     code, out, err = finish(process)
     assert (code, out.split(), err) == (0, [str(tick) for tick in range(1, 40)], "SERVED\n")
+
+
+def test_a_socket_of_another_user_is_never_given_the_command(toy, tmp_path: Path) -> None:
+    """The folder's checks can be raced (a parent folder another user may write in): the
+    command line itself checks whose process listens before it sends its descriptors and
+    environment."""
+    toy("print('served')")
+    code = ATTEMPT.replace("from fccgrb_cli.cli import server",
+                           "from fccgrb_cli.cli import server\n"
+                           "server._peer_uid = lambda link: os.getuid() + 1")
+    done = subprocess.run([sys.executable, "-c", code], env=toy.env, cwd=tmp_path,
+                          capture_output=True, text=True, timeout=60)
+    assert (done.returncode, done.stdout, done.stderr) == (0, "", "NOT SERVED\n")

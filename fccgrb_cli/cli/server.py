@@ -133,6 +133,8 @@ def attempt(argv: list[str], environ: dict[str, str]) -> int | None:
         try:
             link.settimeout(FIRST_REPLY)
             link.connect(str(path))
+            if _peer_uid(link) != os.getuid():
+                return None  # never give another user our descriptors and environment
         except OSError:  # no server up
             return None
         command = _Forward()
@@ -524,9 +526,7 @@ class _Server:
 def _request(link: socket.socket) -> tuple[dict, list[int]]:
     """The command's request and its three descriptors (stdin, stdout, stderr), from a
     process of this user only."""
-    credentials = link.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED,
-                                  struct.calcsize("3i"))
-    _, uid, _ = struct.unpack("3i", credentials)
+    uid = _peer_uid(link)
     message, descriptors, _, _ = socket.recv_fds(link, 65536, 3)
     try:
         if uid != os.getuid() or len(descriptors) != 3 or len(message) < _HEADER.size:
@@ -543,6 +543,13 @@ def _request(link: socket.socket) -> tuple[dict, list[int]]:
         for descriptor in descriptors:
             os.close(descriptor)
         raise
+
+
+def _peer_uid(link: socket.socket) -> int:
+    """The user of the process at the other end of ``link`` (as it connected or listened)."""
+    credentials = link.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED,
+                                  struct.calcsize("3i"))
+    return struct.unpack("3i", credentials)[1]
 
 
 def _suppress() -> contextlib.suppress:
