@@ -446,3 +446,77 @@ def test_a_socket_of_another_user_is_never_given_the_command(toy, tmp_path: Path
     done = subprocess.run([sys.executable, "-c", code], env=toy.env, cwd=tmp_path,
                           capture_output=True, text=True, timeout=60)
     assert (done.returncode, done.stdout, done.stderr) == (0, "", "NOT SERVED\n")
+
+
+def test_the_temporary_folder_is_the_commands_not_the_warm_ups(tmp_path: Path) -> None:
+    """tempfile caches its folder on first use (say in the warm-up); TMP and TEMP are not in
+    the key, and a command must use its own, as it would alone."""
+    (tmp_path / "sockets").mkdir()
+    env = served_env(tmp_path / "sockets")
+    for name in ("TMP", "TEMP", "TMPDIR"):
+        env.pop(name, None)
+    path = socket_of(env)
+    server = subprocess.Popen(
+        [sys.executable, "-c", "import tempfile; from fccgrb_cli.cli import server; "
+         "from fccgrb_cli.entry import leave; "
+         f"server.serve({str(path)!r}, lambda: leave(print(tempfile.gettempdir())), "
+         "tempfile.gettempdir)"], env=env, cwd="/", start_new_session=True)
+    try:
+        wait_for(lambda: path.exists() or server.poll() is not None, 60, "the server's socket")
+        (tmp_path / "mine").mkdir()
+        code, out, err = finish(fccgrb({**env, "TMP": str(tmp_path / "mine")}, cwd=tmp_path))
+        assert (code, out, err) == (0, f"{tmp_path / 'mine'}\n", "SERVED\n")
+    finally:
+        stop(server)
+
+
+def test_a_command_outliving_its_killed_server_lets_a_new_one_start(toy,
+                                                                    tmp_path: Path) -> None:
+    first = toy("""
+        import signal
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)  # outlives its server's death
+        Path('pid').write_text(str(os.getpid()))
+        time.sleep(30)
+    """)
+    process = fccgrb(toy.env, cwd=tmp_path)
+    wait_for((tmp_path / "pid").exists, 30, "the command's pid")
+    pid = int((tmp_path / "pid").read_text())
+    try:
+        first.kill()
+        first.wait()
+        assert process.wait(timeout=30) == 1  # its stdout stays open: the command holds it
+        assert alive(pid)
+        toy("print('second')")  # its socket appears: the lock was free
+        assert finish(fccgrb(toy.env, cwd=tmp_path))[1] == "second\n"
+    finally:
+        os.kill(pid, signal.SIGKILL)
+
+
+@pytest.mark.parametrize("how", ["terminal", "-u"])
+def test_stdout_is_buffered_as_the_command_lines(toy, tmp_path: Path, how: str) -> None:
+    """On a terminal stdout is line-buffered, under -u not buffered: a line printed shows at
+    once, not when the command ends."""
+    import select
+
+    toy("""
+        sys.stdout.write("early" + chr(10))
+        Path('wrote').write_text('')
+        time.sleep(5)
+    """)
+    flags = ["-u"] if how == "-u" else []
+    if how == "terminal":
+        reader, writer = os.openpty()
+    else:
+        reader, writer = os.pipe()
+    process = subprocess.Popen([sys.executable, *flags, "-c", ATTEMPT], env=toy.env,
+                               cwd=tmp_path, stdout=writer, stderr=subprocess.PIPE)
+    os.close(writer)
+    try:
+        wait_for((tmp_path / "wrote").exists, 30, "the command's line")
+        assert select.select([reader], [], [], 2.0)[0], "the line waits for the command's end"
+        assert os.read(reader, 100).replace(b"\r", b"") == b"early\n"
+    finally:
+        process.kill()
+        process.wait()
+        process.stderr.close()
+        os.close(reader)
