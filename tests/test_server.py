@@ -309,6 +309,15 @@ def test_the_key_names_what_is_read_before_a_command_runs(tmp_path: Path) -> Non
     assert server.folder(env) == tmp_path / f"fccgrb-{os.getuid()}"
     (tmp_path / f"fccgrb-{os.getuid()}").chmod(0o755)
     assert server.folder(env) is None
+    # a socket path too long to listen on: no server is tried nor left (it would warm up
+    # and fail to listen, after every command)
+    beside = len(f"/fccgrb-{os.getuid()}/{server.key({})}.sock")
+    deep = tmp_path / ("x" * (108 - len(str(tmp_path)) - 1 - beside))  # a 108-byte path
+    shallower = Path(str(deep)[:-1])
+    deep.mkdir()
+    shallower.mkdir()
+    assert server.socket_path({"XDG_RUNTIME_DIR": str(deep)}) is None
+    assert len(str(server.socket_path({"XDG_RUNTIME_DIR": str(shallower)}))) == 107
     assert not server.enabled({"FCCGRB_SERVER": "0"}) and not server.enabled(
         {"FCCGRB_SERVER": "off"})
 

@@ -65,6 +65,7 @@ _HEADER = struct.Struct("!I")
 _STARTED, _REFUSED, _ENDED = b"P", b"S", b"X"
 _REPLY = struct.Struct("!ci")  # (kind, pid or wait status)
 PR_SET_PDEATHSIG = 1
+SOCKET_PATH_MOST = 108  # bytes of a Unix socket's path on Linux, the closing NUL included
 
 
 def enabled(environ: dict[str, str] | os._Environ = os.environ) -> bool:
@@ -110,8 +111,14 @@ def folder(environ: dict[str, str] | os._Environ = os.environ) -> Path | None:
 
 
 def socket_path(environ: dict[str, str] | os._Environ = os.environ) -> Path | None:
+    """The socket of the server for ``environ``; None where there is none to be had (no
+    private folder, or a path longer than a Unix socket's: no server could listen on it, and
+    one started would warm up in vain)."""
     place = folder(environ)
-    return None if place is None else place / f"{key(environ)}.sock"
+    if place is None:
+        return None
+    path = place / f"{key(environ)}.sock"
+    return path if len(os.fsencode(path)) < SOCKET_PATH_MOST else None
 
 
 # --- the command line's side ----------------------------------------------------------------
