@@ -529,3 +529,34 @@ def test_stdout_is_buffered_as_the_command_lines(toy, tmp_path: Path, how: str) 
         process.wait()
         process.stderr.close()
         os.close(reader)
+
+
+def test_a_command_line_that_gave_up_waiting_is_not_served_too(tmp_path: Path) -> None:
+    """A server held up (here by connections that say nothing) past the command line's wait:
+    the command line runs the command itself, and the server must not run it a second time
+    when it gets to the request."""
+    import socket
+
+    (tmp_path / "sockets").mkdir()
+    env = served_env(tmp_path / "sockets")
+    path = socket_of(env)
+    server = subprocess.Popen(
+        [sys.executable, "-c", "from fccgrb_cli.cli import server; "
+         "from fccgrb_cli.entry import leave; server.FIRST_REPLY = 2.0; "
+         "run = lambda: leave(open('runs', 'a').write('served' + chr(10))); "
+         f"server.serve({str(path)!r}, run, lambda: None)"],
+        env=env, cwd="/", start_new_session=True)
+    silent = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    try:
+        wait_for(lambda: path.exists() or server.poll() is not None, 60, "the server's socket")
+        silent.connect(str(path))  # holds the server for its FIRST_REPLY
+        code = ATTEMPT.replace("from fccgrb_cli.cli import server",
+                               "from fccgrb_cli.cli import server; server.FIRST_REPLY = 1.0")
+        done = subprocess.run([sys.executable, "-c", code], env=env, cwd=tmp_path,
+                              capture_output=True, text=True, timeout=60)
+        assert done.stderr == "NOT SERVED\n"  # it runs the command itself
+        time.sleep(3.0)  # the server has read the request meanwhile
+        assert not (tmp_path / "runs").exists()
+    finally:
+        silent.close()
+        stop(server)

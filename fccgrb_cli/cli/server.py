@@ -44,6 +44,7 @@ import signal
 import socket
 import struct
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -150,7 +151,8 @@ def attempt(argv: list[str], environ: dict[str, str]) -> int | None:
             os.umask(mask)
             unbuffered = bool(getattr(sys.__stdout__, "write_through", False))  # -u
             request = json.dumps({"argv": argv, "cwd": os.getcwd(), "env": environ,
-                                  "umask": mask, "unbuffered": unbuffered}).encode()
+                                  "umask": mask, "unbuffered": unbuffered,
+                                  "sent": time.monotonic()}).encode()
             socket.send_fds(link, [_HEADER.pack(len(request)) + request], [0, 1, 2])
             kind, pid = _reply(link)
         except (OSError, ValueError):  # a server that died or hangs
@@ -446,6 +448,13 @@ class _Server:
         except (OSError, ValueError):
             link.close()
             return True
+        if time.monotonic() - request.get("sent", 0.0) > FIRST_REPLY / 2:
+            # its command line may have given up waiting and run the command itself: never
+            # run it twice (the server was held up, by another connection that said nothing)
+            for descriptor in descriptors:
+                os.close(descriptor)
+            link.close()
+            return True
         try:
             if source_stamp(self.root) != self.stamp:
                 with _suppress():
@@ -515,7 +524,6 @@ class _Server:
             os.environ.clear()
             os.environ.update({**request["env"], **self.own})
             import tempfile
-            import time
 
             time.tzset()
             tempfile.tempdir = None
