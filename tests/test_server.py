@@ -495,6 +495,7 @@ def test_a_command_outliving_its_killed_server_lets_a_new_one_start(toy,
         first.wait()
         assert process.wait(timeout=30) == 1  # its stdout stays open: the command holds it
         assert alive(pid)
+        socket_of(toy.env).unlink()  # the killed server's, left behind
         toy("print('second')")  # its socket appears: the lock was free
         assert finish(fccgrb(toy.env, cwd=tmp_path))[1] == "second\n"
     finally:
