@@ -428,7 +428,7 @@ def test_ctrl_z_stops_the_command_and_fg_resumes_it(toy, tmp_path: Path) -> None
     with it (SIGCONT, `fg`)."""
     toy("""
         Path('pid').write_text(str(os.getpid()))
-        for tick in range(40):
+        for tick in range(100):
             print(tick, flush=True)
             time.sleep(0.05)
     """)
@@ -441,7 +441,7 @@ def test_ctrl_z_stops_the_command_and_fg_resumes_it(toy, tmp_path: Path) -> None
     wait_for(lambda: _state(pid) == "T", 10, "the command stopped")
     process.send_signal(signal.SIGCONT)
     code, out, err = finish(process)
-    assert (code, out.split(), err) == (0, [str(tick) for tick in range(1, 40)], "SERVED\n")
+    assert (code, out.split(), err) == (0, [str(tick) for tick in range(1, 100)], "SERVED\n")
 
 
 def test_a_socket_of_another_user_is_never_given_the_command(toy, tmp_path: Path) -> None:
@@ -543,7 +543,7 @@ def test_a_command_line_that_gave_up_waiting_is_not_served_too(tmp_path: Path) -
     path = socket_of(env)
     server = subprocess.Popen(
         [sys.executable, "-c", "from fccgrb_cli.cli import server; "
-         "from fccgrb_cli.entry import leave; server.FIRST_REPLY = 2.0; "
+         "from fccgrb_cli.entry import leave; server.FIRST_REPLY = 4.0; "
          "run = lambda: leave(open('runs', 'a').write('served' + chr(10))); "
          f"server.serve({str(path)!r}, run, lambda: None)"],
         env=env, cwd="/", start_new_session=True)
@@ -552,11 +552,11 @@ def test_a_command_line_that_gave_up_waiting_is_not_served_too(tmp_path: Path) -
         wait_for(lambda: path.exists() or server.poll() is not None, 60, "the server's socket")
         silent.connect(str(path))  # holds the server for its FIRST_REPLY
         code = ATTEMPT.replace("from fccgrb_cli.cli import server",
-                               "from fccgrb_cli.cli import server; server.FIRST_REPLY = 1.0")
+                               "from fccgrb_cli.cli import server; server.FIRST_REPLY = 0.5")
         done = subprocess.run([sys.executable, "-c", code], env=env, cwd=tmp_path,
                               capture_output=True, text=True, timeout=60)
         assert done.stderr == "NOT SERVED\n"  # it runs the command itself
-        time.sleep(3.0)  # the server has read the request meanwhile
+        time.sleep(5.0)  # the server has read the request meanwhile
         assert not (tmp_path / "runs").exists()
     finally:
         silent.close()
