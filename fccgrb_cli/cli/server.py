@@ -9,8 +9,9 @@ command (:func:`attempt`) sends it its arguments, folder, environment, umask and
 stdin, stdout and stderr (the descriptors themselves), and the server forks: the child becomes
 that command, in a process that has everything loaded but has run nothing, writes to the
 user's terminal or pipes, and ends as the command ends. The command line waits for it, passes
-it Ctrl-C, SIGTERM, SIGHUP and SIGQUIT, and exits with its status (a signal's death as the
-same signal). Gradle's daemon and Julia's DaemonMode do the same for the same reason.
+it Ctrl-C, SIGTERM, SIGHUP and SIGQUIT, stops and continues it with itself (Ctrl-Z, ``fg``),
+and exits with its status (a signal's death as the same signal). Gradle's daemon and Julia's
+DaemonMode do the same for the same reason.
 
 What makes a server serve a command, and nothing else:
 
@@ -26,8 +27,13 @@ What makes a server serve a command, and nothing else:
   package sets for itself), folder, umask and descriptors; it ends when the server dies
   (``PR_SET_PDEATHSIG``), and the server ends it (SIGTERM: its files being written removed,
   as for Ctrl-C) when the command line dies first;
+- the server runs with the interpreter flags of the command that left it, and serves only
+  on the socket its own digest names;
 - the socket is in a folder only the user can open (``$XDG_RUNTIME_DIR`` or the temporary
-  folder, ``fccgrb-<uid>``), and the server serves only its own user (``SO_PEERCRED``).
+  folder, ``fccgrb-<uid>``), the server serves only its own user and the command line talks
+  only to a server of its own user (``SO_PEERCRED``, both ends);
+- a request the server gets to later than half the command line's wait is not run (the
+  command line may have run it itself).
 
 Anything that stops a command from reaching a server (none running, another user's folder, a
 socket path too long, a closed descriptor, a refusal) runs it in its own process, as without
@@ -418,7 +424,7 @@ class _Server:
                             return
                     elif handle.data[0] == "ended":
                         self.ended(handle.fd)
-                    else:
+                    elif isinstance(handle.fileobj, socket.socket):  # a command line's link
                         self.hung_up(handle.fileobj, handle.data[1])
                 if self.listener.fileno() < 0 and not self.running:
                     return  # stopped, and the last command ended
