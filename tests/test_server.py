@@ -561,3 +561,14 @@ def test_a_command_line_that_gave_up_waiting_is_not_served_too(tmp_path: Path) -
     finally:
         silent.close()
         stop(server)
+
+
+def test_a_nice_command_is_not_served_by_a_server_of_another_niceness(toy,
+                                                                      tmp_path: Path) -> None:
+    """`nice fccgrb ...`: the command runs at the caller's niceness, as it would alone (a fork
+    of the server had the server's, and no process may lower its niceness back)."""
+    toy("print(os.nice(0))")
+    process = fccgrb(toy.env, cwd=tmp_path, preexec_fn=lambda: os.nice(5))
+    code, out, err = finish(process)
+    assert (code, out, err) in ((0, "", "NOT SERVED\n"), (0, f"{os.nice(0) + 5}\n", "SERVED\n"))
+    assert finish(fccgrb(toy.env, cwd=tmp_path))[1:] == (f"{os.nice(0)}\n", "SERVED\n")

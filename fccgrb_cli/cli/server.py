@@ -16,7 +16,8 @@ DaemonMode do the same for the same reason.
 What makes a server serve a command, and nothing else:
 
 - its socket is named by a digest (:func:`key`) of the interpreter, the package's place and
-  version, the user, the interpreter's flags, the resource limits and every environment
+  version, the user, the interpreter's flags, the resource limits, the niceness and CPU
+  affinity (``nice``, ``taskset``) and every environment
   variable that is read before a command runs (numba's, BLAS's, Python's, the locale, the
   cache folders, ``FCCGRB_*``); a command with another of these finds no server and runs in
   its own process (and leaves one for its own digest);
@@ -93,9 +94,12 @@ def key(environ: dict[str, str] | os._Environ = os.environ) -> str:
               if name.startswith("RLIMIT_")]
     keyed = sorted((name, value) for name, value in environ.items()
                    if name.startswith(KEYED_PREFIXES) or name in KEYED_NAMES)
+    # the scheduling a command would have (nice, taskset), inherited by a fork as it is
+    scheduling = [os.getpriority(os.PRIO_PROCESS, 0), sorted(os.sched_getaffinity(0))]
     what = [os.path.realpath(sys.executable), sys.version, str(PACKAGE), __version__,
             os.getuid(), os.getgid(), sorted(os.getgroups()), repr(sys.flags),
-            sorted(sys._xoptions.items(), key=repr), sys.warnoptions, limits, keyed]
+            sorted(sys._xoptions.items(), key=repr), sys.warnoptions, limits, scheduling,
+            keyed]
     return hashlib.sha256(json.dumps(what, default=repr).encode()).hexdigest()[:16]
 
 
