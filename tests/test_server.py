@@ -572,3 +572,24 @@ def test_a_nice_command_is_not_served_by_a_server_of_another_niceness(toy,
     code, out, err = finish(process)
     assert (code, out, err) in ((0, "", "NOT SERVED\n"), (0, f"{os.nice(0) + 5}\n", "SERVED\n"))
     assert finish(fccgrb(toy.env, cwd=tmp_path))[1:] == (f"{os.nice(0)}\n", "SERVED\n")
+
+
+def test_the_command_has_what_the_warm_up_set_in_its_environment(tmp_path: Path) -> None:
+    """The package sets variables for itself at import (the kernels' cache folder, BLAS's
+    threads): a command alone has them, so a served command keeps the warm-up's, over the
+    command line's environment."""
+    (tmp_path / "sockets").mkdir()
+    env = served_env(tmp_path / "sockets")
+    path = socket_of(env)
+    warm_up = "lambda: os.environ.update(FCCGRB_SET_AT_IMPORT='yes')"
+    server = subprocess.Popen(
+        [sys.executable, "-c", "import os; from fccgrb_cli.cli import server; "
+         "from fccgrb_cli.entry import leave; "
+         "show = lambda: leave(print(os.environ.get('FCCGRB_SET_AT_IMPORT'))); "
+         f"server.serve({str(path)!r}, show, {warm_up})"], env=env, cwd="/",
+        start_new_session=True)
+    try:
+        wait_for(lambda: path.exists() or server.poll() is not None, 60, "the server's socket")
+        assert finish(fccgrb(env, cwd=tmp_path)) == (0, "yes\n", "SERVED\n")
+    finally:
+        stop(server)
