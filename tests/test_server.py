@@ -593,3 +593,20 @@ def test_the_command_has_what_the_warm_up_set_in_its_environment(tmp_path: Path)
         assert finish(fccgrb(env, cwd=tmp_path)) == (0, "yes\n", "SERVED\n")
     finally:
         stop(server)
+
+
+def test_a_stopped_command_ends_when_its_command_line_is_killed(toy, tmp_path: Path) -> None:
+    """Ctrl-Z, then `kill -9 %1`: the command, stopped with its command line, must end (a
+    SIGTERM waits while a process is stopped) rather than stay stopped forever."""
+    toy("""
+        Path('pid').write_text(str(os.getpid()))
+        time.sleep(60)
+    """)
+    process = fccgrb(toy.env, cwd=tmp_path, preexec_fn=os.setpgrp)
+    wait_for((tmp_path / "pid").exists, 30, "the command's pid")
+    pid = int((tmp_path / "pid").read_text())
+    process.send_signal(signal.SIGTSTP)
+    wait_for(lambda: _state(pid) == "T", 10, "the command stopped")
+    process.kill()
+    process.wait()
+    wait_for(lambda: not alive(pid), 10, "the command's end")

@@ -506,6 +506,7 @@ class _Server:
             self.events.unregister(link)
         with _suppress():
             os.kill(pid, signal.SIGTERM)
+            os.kill(pid, signal.SIGCONT)  # stopped with its command line (Ctrl-Z): it ends too
 
     def child(self, link: socket.socket, request: dict, descriptors: list[int]) -> None:
         """The forked command: becomes the command line's process in all it can see
