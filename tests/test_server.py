@@ -257,6 +257,29 @@ def test_a_changed_package_is_never_served(toy, tmp_path: Path) -> None:
     assert not socket_of(toy.env).exists()
 
 
+def test_a_package_changed_during_the_warm_up_is_never_served(tmp_path: Path) -> None:
+    """A file edited after the warm-up imported it but before the server listens: the
+    server must not take the edited files for those it runs."""
+    (tmp_path / "sockets").mkdir()
+    env = served_env(tmp_path / "sockets")
+    package = tmp_path / "package"
+    package.mkdir()
+    (package / "module.py").write_text("x = 1\n")
+    path = socket_of(env)
+    edit = f"lambda: Path({str(package / 'module.py')!r}).write_text('x = 22\\n')"
+    server = subprocess.Popen(
+        [sys.executable, "-c", "from pathlib import Path; from fccgrb_cli.cli import server; "
+         f"server.serve({str(path)!r}, lambda: print('stale'), {edit}, "
+         f"root={str(package)!r})"], env=env, cwd="/", start_new_session=True)
+    try:
+        wait_for(lambda: path.exists() or server.poll() is not None, 60, "the server's socket")
+        code, out, err = finish(fccgrb(env, cwd=tmp_path))
+        assert (code, out, err) == (0, "", "NOT SERVED\n")
+        assert server.wait(timeout=30) == 0
+    finally:
+        stop(server)
+
+
 def test_an_idle_server_ends_and_a_second_one_does_not_start(toy, tmp_path: Path) -> None:
     server = toy("print('first')", idle=3.0)
     path = socket_of(toy.env)
@@ -286,6 +309,15 @@ def test_the_key_names_what_is_read_before_a_command_runs(tmp_path: Path) -> Non
     assert server.folder(env) == tmp_path / f"fccgrb-{os.getuid()}"
     (tmp_path / f"fccgrb-{os.getuid()}").chmod(0o755)
     assert server.folder(env) is None
+    # a socket path too long to listen on: no server is tried nor left (it would warm up
+    # and fail to listen, after every command)
+    beside = len(f"/fccgrb-{os.getuid()}/{server.key({})}.sock")
+    deep = tmp_path / ("x" * (108 - len(str(tmp_path)) - 1 - beside))  # a 108-byte path
+    shallower = Path(str(deep)[:-1])
+    deep.mkdir()
+    shallower.mkdir()
+    assert server.socket_path({"XDG_RUNTIME_DIR": str(deep)}) is None
+    assert len(str(server.socket_path({"XDG_RUNTIME_DIR": str(shallower)}))) == 107
     assert not server.enabled({"FCCGRB_SERVER": "0"}) and not server.enabled(
         {"FCCGRB_SERVER": "off"})
 
@@ -343,3 +375,238 @@ def test_an_ignored_signal_stays_ignored(toy, tmp_path: Path) -> None:
     assert running.stdout.readline() == "started\n"
     running.send_signal(signal.SIGHUP)
     assert finish(running) == (0, "finished\n", "SERVED\n")
+
+
+def test_a_command_with_interpreter_flags_leaves_a_server_with_them(tmp_path: Path) -> None:
+    """The flags are in the key: the server left for them must run with them (-X dev, -O,
+    -W error, -X utf8), and leaving it says nothing (no ResourceWarning under -X dev)."""
+    pytest.importorskip("numba")
+    flags = ["-X", "dev", "-W", "error::ResourceWarning"]
+    run = [sys.executable, *flags, "-c", "from fccgrb_cli.entry import run; run()", "solve",
+           str(MODEL), str(SAMPLE), "-o", "out.h5", "--replace"]
+    env = served_env(tmp_path / "on")
+    (tmp_path / "on").mkdir()
+    first = subprocess.run(run, env=env, cwd=tmp_path, check=True, capture_output=True,
+                           text=True)
+    assert "Warning" not in first.stderr, first.stderr
+    code = "import os; from fccgrb_cli.cli import server; print(server.socket_path(os.environ))"
+    path = Path(subprocess.run([sys.executable, *flags, "-c", code], env=env, text=True,
+                               capture_output=True, check=True).stdout.strip())
+    wait_for(path.exists, 180, "the server left by the command")
+    pid = int(path.with_suffix(".lock").read_text())
+    try:
+        arguments = Path(f"/proc/{pid}/cmdline").read_text().split("\0")
+        assert {"-Werror::ResourceWarning", "dev"} <= set(arguments), arguments
+        args = run[len(flags) + 3:]
+        done = subprocess.run([sys.executable, *flags, "-c", ATTEMPT, *args], env=env,
+                              cwd=tmp_path, capture_output=True, text=True, timeout=120)
+        assert (done.returncode, done.stderr.splitlines()[-1]) == (0, "SERVED"), done.stderr
+    finally:
+        os.kill(pid, signal.SIGKILL)
+
+
+def test_a_server_serves_only_the_socket_of_its_own_key(tmp_path: Path) -> None:
+    (tmp_path / "sockets").mkdir()
+    env = served_env(tmp_path / "sockets")
+    path = socket_of(env).with_name("0123456789abcdef.sock")  # another interpreter's, flags'
+    subprocess.run([sys.executable, "-c", "from fccgrb_cli.cli import server; "
+                    f"server.serve({str(path)!r}, print, lambda: print('warm'))"],
+                   env=env, timeout=60, check=True, capture_output=True, text=True)
+    assert not path.exists() and not path.with_suffix(".lock").exists()
+
+
+def _state(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0]
+    except OSError:
+        return "gone"
+
+
+def test_ctrl_z_stops_the_command_and_fg_resumes_it(toy, tmp_path: Path) -> None:
+    """Ctrl-Z (SIGTSTP) stops the command line; the command, running in the server's fork,
+    must stop with it (not write on while the shell says the job is stopped), and continue
+    with it (SIGCONT, `fg`)."""
+    toy("""
+        Path('pid').write_text(str(os.getpid()))
+        for tick in range(100):
+            print(tick, flush=True)
+            time.sleep(0.05)
+    """)
+    # its own process group in the test's session: not orphaned, so SIGTSTP stops it
+    process = fccgrb(toy.env, cwd=tmp_path, preexec_fn=os.setpgrp)
+    assert process.stdout.readline() == "0\n"
+    pid = int((tmp_path / "pid").read_text())
+    process.send_signal(signal.SIGTSTP)
+    wait_for(lambda: _state(process.pid) == "T", 10, "the command line stopped")
+    wait_for(lambda: _state(pid) == "T", 10, "the command stopped")
+    process.send_signal(signal.SIGCONT)
+    code, out, err = finish(process)
+    assert (code, out.split(), err) == (0, [str(tick) for tick in range(1, 100)], "SERVED\n")
+
+
+def test_a_socket_of_another_user_is_never_given_the_command(toy, tmp_path: Path) -> None:
+    """The folder's checks can be raced (a parent folder another user may write in): the
+    command line itself checks whose process listens before it sends its descriptors and
+    environment."""
+    toy("print('served')")
+    code = ATTEMPT.replace("from fccgrb_cli.cli import server",
+                           "from fccgrb_cli.cli import server\n"
+                           "server._peer_uid = lambda link: os.getuid() + 1")
+    done = subprocess.run([sys.executable, "-c", code], env=toy.env, cwd=tmp_path,
+                          capture_output=True, text=True, timeout=60)
+    assert (done.returncode, done.stdout, done.stderr) == (0, "", "NOT SERVED\n")
+
+
+def test_the_temporary_folder_is_the_commands_not_the_warm_ups(tmp_path: Path) -> None:
+    """tempfile caches its folder on first use (say in the warm-up); TMP and TEMP are not in
+    the key, and a command must use its own, as it would alone."""
+    (tmp_path / "sockets").mkdir()
+    env = served_env(tmp_path / "sockets")
+    for name in ("TMP", "TEMP", "TMPDIR"):
+        env.pop(name, None)
+    path = socket_of(env)
+    server = subprocess.Popen(
+        [sys.executable, "-c", "import tempfile; from fccgrb_cli.cli import server; "
+         "from fccgrb_cli.entry import leave; "
+         f"server.serve({str(path)!r}, lambda: leave(print(tempfile.gettempdir())), "
+         "tempfile.gettempdir)"], env=env, cwd="/", start_new_session=True)
+    try:
+        wait_for(lambda: path.exists() or server.poll() is not None, 60, "the server's socket")
+        (tmp_path / "mine").mkdir()
+        code, out, err = finish(fccgrb({**env, "TMP": str(tmp_path / "mine")}, cwd=tmp_path))
+        assert (code, out, err) == (0, f"{tmp_path / 'mine'}\n", "SERVED\n")
+    finally:
+        stop(server)
+
+
+def test_a_command_outliving_its_killed_server_lets_a_new_one_start(toy,
+                                                                    tmp_path: Path) -> None:
+    first = toy("""
+        import signal
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)  # outlives its server's death
+        Path('pid').write_text(str(os.getpid()))
+        time.sleep(30)
+    """)
+    process = fccgrb(toy.env, cwd=tmp_path)
+    wait_for((tmp_path / "pid").exists, 30, "the command's pid")
+    pid = int((tmp_path / "pid").read_text())
+    try:
+        first.kill()
+        first.wait()
+        assert process.wait(timeout=30) == 1  # its stdout stays open: the command holds it
+        assert alive(pid)
+        socket_of(toy.env).unlink()  # the killed server's, left behind
+        toy("print('second')")  # its socket appears: the lock was free
+        assert finish(fccgrb(toy.env, cwd=tmp_path))[1] == "second\n"
+    finally:
+        os.kill(pid, signal.SIGKILL)
+
+
+@pytest.mark.parametrize("how", ["terminal", "-u"])
+def test_stdout_is_buffered_as_the_command_lines(toy, tmp_path: Path, how: str) -> None:
+    """On a terminal stdout is line-buffered, under -u not buffered: a line printed shows at
+    once, not when the command ends."""
+    import select
+
+    toy("""
+        sys.stdout.write("early" + chr(10))
+        Path('wrote').write_text('')
+        time.sleep(5)
+    """)
+    flags = ["-u"] if how == "-u" else []
+    if how == "terminal":
+        reader, writer = os.openpty()
+    else:
+        reader, writer = os.pipe()
+    process = subprocess.Popen([sys.executable, *flags, "-c", ATTEMPT], env=toy.env,
+                               cwd=tmp_path, stdout=writer, stderr=subprocess.PIPE)
+    os.close(writer)
+    try:
+        wait_for((tmp_path / "wrote").exists, 30, "the command's line")
+        assert select.select([reader], [], [], 2.0)[0], "the line waits for the command's end"
+        assert os.read(reader, 100).replace(b"\r", b"") == b"early\n"
+    finally:
+        process.kill()
+        process.wait()
+        process.stderr.close()
+        os.close(reader)
+
+
+def test_a_command_line_that_gave_up_waiting_is_not_served_too(tmp_path: Path) -> None:
+    """A server held up (here by connections that say nothing) past the command line's wait:
+    the command line runs the command itself, and the server must not run it a second time
+    when it gets to the request."""
+    import socket
+
+    (tmp_path / "sockets").mkdir()
+    env = served_env(tmp_path / "sockets")
+    path = socket_of(env)
+    server = subprocess.Popen(
+        [sys.executable, "-c", "from fccgrb_cli.cli import server; "
+         "from fccgrb_cli.entry import leave; server.FIRST_REPLY = 4.0; "
+         "run = lambda: leave(open('runs', 'a').write('served' + chr(10))); "
+         f"server.serve({str(path)!r}, run, lambda: None)"],
+        env=env, cwd="/", start_new_session=True)
+    silent = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    try:
+        wait_for(lambda: path.exists() or server.poll() is not None, 60, "the server's socket")
+        silent.connect(str(path))  # holds the server for its FIRST_REPLY
+        code = ATTEMPT.replace("from fccgrb_cli.cli import server",
+                               "from fccgrb_cli.cli import server; server.FIRST_REPLY = 0.5")
+        done = subprocess.run([sys.executable, "-c", code], env=env, cwd=tmp_path,
+                              capture_output=True, text=True, timeout=60)
+        assert done.stderr == "NOT SERVED\n"  # it runs the command itself
+        time.sleep(5.0)  # the server has read the request meanwhile
+        assert not (tmp_path / "runs").exists()
+    finally:
+        silent.close()
+        stop(server)
+
+
+def test_a_nice_command_is_not_served_by_a_server_of_another_niceness(toy,
+                                                                      tmp_path: Path) -> None:
+    """`nice fccgrb ...`: the command runs at the caller's niceness, as it would alone (a fork
+    of the server had the server's, and no process may lower its niceness back)."""
+    toy("print(os.nice(0))")
+    process = fccgrb(toy.env, cwd=tmp_path, preexec_fn=lambda: os.nice(5))
+    code, out, err = finish(process)
+    assert (code, out, err) in ((0, "", "NOT SERVED\n"), (0, f"{os.nice(0) + 5}\n", "SERVED\n"))
+    assert finish(fccgrb(toy.env, cwd=tmp_path))[1:] == (f"{os.nice(0)}\n", "SERVED\n")
+
+
+def test_the_command_has_what_the_warm_up_set_in_its_environment(tmp_path: Path) -> None:
+    """The package sets variables for itself at import (the kernels' cache folder, BLAS's
+    threads): a command alone has them, so a served command keeps the warm-up's, over the
+    command line's environment."""
+    (tmp_path / "sockets").mkdir()
+    env = served_env(tmp_path / "sockets")
+    path = socket_of(env)
+    warm_up = "lambda: os.environ.update(FCCGRB_SET_AT_IMPORT='yes')"
+    server = subprocess.Popen(
+        [sys.executable, "-c", "import os; from fccgrb_cli.cli import server; "
+         "from fccgrb_cli.entry import leave; "
+         "show = lambda: leave(print(os.environ.get('FCCGRB_SET_AT_IMPORT'))); "
+         f"server.serve({str(path)!r}, show, {warm_up})"], env=env, cwd="/",
+        start_new_session=True)
+    try:
+        wait_for(lambda: path.exists() or server.poll() is not None, 60, "the server's socket")
+        assert finish(fccgrb(env, cwd=tmp_path)) == (0, "yes\n", "SERVED\n")
+    finally:
+        stop(server)
+
+
+def test_a_stopped_command_ends_when_its_command_line_is_killed(toy, tmp_path: Path) -> None:
+    """Ctrl-Z, then `kill -9 %1`: the command, stopped with its command line, must end (a
+    SIGTERM waits while a process is stopped) rather than stay stopped forever."""
+    toy("""
+        Path('pid').write_text(str(os.getpid()))
+        time.sleep(60)
+    """)
+    process = fccgrb(toy.env, cwd=tmp_path, preexec_fn=os.setpgrp)
+    wait_for((tmp_path / "pid").exists, 30, "the command's pid")
+    pid = int((tmp_path / "pid").read_text())
+    process.send_signal(signal.SIGTSTP)
+    wait_for(lambda: _state(pid) == "T", 10, "the command stopped")
+    process.kill()
+    process.wait()
+    wait_for(lambda: not alive(pid), 10, "the command's end")

@@ -9,13 +9,15 @@ command (:func:`attempt`) sends it its arguments, folder, environment, umask and
 stdin, stdout and stderr (the descriptors themselves), and the server forks: the child becomes
 that command, in a process that has everything loaded but has run nothing, writes to the
 user's terminal or pipes, and ends as the command ends. The command line waits for it, passes
-it Ctrl-C, SIGTERM, SIGHUP and SIGQUIT, and exits with its status (a signal's death as the
-same signal). Gradle's daemon and Julia's DaemonMode do the same for the same reason.
+it Ctrl-C, SIGTERM, SIGHUP and SIGQUIT, stops and continues it with itself (Ctrl-Z, ``fg``),
+and exits with its status (a signal's death as the same signal). Gradle's daemon and Julia's
+DaemonMode do the same for the same reason.
 
 What makes a server serve a command, and nothing else:
 
 - its socket is named by a digest (:func:`key`) of the interpreter, the package's place and
-  version, the user, the interpreter's flags, the resource limits and every environment
+  version, the user, the interpreter's flags, the resource limits, the niceness and CPU
+  affinity (``nice``, ``taskset``) and every environment
   variable that is read before a command runs (numba's, BLAS's, Python's, the locale, the
   cache folders, ``FCCGRB_*``); a command with another of these finds no server and runs in
   its own process (and leaves one for its own digest);
@@ -26,8 +28,13 @@ What makes a server serve a command, and nothing else:
   package sets for itself), folder, umask and descriptors; it ends when the server dies
   (``PR_SET_PDEATHSIG``), and the server ends it (SIGTERM: its files being written removed,
   as for Ctrl-C) when the command line dies first;
+- the server runs with the interpreter flags of the command that left it, and serves only
+  on the socket its own digest names;
 - the socket is in a folder only the user can open (``$XDG_RUNTIME_DIR`` or the temporary
-  folder, ``fccgrb-<uid>``), and the server serves only its own user (``SO_PEERCRED``).
+  folder, ``fccgrb-<uid>``), the server serves only its own user and the command line talks
+  only to a server of its own user (``SO_PEERCRED``, both ends);
+- a request the server gets to later than half the command line's wait is not run (the
+  command line may have run it itself).
 
 Anything that stops a command from reaching a server (none running, another user's folder, a
 socket path too long, a closed descriptor, a refusal) runs it in its own process, as without
@@ -44,6 +51,7 @@ import signal
 import socket
 import struct
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -65,6 +73,7 @@ _HEADER = struct.Struct("!I")
 _STARTED, _REFUSED, _ENDED = b"P", b"S", b"X"
 _REPLY = struct.Struct("!ci")  # (kind, pid or wait status)
 PR_SET_PDEATHSIG = 1
+SOCKET_PATH_MOST = 108  # bytes of a Unix socket's path on Linux, the closing NUL included
 
 
 def enabled(environ: dict[str, str] | os._Environ = os.environ) -> bool:
@@ -85,9 +94,12 @@ def key(environ: dict[str, str] | os._Environ = os.environ) -> str:
               if name.startswith("RLIMIT_")]
     keyed = sorted((name, value) for name, value in environ.items()
                    if name.startswith(KEYED_PREFIXES) or name in KEYED_NAMES)
+    # the scheduling a command would have (nice, taskset), inherited by a fork as it is
+    scheduling = [os.getpriority(os.PRIO_PROCESS, 0), sorted(os.sched_getaffinity(0))]
     what = [os.path.realpath(sys.executable), sys.version, str(PACKAGE), __version__,
             os.getuid(), os.getgid(), sorted(os.getgroups()), repr(sys.flags),
-            sorted(sys._xoptions.items(), key=repr), sys.warnoptions, limits, keyed]
+            sorted(sys._xoptions.items(), key=repr), sys.warnoptions, limits, scheduling,
+            keyed]
     return hashlib.sha256(json.dumps(what, default=repr).encode()).hexdigest()[:16]
 
 
@@ -110,8 +122,14 @@ def folder(environ: dict[str, str] | os._Environ = os.environ) -> Path | None:
 
 
 def socket_path(environ: dict[str, str] | os._Environ = os.environ) -> Path | None:
+    """The socket of the server for ``environ``; None where there is none to be had (no
+    private folder, or a path longer than a Unix socket's: no server could listen on it, and
+    one started would warm up in vain)."""
     place = folder(environ)
-    return None if place is None else place / f"{key(environ)}.sock"
+    if place is None:
+        return None
+    path = place / f"{key(environ)}.sock"
+    return path if len(os.fsencode(path)) < SOCKET_PATH_MOST else None
 
 
 # --- the command line's side ----------------------------------------------------------------
@@ -133,6 +151,8 @@ def attempt(argv: list[str], environ: dict[str, str]) -> int | None:
         try:
             link.settimeout(FIRST_REPLY)
             link.connect(str(path))
+            if _peer_uid(link) != os.getuid():
+                return None  # never give another user our descriptors and environment
         except OSError:  # no server up
             return None
         command = _Forward()
@@ -141,7 +161,8 @@ def attempt(argv: list[str], environ: dict[str, str]) -> int | None:
             os.umask(mask)
             unbuffered = bool(getattr(sys.__stdout__, "write_through", False))  # -u
             request = json.dumps({"argv": argv, "cwd": os.getcwd(), "env": environ,
-                                  "umask": mask, "unbuffered": unbuffered}).encode()
+                                  "umask": mask, "unbuffered": unbuffered,
+                                  "sent": time.monotonic()}).encode()
             socket.send_fds(link, [_HEADER.pack(len(request)) + request], [0, 1, 2])
             kind, pid = _reply(link)
         except (OSError, ValueError):  # a server that died or hangs
@@ -166,6 +187,23 @@ class _Forward:
         self.previous = {name: signal.signal(getattr(signal, name), self.forward)
                          for name in FORWARDED
                          if signal.getsignal(getattr(signal, name)) is not signal.SIG_IGN}
+        if signal.getsignal(signal.SIGTSTP) is not signal.SIG_IGN:
+            self.previous["SIGTSTP"] = signal.signal(signal.SIGTSTP, self.stop)
+
+    def stop(self, signum: int, frame) -> None:
+        """Ctrl-Z: the command stops with this process (as it would, being this process),
+        and continues with it (``fg``, ``bg``); where the kernel drops the stop (an orphaned
+        process group), neither stops."""
+        if not self.pid:
+            self.pending.append(signum)
+            return
+        with contextlib.suppress(OSError):
+            os.kill(self.pid, signal.SIGSTOP)
+        signal.signal(signal.SIGTSTP, signal.SIG_DFL)
+        os.kill(os.getpid(), signal.SIGTSTP)  # stopped here until SIGCONT
+        signal.signal(signal.SIGTSTP, self.stop)
+        with contextlib.suppress(OSError):
+            os.kill(self.pid, signal.SIGCONT)
 
     def forward(self, signum: int, frame) -> None:
         if not self.pid:
@@ -177,7 +215,7 @@ class _Forward:
     def started(self, pid: int) -> None:
         self.pid = pid
         for signum in self.pending:
-            self.forward(signum, None)
+            (self.stop if signum == signal.SIGTSTP else self.forward)(signum, None)
 
     def restore(self) -> None:
         """Not served: the handlers as they were, and a signal that came meanwhile
@@ -231,12 +269,17 @@ def offer(environ: dict[str, str]) -> None:
     if path is None or _locked(path) or len(servers(environ)) >= MOST:
         return
     import subprocess
+    import warnings
 
     home = str(PACKAGE.parent)
     code = (f"import sys; sys.path[0] = {home!r}; from fccgrb_cli.entry import serve; "
             f"serve({str(path)!r})")
-    with contextlib.suppress(OSError):
-        subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.DEVNULL,
+    # the command's own flags (-O, -W, -X dev, -X utf8, -B, ...): they are in the key
+    flags = subprocess._args_from_interpreter_flags()  # type: ignore[attr-defined]
+    with contextlib.suppress(OSError), warnings.catch_warnings():
+        # never waited for (it outlives the command): not a "still running" ResourceWarning
+        warnings.simplefilter("ignore", ResourceWarning)
+        subprocess.Popen([sys.executable, *flags, "-c", code], stdin=subprocess.DEVNULL,
                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                          start_new_session=True, env=environ, cwd="/")
 
@@ -316,6 +359,8 @@ def serve(path: str | Path, command: Callable[[], object], warm_up: Callable[[],
     import fcntl
 
     path = Path(path)
+    if path.stem != key(os.environ):
+        return  # not the interpreter (flags), limits or environment its commands have
     lock = open(path.with_suffix(".lock"), "a")  # noqa: SIM115  (held for the server's life)
     try:
         fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -332,9 +377,12 @@ def serve(path: str | Path, command: Callable[[], object], warm_up: Callable[[],
         return
     try:
         begun = dict(os.environ)
+        # the files as they were before the warm-up imported them: one edited meanwhile is
+        # seen as changed, not taken as what was imported
+        stamp = source_stamp(Path(root))
         warm_up()
         own = {name: value for name, value in os.environ.items() if begun.get(name) != value}
-        _Server(path, command, Path(root), own, lock).run(idle)
+        _Server(path, command, Path(root), stamp, own, lock).run(idle)
     finally:
         lock.close()
 
@@ -343,13 +391,13 @@ class _Server:
     """The listening socket and the commands running (a pidfd and the command line's
     connection each)."""
 
-    def __init__(self, path: Path, command: Callable[[], object], root: Path,
+    def __init__(self, path: Path, command: Callable[[], object], root: Path, stamp: tuple,
                  own: dict[str, str], lock) -> None:
         import selectors
 
         self.path, self.command, self.root, self.own = path, command, root, own
         self.lock = lock  # closed in each command: a command outliving its server holds none
-        self.stamp = source_stamp(root)
+        self.stamp = stamp
         self.listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         path.unlink(missing_ok=True)
         self.listener.bind(str(path))
@@ -385,7 +433,7 @@ class _Server:
                             return
                     elif handle.data[0] == "ended":
                         self.ended(handle.fd)
-                    else:
+                    elif isinstance(handle.fileobj, socket.socket):  # a command line's link
                         self.hung_up(handle.fileobj, handle.data[1])
                 if self.listener.fileno() < 0 and not self.running:
                     return  # stopped, and the last command ended
@@ -413,6 +461,13 @@ class _Server:
             link.settimeout(FIRST_REPLY)
             request, descriptors = _request(link)
         except (OSError, ValueError):
+            link.close()
+            return True
+        if time.monotonic() - request.get("sent", 0.0) > FIRST_REPLY / 2:
+            # its command line may have given up waiting and run the command itself: never
+            # run it twice (the server was held up, by another connection that said nothing)
+            for descriptor in descriptors:
+                os.close(descriptor)
             link.close()
             return True
         try:
@@ -460,6 +515,7 @@ class _Server:
             self.events.unregister(link)
         with _suppress():
             os.kill(pid, signal.SIGTERM)
+            os.kill(pid, signal.SIGCONT)  # stopped with its command line (Ctrl-Z): it ends too
 
     def child(self, link: socket.socket, request: dict, descriptors: list[int]) -> None:
         """The forked command: becomes the command line's process in all it can see
@@ -488,7 +544,6 @@ class _Server:
             os.environ.clear()
             os.environ.update({**request["env"], **self.own})
             import tempfile
-            import time
 
             time.tzset()
             tempfile.tempdir = None
@@ -506,9 +561,7 @@ class _Server:
 def _request(link: socket.socket) -> tuple[dict, list[int]]:
     """The command's request and its three descriptors (stdin, stdout, stderr), from a
     process of this user only."""
-    credentials = link.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED,
-                                  struct.calcsize("3i"))
-    _, uid, _ = struct.unpack("3i", credentials)
+    uid = _peer_uid(link)
     message, descriptors, _, _ = socket.recv_fds(link, 65536, 3)
     try:
         if uid != os.getuid() or len(descriptors) != 3 or len(message) < _HEADER.size:
@@ -525,6 +578,13 @@ def _request(link: socket.socket) -> tuple[dict, list[int]]:
         for descriptor in descriptors:
             os.close(descriptor)
         raise
+
+
+def _peer_uid(link: socket.socket) -> int:
+    """The user of the process at the other end of ``link`` (as it connected or listened)."""
+    credentials = link.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED,
+                                  struct.calcsize("3i"))
+    return struct.unpack("3i", credentials)[1]
 
 
 def _suppress() -> contextlib.suppress:
