@@ -610,3 +610,26 @@ def test_a_stopped_command_ends_when_its_command_line_is_killed(toy, tmp_path: P
     process.kill()
     process.wait()
     wait_for(lambda: not alive(pid), 10, "the command's end")
+
+
+def test_an_upgraded_dependency_is_never_served(toy, tmp_path: Path) -> None:
+    """A library the commands run on (numpy's ``__init__.py`` by default) rewritten in place,
+    as ``pip install -U`` does: the server refuses and ends."""
+    package, library = tmp_path / "package", tmp_path / "library.py"
+    package.mkdir()
+    (package / "module.py").write_text("x = 1\n")
+    library.write_text("version = 1\n")
+    server = toy("print('served')", root=str(package), also=(str(library),))
+    assert finish(fccgrb(toy.env, cwd=tmp_path))[1:] == ("served\n", "SERVED\n")
+    library.unlink()
+    library.write_text("version = 2\n")  # a new file in its place
+    assert finish(fccgrb(toy.env, cwd=tmp_path))[1:] == ("", "NOT SERVED\n")
+    assert server.wait(timeout=30) == 0
+
+
+def test_the_libraries_watched_are_those_a_command_imports() -> None:
+    from fccgrb_cli.cli import server
+
+    watched = server.dependencies()
+    for name in ("numpy", "numba", "h5py", "click"):
+        assert any(f"{os.sep}{name}{os.sep}__init__.py" in path for path in watched), name

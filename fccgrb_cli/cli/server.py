@@ -21,9 +21,10 @@ What makes a server serve a command, and nothing else:
   variable that is read before a command runs (numba's, BLAS's, Python's, the locale, the
   cache folders, ``FCCGRB_*``); a command with another of these finds no server and runs in
   its own process (and leaves one for its own digest);
-- before each fork the server compares its package's files (path, size, modification time)
-  with those it imported: after an upgrade or an edit it refuses (the command runs in its own
-  process) and ends, and the next command leaves a fresh one;
+- before each fork the server compares its package's files and its libraries' entry files
+  (path, size, modification time, inode) with those it imported: after an upgrade or an edit
+  it refuses (the command runs in its own process) and ends, and the next command leaves a
+  fresh one;
 - the child takes the command's environment as a whole (with the kernels' cache folder the
   package sets for itself), folder, umask and descriptors; it ends when the server dies
   (``PR_SET_PDEATHSIG``), and the server ends it (SIGTERM: its files being written removed,
@@ -335,24 +336,47 @@ def stop(environ: dict[str, str] | os._Environ = os.environ) -> list[int]:
 
 
 # --- the server's side ----------------------------------------------------------------------
-def source_stamp(root: Path = PACKAGE) -> tuple:
-    """The package's files as the server imported them: (path, size, modification time) of
-    every file under ``root`` but the bytecode."""
-    stamp = []
+def source_stamp(root: Path = PACKAGE, also: tuple[str, ...] = ()) -> tuple:
+    """The code as the server imported it: (path, size, modification time, inode) of every
+    file under ``root`` but the bytecode, and of the files ``also`` (:func:`dependencies`)."""
+    paths = []
     for here, folders, files in os.walk(root):
         folders[:] = sorted(name for name in folders if name != "__pycache__")
-        for name in sorted(files):
-            path = os.path.join(here, name)
-            try:
-                info = os.stat(path)
-            except OSError:
-                continue
-            stamp.append((path, info.st_size, info.st_mtime_ns))
+        paths += [os.path.join(here, name) for name in sorted(files)]
+    stamp = []
+    for path in (*paths, *also):
+        try:
+            info = os.stat(path)
+        except OSError:
+            stamp.append((path, -1, -1, -1))  # absent: its coming back is a change too
+            continue
+        stamp.append((path, info.st_size, info.st_mtime_ns, info.st_ino))
     return tuple(stamp)
 
 
+DEPENDENCIES = ("numpy", "scipy", "numba", "llvmlite", "h5py", "ezc3d", "click", "yaml")
+
+
+def dependencies() -> tuple[str, ...]:
+    """The entry files of the libraries a command runs on (their ``__init__.py``): an upgrade
+    in the same environment (``pip install -U numpy``) rewrites them, and the server, which
+    imported the old ones, then refuses and ends."""
+    from importlib.util import find_spec
+
+    found = []
+    for name in DEPENDENCIES:
+        try:
+            spec = find_spec(name)
+        except (ImportError, ValueError):
+            continue
+        if spec is not None and spec.origin:
+            found.append(spec.origin)
+    return tuple(found)
+
+
 def serve(path: str | Path, command: Callable[[], object], warm_up: Callable[[], object],
-          root: str | Path = PACKAGE, idle: float = IDLE) -> None:
+          root: str | Path = PACKAGE, idle: float = IDLE,
+          also: tuple[str, ...] | None = None) -> None:
     """The server's process: hold ``path``'s lock (else another server is up: return), run
     ``warm_up`` (imports, kernels), listen on ``path``, and fork ``command`` for each request
     until ``idle`` seconds pass without a command or the package under ``root`` changes."""
@@ -379,10 +403,11 @@ def serve(path: str | Path, command: Callable[[], object], warm_up: Callable[[],
         begun = dict(os.environ)
         # the files as they were before the warm-up imported them: one edited meanwhile is
         # seen as changed, not taken as what was imported
-        stamp = source_stamp(Path(root))
+        watched = dependencies() if also is None else also
+        stamp = source_stamp(Path(root), watched)
         warm_up()
         own = {name: value for name, value in os.environ.items() if begun.get(name) != value}
-        _Server(path, command, Path(root), stamp, own, lock).run(idle)
+        _Server(path, command, (Path(root), watched), stamp, own, lock).run(idle)
     finally:
         lock.close()
 
@@ -391,7 +416,8 @@ class _Server:
     """The listening socket and the commands running (a pidfd and the command line's
     connection each)."""
 
-    def __init__(self, path: Path, command: Callable[[], object], root: Path, stamp: tuple,
+    def __init__(self, path: Path, command: Callable[[], object],
+                 root: tuple[Path, tuple[str, ...]], stamp: tuple,
                  own: dict[str, str], lock) -> None:
         import selectors
 
@@ -471,7 +497,7 @@ class _Server:
             link.close()
             return True
         try:
-            if source_stamp(self.root) != self.stamp:
+            if source_stamp(*self.root) != self.stamp:
                 with _suppress():
                     link.sendall(_REPLY.pack(_REFUSED, 0))
                 link.close()
