@@ -215,14 +215,20 @@ def test_a_command_killed_by_a_signal_kills_its_command_line(toy, tmp_path: Path
     assert code == -9
 
 
-def test_a_dead_command_line_ends_its_command(toy, tmp_path: Path) -> None:
-    toy("""
+def sleeping(toy, folder: Path) -> tuple[subprocess.Popen, subprocess.Popen, int]:
+    """A server whose command writes its pid then sleeps a minute, a command line running it
+    in ``folder``, and the command's pid."""
+    server = toy("""
         Path('pid').write_text(str(os.getpid()))
         time.sleep(60)
     """)
-    process = fccgrb(toy.env, cwd=tmp_path)
-    wait_for((tmp_path / "pid").exists, 30, "the command's pid")
-    pid = int((tmp_path / "pid").read_text())
+    process = fccgrb(toy.env, cwd=folder)
+    wait_for((folder / "pid").exists, 30, "the command's pid")
+    return server, process, int((folder / "pid").read_text())
+
+
+def test_a_dead_command_line_ends_its_command(toy, tmp_path: Path) -> None:
+    _, process, pid = sleeping(toy, tmp_path)
     process.kill()
     process.wait()
     wait_for(lambda: not alive(pid), 10, "the command's end")
@@ -230,13 +236,7 @@ def test_a_dead_command_line_ends_its_command(toy, tmp_path: Path) -> None:
 
 def test_a_dead_server_ends_its_commands_and_the_command_line_says_so(toy,
                                                                     tmp_path: Path) -> None:
-    server = toy("""
-        Path('pid').write_text(str(os.getpid()))
-        time.sleep(60)
-    """)
-    process = fccgrb(toy.env, cwd=tmp_path)
-    wait_for((tmp_path / "pid").exists, 30, "the command's pid")
-    pid = int((tmp_path / "pid").read_text())
+    server, process, pid = sleeping(toy, tmp_path)
     server.kill()
     code, _, err = finish(process)
     assert code == 1 and "the fccgrb server ended before the command did" in err
