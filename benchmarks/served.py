@@ -28,8 +28,9 @@ def warm_server(python: str = sys.executable, timeout: float = 300.0) -> Iterato
     with tempfile.TemporaryDirectory(prefix="fccgrb-sockets-") as folder:
         env = {**os.environ, "FCCGRB_SERVER": "1", "XDG_RUNTIME_DIR": folder}
         code = "import os; from fccgrb_cli.cli import server; print(server.socket_path(os.environ))"
+        # from "/", as the server starts: the installed package, not a source tree here
         path = Path(subprocess.run([python, "-c", code], env=env, capture_output=True,
-                                   text=True, check=True).stdout.strip())
+                                   text=True, check=True, cwd="/").stdout.strip())
         server = subprocess.Popen(
             [python, "-c", f"from fccgrb_cli.entry import serve; serve({str(path)!r})"],
             env=env, cwd="/", stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,

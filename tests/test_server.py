@@ -40,8 +40,10 @@ def served_env(folder: Path, **extra: str) -> dict[str, str]:
 
 def socket_of(env: dict[str, str]) -> Path:
     code = "import os; from fccgrb_cli.cli import server; print(server.socket_path(os.environ))"
+    # from "/", as the servers start: the package installed, not a source tree in the folder
+    # (whose place, in the key, names another socket)
     done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
-                          text=True, check=True)
+                          text=True, check=True, cwd="/")
     return Path(done.stdout.strip())
 
 
@@ -154,7 +156,7 @@ def test_the_command_has_the_callers_folder_umask_and_environment(warm, tmp_path
         code, out, err = finish(fccgrb(env, "solve", "--help", cwd=tmp_path))
         alone = subprocess.run([sys.executable, "-c", "from fccgrb_cli.entry import run; run()",
                                 "solve", "--help"], env={**env, "FCCGRB_SERVER": "0"},
-                               capture_output=True, text=True, check=True)
+                               capture_output=True, text=True, check=True, cwd=tmp_path)
         assert code == 0 and err.splitlines() == ["SERVED"] and out == alone.stdout
 
 
@@ -204,7 +206,7 @@ def test_a_signal_to_the_command_line_reaches_the_command(toy, tmp_path: Path,
     process.send_signal(getattr(signal, name))
     code, _, err = finish(process)
     number = getattr(signal, name)
-    assert code == 128 + number
+    assert code == 128 + number, err
     assert f"interrupted by {name}" in err
     assert not list(tmp_path.glob("being-written-*"))  # removed, as without a server
 
@@ -285,7 +287,7 @@ def test_an_idle_server_ends_and_a_second_one_does_not_start(toy, tmp_path: Path
     path = socket_of(toy.env)
     second = subprocess.run([sys.executable, "-c", "from fccgrb_cli.cli import server; "
                              f"server.serve({str(path)!r}, print, print)"], env=toy.env,
-                            timeout=60, check=True, capture_output=True, text=True)
+                            timeout=60, check=True, capture_output=True, text=True, cwd="/")
     assert second.stdout == ""  # neither warmed up nor served: the lock is held
     assert int(path.with_suffix(".lock").read_text()) == server.pid
     assert finish(fccgrb(toy.env, cwd=tmp_path))[1] == "first\n"
@@ -391,7 +393,7 @@ def test_a_command_with_interpreter_flags_leaves_a_server_with_them(tmp_path: Pa
     assert "Warning" not in first.stderr, first.stderr
     code = "import os; from fccgrb_cli.cli import server; print(server.socket_path(os.environ))"
     path = Path(subprocess.run([sys.executable, *flags, "-c", code], env=env, text=True,
-                               capture_output=True, check=True).stdout.strip())
+                               capture_output=True, check=True, cwd="/").stdout.strip())
     wait_for(path.exists, 180, "the server left by the command")
     pid = int(path.with_suffix(".lock").read_text())
     try:
@@ -411,7 +413,7 @@ def test_a_server_serves_only_the_socket_of_its_own_key(tmp_path: Path) -> None:
     path = socket_of(env).with_name("0123456789abcdef.sock")  # another interpreter's, flags'
     subprocess.run([sys.executable, "-c", "from fccgrb_cli.cli import server; "
                     f"server.serve({str(path)!r}, print, lambda: print('warm'))"],
-                   env=env, timeout=60, check=True, capture_output=True, text=True)
+                   env=env, timeout=60, check=True, capture_output=True, text=True, cwd="/")
     assert not path.exists() and not path.with_suffix(".lock").exists()
 
 
