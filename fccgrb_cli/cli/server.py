@@ -57,6 +57,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from fccgrb_cli.core import scratch
+
 __all__ = ["IDLE", "SETTING", "attempt", "key", "offer", "serve", "source_stamp"]
 
 SETTING = "FCCGRB_SERVER"  # "0", "off", "no" or "false": never use nor leave a server
@@ -73,7 +75,6 @@ FIRST_REPLY = 10.0  # s the command line waits for the server to say it started 
 _HEADER = struct.Struct("!I")
 _STARTED, _REFUSED, _ENDED = b"P", b"S", b"X"
 _REPLY = struct.Struct("!ci")  # (kind, pid or wait status)
-PR_SET_PDEATHSIG = 1
 SOCKET_PATH_MOST = 108  # bytes of a Unix socket's path on Linux, the closing NUL included
 
 
@@ -385,21 +386,15 @@ def serve(path: str | Path, command: Callable[[], object], warm_up: Callable[[],
     path = Path(path)
     if path.stem != key(os.environ):
         return  # not the interpreter (flags), limits or environment its commands have
-    lock = open(path.with_suffix(".lock"), "a")  # noqa: SIM115  (held for the server's life)
-    try:
-        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
-        lock.close()
-        return
-    lock.truncate(0)
-    lock.write(f"{os.getpid()}\n")  # who serves: for `fccgrb server --stop`
-    lock.flush()
-    try:
-        os.close(os.pidfd_open(os.getpid()))  # Linux ≥ 5.3: how a command's end is seen
-    except OSError:
-        lock.close()
-        return
-    try:
+    with open(path.with_suffix(".lock"), "a") as lock:  # held for the server's life
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            os.close(os.pidfd_open(os.getpid()))  # Linux ≥ 5.3: how a command's end is seen
+        except OSError:
+            return  # another server holds it, or no pidfds
+        lock.truncate(0)
+        lock.write(f"{os.getpid()}\n")  # who serves: for `fccgrb server --stop`
+        lock.flush()
         begun = dict(os.environ)
         # the files as they were before the warm-up imported them: one edited meanwhile is
         # seen as changed, not taken as what was imported
@@ -408,8 +403,6 @@ def serve(path: str | Path, command: Callable[[], object], warm_up: Callable[[],
         warm_up()
         own = {name: value for name, value in os.environ.items() if begun.get(name) != value}
         _Server(path, command, (Path(root), watched), stamp, own, lock).run(idle)
-    finally:
-        lock.close()
 
 
 class _Server:
@@ -489,14 +482,13 @@ class _Server:
         except (OSError, ValueError):
             link.close()
             return True
-        if time.monotonic() - request.get("sent", 0.0) > FIRST_REPLY / 2:
-            # its command line may have given up waiting and run the command itself: never
-            # run it twice (the server was held up, by another connection that said nothing)
-            for descriptor in descriptors:
-                os.close(descriptor)
-            link.close()
-            return True
         try:
+            if time.monotonic() - request.get("sent", 0.0) > FIRST_REPLY / 2:
+                # its command line may have given up waiting and run the command itself:
+                # never run it twice (the server was held up, by a connection that said
+                # nothing)
+                link.close()
+                return True
             if source_stamp(*self.root) != self.stamp:
                 with _suppress():
                     link.sendall(_REPLY.pack(_REFUSED, 0))
@@ -548,7 +540,7 @@ class _Server:
         (descriptors, folder, umask, environment, arguments, signals), runs the command
         (which ends the process), and never returns into the server's loop."""
         try:
-            _die_with_server()
+            scratch.terminated_with_parent()  # the server's death ends the command
             for name in ("SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT", "SIGCHLD"):
                 signal.signal(getattr(signal, name), signal.SIG_DFL)
             signal.set_wakeup_fd(-1)
@@ -615,16 +607,6 @@ def _peer_uid(link: socket.socket) -> int:
 
 def _suppress() -> contextlib.suppress:
     return contextlib.suppress(OSError)
-
-
-def _die_with_server() -> None:
-    import ctypes
-
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
-    except (OSError, AttributeError):
-        pass
 
 
 def _reopen_streams(unbuffered: bool) -> None:

@@ -126,18 +126,24 @@ def die_with_parent(parent: int) -> None:
     _QUIET = True
     _SCRATCH.clear()
     install()
-    if sys.platform.startswith("linux"):
-        import ctypes
-
-        try:
-            libc = ctypes.CDLL(None, use_errno=True)
-            libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
-        except (OSError, AttributeError):
-            _watch(parent)
-    else:
+    if not terminated_with_parent():
         _watch(parent)
     if os.getppid() != parent:  # the parent died before the request took effect
         _end(signal.SIGTERM, None)
+
+
+def terminated_with_parent() -> bool:
+    """Ask the kernel to send this process SIGTERM when its parent dies, however it dies
+    (Linux's ``prctl(PR_SET_PDEATHSIG)``); whether it could."""
+    if not sys.platform.startswith("linux"):
+        return False
+    import ctypes
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        return libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
 
 
 def _watch(parent: int) -> None:
