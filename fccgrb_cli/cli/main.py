@@ -499,12 +499,13 @@ def _solve_one(model: Model, path: str, options: SolveOptions, accept_truncated:
 
 def _report_kernels() -> None:
     """How long this process spent loading (or compiling) the compiled kernels, on stderr: a
-    one-time cost per process that no ms/frame includes. Nothing where they were loaded already
-    (a command forked by the warm server, ``cli.server``: a few ms)."""
+    one-time cost per process that no ms/frame includes. Nothing in a command forked by the
+    warm server (``cli.server``), which loaded them before the command, unless it compiled."""
+    from fccgrb_cli.cli import server
     from fccgrb_cli.solvers.engine import KernelClock
 
     seconds, compiled = KernelClock.take()
-    if seconds >= 0.005 or compiled:
+    if (seconds and not server.warm) or compiled:
         what = "compiled" if compiled else "loaded"
         click.echo(f"fccgrb: compiled kernels {what} in {seconds:.2f} s (once per process; not "
                    "in ms/frame)", err=True)

@@ -75,6 +75,7 @@ FIRST_REPLY = 10.0  # s the command line waits for the server to say it started 
 _HEADER = struct.Struct("!I")
 _STARTED, _REFUSED, _ENDED = b"P", b"S", b"X"
 _REPLY = struct.Struct("!ci")  # (kind, pid or wait status)
+warm = False  # this process is a warm server or one of its commands (set by warm_up)
 SOCKET_PATH_MOST = 108  # bytes of a Unix socket's path on Linux, the closing NUL included
 
 
@@ -645,6 +646,8 @@ def warm_up() -> None:
 
     import fccgrb_cli
 
+    global warm
+    warm = True
     for module in pkgutil.walk_packages(fccgrb_cli.__path__, "fccgrb_cli."):
         with contextlib.suppress(ImportError):
             importlib.import_module(module.name)
