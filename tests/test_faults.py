@@ -142,6 +142,36 @@ def test_a_signal_stops_a_solve_and_leaves_nothing(lab: Path, tmp_path: Path, si
         assert scratch_files(folder) == []
 
 
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_inside_stdouts_own_flush_still_ends_in_one_line(tmp_path: Path,
+                                                                  sig: int) -> None:
+    """Python runs a signal's handler between a buffered writer's raw writes, with the
+    writer's lock held; the handler's own flush of stdout then raises "reentrant call". Seen
+    as a served command answering SIGTERM with that error and status 1 just after it printed.
+    Here the raw write itself sends the signal, so the handler always runs inside the flush."""
+    script = f"""
+import io, os, signal, sys
+from fccgrb_cli.core import scratch
+scratch.install()
+scratch.create({str(tmp_path)!r}, "being-written-", ".h5")
+class Raw(io.RawIOBase):
+    def writable(self):
+        return True
+    def write(self, data):
+        os.kill(os.getpid(), {int(sig)})
+        return len(data)
+sys.stdout = io.TextIOWrapper(io.BufferedWriter(Raw()))
+print("ready", flush=True)
+"""
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          env=environment(), timeout=60)
+    name = signal.Signals(sig).name
+    assert done.returncode == 128 + sig, done.stderr
+    assert done.stderr == f"fccgrb: error: interrupted by {name}; the files being written " \
+                          "were removed\n"
+    assert not list(tmp_path.glob("being-written-*"))
+
+
 def test_kill_9_of_a_solve_is_cleaned_by_the_next_solve(lab: Path, tmp_path: Path) -> None:
     """kill -9 leaves its scratch files (nothing can remove them); the next write of the same
     results file removes those of processes that no longer run, and adds its run."""

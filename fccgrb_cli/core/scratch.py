@@ -88,12 +88,14 @@ def _end(signum: int, frame) -> None:
     if _QUIET:
         os._exit(128 + signum)
     name = signal.Signals(signum).name
-    try:
+    # The handler can run inside sys.stdout's own flush (Python checks for signals between a
+    # buffered writer's raw writes, holding its lock): flushing again there raises
+    # RuntimeError ("reentrant call"), which must not replace the interruption.
+    with contextlib.suppress(OSError, ValueError, RuntimeError):
         sys.stdout.flush()
+    with contextlib.suppress(OSError):
         os.write(2, f"fccgrb: error: interrupted by {name}; the files being written were "
                     "removed\n".encode())
-    except (OSError, ValueError):
-        pass
     os._exit(128 + signum)
 
 
