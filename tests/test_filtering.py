@@ -30,8 +30,9 @@ def _cases(seed: int, count: int):
 
 @pytest.mark.parametrize("long", [False, True])
 def test_butter_and_filtfilt_are_scipy_to_the_bit(long, monkeypatch):
-    if long:
-        monkeypatch.setattr(filtering, "LONG", 0)
+    """Through the numpy loop (what a solve in a fresh process runs) and through lfilter (a
+    long signal, or scipy.signal already imported: this test's process has it)."""
+    monkeypatch.setattr(filtering, "in_lfilter", lambda samples: long)
     for order, wn, x in _cases(7 + long, 60):
         b, a = filtering.butter(order, wn)
         b0, a0 = oracle.butter(order, wn)
@@ -50,6 +51,18 @@ def test_lowpass_keeps_the_band_and_removes_the_rest():
         gain = np.sqrt(2 * np.mean(out[1000:3000] ** 2))  # 10 s: whole periods
         ratio = np.tan(np.pi * f / rate) / np.tan(np.pi * fc / rate)
         assert gain == pytest.approx(1 / (1 + ratio**4), rel=1e-3), f
+
+
+def test_the_recursion_runs_in_lfilter_when_long_or_already_imported(monkeypatch):
+    assert filtering.in_lfilter(50)  # this process imported scipy.signal
+    monkeypatch.delitem(sys.modules, "scipy.signal")
+    assert not filtering.in_lfilter(filtering.LONG)
+    assert filtering.in_lfilter(filtering.LONG + 1)
+    code = ("from fccgrb_cli.signals import butterworth as f; print(f.in_lfilter(50)); "
+            "f.preload(); print(f.in_lfilter(50))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=ROOT)
+    assert out.stdout.split() == ["False", "True"]
 
 
 def test_a_solve_does_not_import_scipy_signal():

@@ -637,10 +637,11 @@ def _reopen_streams(unbuffered: bool) -> None:
 
 
 def warm_up() -> None:
-    """What a command would load, loaded once: every module of the package, h5py and ezc3d,
-    and (where numba is installed) every compiled kernel, by ``fccgrb compile``'s passes on
-    the built-in pendulum; then the kernels' clock and compile notice reset, so that a
-    command reports only its own (a kernel the warm-up compiled stays known as compiled)."""
+    """What a command would load, loaded once: every module of the package, h5py, ezc3d,
+    scipy.signal (the filters' fast path) and (where numba is installed) every compiled
+    kernel, by ``fccgrb compile``'s passes on the built-in pendulum; then the kernels' clock
+    and compile notice reset, so that a command reports only its own (a kernel the warm-up
+    compiled stays known as compiled)."""
     import importlib
     import pkgutil
 
@@ -654,6 +655,9 @@ def warm_up() -> None:
     for optional in ("h5py", "ezc3d"):
         with contextlib.suppress(ImportError):
             importlib.import_module(optional)
+    from fccgrb_cli.signals.butterworth import preload
+
+    preload()  # every command's filters in lfilter's C loop
     from fccgrb_cli.solvers import engine
 
     if engine.numba_available():

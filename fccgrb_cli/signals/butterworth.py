@@ -4,9 +4,16 @@ The design and the forward-backward run are scipy.signal's ``butter`` and ``filt
 extension of 3 × (order + 1) samples at each end, the initial state of the step response),
 written out here with the same operations in the same order, so the values are scipy's to the
 bit (tests/test_filtering.py compares them): importing scipy.signal takes 0.4–1 s, longer than
-the rest of a short solve, and every solve runs a filter (the moments' noise test)."""
+the rest of a short solve, and every solve runs a filter (the moments' noise test).
+
+The recursion itself is a Python loop over the samples (every column at once), ~7 µs a sample:
+a gait trial's filters take ~70 ms in it. A process that solves many trials (the warm server, a
+study) imports scipy.signal once (:func:`preload`); from then on every recursion runs in
+lfilter's C loop, the same values to the bit."""
 
 from __future__ import annotations
+
+import sys
 
 import numpy as np
 
@@ -80,15 +87,32 @@ def _step_state(b: np.ndarray, a: np.ndarray) -> np.ndarray:
     return np.linalg.solve(np.eye(n - 1) - companion.T, b[1:] - a[1:] * b[0])
 
 
+def preload() -> None:
+    """Import scipy.signal (0.4–1 s), so that every later filter of this process runs in
+    lfilter's C loop (:func:`in_lfilter`): for a process that filters many trials."""
+    import scipy.signal  # noqa: F401
+
+
+def in_lfilter(samples: int) -> bool:
+    """Whether a recursion over ``samples`` runs in scipy.signal.lfilter: when its C loop pays
+    back scipy.signal's import (longer than ``LONG``), or the import is already paid
+    (:func:`preload`, or whatever else imported it)."""
+    return samples > LONG or "scipy.signal" in sys.modules
+
+
 def _recursion(b: np.ndarray, a: np.ndarray, x: np.ndarray, state: np.ndarray) -> np.ndarray:
-    """y along axis 0 of the direct form II transposed from ``state`` (scipy.signal.lfilter's
-    arithmetic: y = z₀ + b₀x, then z_j = z_{j+1} + x b_{j+1} − y a_{j+1}, the last z_j without
-    z_{j+1}), every column at once; a signal longer than ``LONG`` samples goes to lfilter
-    itself, whose C loop then pays back scipy.signal's import (the same values)."""
-    if len(x) > LONG:
+    """y along axis 0 of the direct form II transposed from ``state``: in lfilter where
+    :func:`in_lfilter` says, else in :func:`_loop` (the same values)."""
+    if in_lfilter(len(x)):
         from scipy.signal import lfilter
 
         return lfilter(b, a, x, axis=0, zi=state)[0]
+    return _loop(b, a, x, state)
+
+
+def _loop(b: np.ndarray, a: np.ndarray, x: np.ndarray, state: np.ndarray) -> np.ndarray:
+    """scipy.signal.lfilter's arithmetic, every column at once: y = z₀ + b₀x, then
+    z_j = z_{j+1} + x b_{j+1} − y a_{j+1}, the last z_j without z_{j+1}."""
     z = [np.array(part) for part in state]
     y = np.empty(x.shape)
     last = len(b) - 1
