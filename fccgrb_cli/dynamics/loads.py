@@ -8,7 +8,7 @@ its global position.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -47,19 +47,40 @@ class ExternalLoad:
         number per frame, as ``generalized``)."""
         return np.einsum("...i,...i->...", self.generalized(x_body, frame), xd_body)
 
-    def lowpassed(self, rate: float, cutoff: float, order: int = 2) -> ExternalLoad:
-        """The load with force and moment low-passed like the kinematics (the same cutoff keeps
-        impact transients of the ground reaction from meeting smoothed accelerations:
-        Kristianslund et al. 2012, J Biomech 45:666)."""
-        return self.filtered(lambda signal: lowpass(signal, rate, cutoff, order))
-
     def filtered(self, filter_: Callable[[np.ndarray], np.ndarray]) -> ExternalLoad:
         """The load with ``filter_`` (frames × 3 → frames × 3) applied to its force and free
-        moment. The point keeps its loaded values and holds the nearest loaded one where the
-        filter spreads the force beyond contact."""
-        loaded = np.flatnonzero(np.abs(self.force).any(axis=1))
-        if loaded.size == 0:
+        moment (:meth:`with_filtered`)."""
+        if not self.loaded().size:
             return self
+        return self.with_filtered(filter_(self.force), filter_(self.moment))
+
+    def loaded(self) -> np.ndarray:
+        """The frames with a force."""
+        return np.flatnonzero(np.abs(self.force).any(axis=1))
+
+    def with_filtered(self, force: np.ndarray, moment: np.ndarray) -> ExternalLoad:
+        """The load with its force and free moment filtered (``force``, ``moment``). The point
+        keeps its loaded values and holds the nearest loaded one where the filter spreads the
+        force beyond contact."""
+        loaded = self.loaded()
         nearest = loaded[np.abs(np.arange(len(self.force))[:, None] - loaded).argmin(axis=1)]
-        return replace(self, force=filter_(self.force), moment=filter_(self.moment),
-                       point=self.point[nearest])
+        return replace(self, force=force, moment=moment, point=self.point[nearest])
+
+
+def lowpassed(loads: Sequence[ExternalLoad], rate: float, cutoff: float,
+              order: int = 2) -> list[ExternalLoad]:
+    """The loads with force and moment low-passed like the kinematics (the same cutoff keeps
+    impact transients of the ground reaction from meeting smoothed accelerations:
+    Kristianslund et al. 2012, J Biomech 45:666); a load never loaded is kept as it is. One
+    pass of the filter over every column at once: each column is filtered alone, so the
+    values are those of one call per signal, for one call's overhead."""
+    active = [k for k, load in enumerate(loads) if load.loaded().size]
+    out = list(loads)
+    if not active:
+        return out
+    stacked = lowpass(np.concatenate([np.concatenate([loads[k].force, loads[k].moment], axis=1)
+                                      for k in active], axis=1), rate, cutoff, order)
+    for j, k in enumerate(active):
+        out[k] = loads[k].with_filtered(np.ascontiguousarray(stacked[:, 6 * j:6 * j + 3]),
+                                        np.ascontiguousarray(stacked[:, 6 * j + 3:6 * j + 6]))
+    return out

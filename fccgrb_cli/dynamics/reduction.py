@@ -159,11 +159,16 @@ def prefiltered(model: Model, result: KinematicResult, stage: Stage) -> Kinemati
         return result
     system = compile_system(model, angles="driver")
     q = result.q.copy()
-    for base in model.floating_bases:
-        block = system.layout.q_slice(base)
-        q[:, block] = lowpass(q[:, block], stage.rate, stage.cutoff, stage.order)
-    return replace(result, q=q, theta=lowpass(result.theta, stage.rate, stage.cutoff,
-                                              stage.order))
+    blocks = [system.layout.q_slice(base) for base in model.floating_bases]
+    # one pass of the filter over the angles and the bases (each column alone)
+    together = lowpass(np.concatenate([result.theta, *(q[:, b] for b in blocks)], axis=1),
+                       stage.rate, stage.cutoff, stage.order)
+    start = result.theta.shape[1]
+    for block in blocks:
+        width = q[:, block].shape[1]
+        q[:, block] = together[:, start:start + width]
+        start += width
+    return replace(result, q=q, theta=np.ascontiguousarray(together[:, :result.theta.shape[1]]))
 
 
 @dataclass(frozen=True)

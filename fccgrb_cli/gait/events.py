@@ -251,14 +251,20 @@ def kinematic_events(markers: dict[str, np.ndarray], rate: float, vertical: np.n
     if absent:
         raise InputError(f"{where}: kinematic gait events need heel, toe and pelvis markers; "
                          f"expected the landmarks {', '.join(absent)}")
-    smooth = {}
+    filled = {}
     for name, xyz in markers.items():
-        filled = bridged(xyz)
-        if filled is None:
+        bridge = bridged(xyz)
+        if bridge is None:
             raise InputError(f"{where}: kinematic gait events: the {name} marker is never "
                              "seen")
-        smooth[name] = lowpass(filled, rate, min(6.0, 0.4 * rate), 2) if len(filled) > 12 \
-            else filled
+        filled[name] = bridge
+    frames = len(next(iter(filled.values())))
+    smooth = filled
+    if frames > 12:  # every marker in one pass of the filter (each column alone)
+        together = lowpass(np.concatenate(list(filled.values()), axis=1), rate,
+                           min(6.0, 0.4 * rate), 2)
+        smooth = {name: np.ascontiguousarray(together[:, 3 * k:3 * k + 3])
+                  for k, name in enumerate(filled)}
     travel = smooth["pelvis"][-1] - smooth["pelvis"][0]
     travel -= (travel @ vertical) * vertical
     if np.linalg.norm(travel) < 0.1:

@@ -20,7 +20,7 @@ from fccgrb_cli.anatomy.lab_axes import lab_axes
 from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.core.stretches import clocked, merged, runs, shifted, shortest, spans, take
 from fccgrb_cli.dynamics.convert import Dynamics, classical_dynamics, smoothed_dynamics
-from fccgrb_cli.dynamics.loads import ExternalLoad
+from fccgrb_cli.dynamics.loads import ExternalLoad, lowpassed
 from fccgrb_cli.dynamics.plate_loads import plate_loads
 from fccgrb_cli.gait.analysis import analyse_gait, find_events, landmark_labels
 from fccgrb_cli.model import Model
@@ -519,7 +519,7 @@ def dynamics_stage(model: Model, trial: Trial, system: System, result: Kinematic
         part = slice(a, b)
         some = [take(load, part, n) for load in loads]
         if cutoff is not None:
-            some = [load.lowpassed(trial.rate, cutoff, options.filter_order) for load in some]
+            some = lowpassed(some, trial.rate, cutoff, options.filter_order)
         pieces.append((part, classical_dynamics(
             model, take(result, part, n), cutoff=None if baseline else cutoff,
             order=options.filter_order, loads=some, tol=options.tol, engine=options.engine,

@@ -6,10 +6,11 @@ written out here with the same operations in the same order, so the values are s
 bit (tests/test_filtering.py compares them): importing scipy.signal takes 0.4–1 s, longer than
 the rest of a short solve, and every solve runs a filter (the moments' noise test).
 
-The recursion itself is a Python loop over the samples (every column at once), ~7 µs a sample:
-a gait trial's filters take ~70 ms in it. A process that solves many trials (the warm server, a
-study) imports scipy.signal once (:func:`preload`); from then on every recursion runs in
-lfilter's C loop, the same values to the bit."""
+The recursion itself is a Python loop over the samples (every column at once), ~7 µs a sample
+whatever the number of columns: callers filter their signals together (a trial's loads, its
+angles and bases, the markers of its events), each column alone, the same values as one by one.
+The warm server imports scipy.signal once (:func:`preload`); from then on every recursion runs
+in lfilter's C loop, the same values to the bit."""
 
 from __future__ import annotations
 

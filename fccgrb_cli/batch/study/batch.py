@@ -29,12 +29,8 @@ from fccgrb_cli.batch.study.store import Solved, write_study
 from fccgrb_cli.core.atomic import remove_stale
 from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.core.lock import exclusive
-from fccgrb_cli.signals.butterworth import preload
 
 Progress = Callable[[int, int, str], None]
-# From this many trials a study imports scipy.signal before its local workers fork (0.4–1 s,
-# once): each trial's filters then run in lfilter's C loop, ~60 ms less a gait trial's CPU
-PRELOAD_TRIALS = 20
 
 
 @dataclass(frozen=True)
@@ -97,8 +93,6 @@ def _run_study(study: Study, output: Path, where: Executors, accept_truncated: b
                progress: Progress | None) -> Outcome:
     store = cells_folder(output)
     failures: dict[str, str] = {}
-    if where.executor is None and sum(len(s.trials) for s in study.subjects) >= PRELOAD_TRIALS:
-        preload()
 
     def collect(job: Job, error: BaseException | None) -> None:
         if error is not None:

@@ -45,15 +45,20 @@ def drivers_from(system: System, time: np.ndarray, theta: np.ndarray, base: np.n
     differences; a floating base follows ``base`` (frames × slots × 3), filtered and
     differentiated alike."""
     rate = 1.0 / float(time[1] - time[0]) if len(time) > 1 else 1.0
-    if cutoff is not None:
-        theta = lowpass(theta, rate, cutoff, order)
-    theta_d, theta_dd = central_derivatives(theta, 1.0 / rate)
-    base_rates = None
+    flat = None
     if system.n_base_slots:
         assert base is not None  # a system with a floating base is driven along it
         flat = base.reshape(len(time), -1)
-        if cutoff is not None:
-            flat = lowpass(flat, rate, cutoff, order)
+    if cutoff is not None:  # the angles and the base in one pass of the filter (each column alone)
+        width = theta.shape[1]
+        together = lowpass(theta if flat is None else np.concatenate([theta, flat], axis=1),
+                           rate, cutoff, order)
+        theta = np.ascontiguousarray(together[:, :width])
+        flat = None if flat is None else np.ascontiguousarray(together[:, width:])
+    theta_d, theta_dd = central_derivatives(theta, 1.0 / rate)
+    base_rates = None
+    if flat is not None:
+        assert base is not None
         d1, d2 = central_derivatives(flat, 1.0 / rate)
         r, r_d, r_dd = (a.reshape(base.shape) for a in (flat, d1, d2))
         base_rates = (r, r_d, r_dd)
