@@ -8,9 +8,10 @@ on which (the same function runs on the same inputs).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
@@ -60,30 +61,41 @@ def pending(jobs: Iterable[Job], readable: Callable[[Path], bool],
     return todo
 
 
+@contextlib.contextmanager
+def local_pool(workers: int) -> Iterator[Executor | None]:
+    """A pool of ``workers`` processes that end with this one (``scratch``), for one or several
+    :func:`run_jobs` in turn: its workers keep what they loaded (the compiled kernels) from one
+    to the next. None when ``workers`` is 1 (the jobs run in this process). Left, it cancels
+    the jobs not started."""
+    if workers <= 1:
+        yield None
+        return
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=scratch.die_with_parent,
+                               initargs=(os.getpid(),))
+    try:
+        yield pool
+    finally:
+        pool.shutdown(cancel_futures=True)
+
+
 def run_jobs(jobs: Sequence[Job], done: Done, *, workers: int = 1,
              executor: Executor | None = None) -> None:
-    """Run ``jobs``: the pooled ones over ``executor``, else over a local pool of ``workers``
-    processes (in this process when ``workers`` is 1; they end with it: ``scratch``), then the
-    ``alone`` ones here. After each,
-    ``done(job, error)`` (error None when it succeeded; ``done`` re-raises what should stop the
-    run: the remaining local jobs are cancelled)."""
+    """Run ``jobs``: the pooled ones over ``executor``, else over a :func:`local_pool` of
+    ``workers`` processes (in this process when ``workers`` is 1), then the ``alone`` ones
+    here. After each, ``done(job, error)`` (error None when it succeeded; ``done`` re-raises
+    what should stop the run: the remaining local jobs are cancelled)."""
     pooled = [job for job in jobs if not job.alone]
     if pooled:
-        own = executor is None and workers > 1
-        pool = ProcessPoolExecutor(max_workers=workers, initializer=scratch.die_with_parent,
-                                   initargs=(os.getpid(),)) if own else executor
-        if pool is None:
-            for job in pooled:
-                _run_here(job, done)
-        else:
-            try:
+        with contextlib.ExitStack() as stack:
+            pool = executor if executor is not None else stack.enter_context(
+                local_pool(workers))
+            if pool is None:
+                for job in pooled:
+                    _run_here(job, done)
+            else:
                 futures = {pool.submit(job.function, *job.args): job for job in pooled}
                 for future in as_completed(futures):
-                    error = future.exception()
-                    done(futures[future], error)
-            finally:
-                if own:
-                    pool.shutdown(cancel_futures=True)
+                    done(futures[future], future.exception())
     for job in jobs:
         if job.alone:
             _run_here(job, done)

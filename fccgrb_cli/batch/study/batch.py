@@ -15,7 +15,7 @@ from concurrent.futures import Executor
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from fccgrb_cli.batch.cells import Job, cells_folder, pending, run_jobs
+from fccgrb_cli.batch.cells import Job, cells_folder, local_pool, pending, run_jobs
 from fccgrb_cli.batch.study.jobs import (
     CalibrationJob,
     TrialSolve,
@@ -86,10 +86,14 @@ def run_study(study: Study, output: Path, where: Executors = Executors(), *,
         store.mkdir(exist_ok=True)
         for folder in (store, *(p for p in store.rglob("*") if p.is_dir())):
             remove_stale(folder)
-        return _run_study(study, output, where, accept_truncated, progress)
+        if where.executor is not None:
+            return _run_study(study, output, where.executor, accept_truncated, progress)
+        # one pool for the calibrations and the trials: its workers load the kernels once
+        with local_pool(where.workers) as pool:
+            return _run_study(study, output, pool, accept_truncated, progress)
 
 
-def _run_study(study: Study, output: Path, where: Executors, accept_truncated: bool,
+def _run_study(study: Study, output: Path, pool: Executor | None, accept_truncated: bool,
                progress: Progress | None) -> Outcome:
     store = cells_folder(output)
     failures: dict[str, str] = {}
@@ -114,8 +118,7 @@ def _run_study(study: Study, output: Path, where: Executors, accept_truncated: b
             continue
         calibrations[s.name] = Job(s.name, target, calibrate_job,
                                    (CalibrationJob(s, target, accept_truncated),))
-    run_jobs(pending(calibrations.values(), _readable_text), calibrated, workers=where.workers,
-             executor=where.executor)
+    run_jobs(pending(calibrations.values(), _readable_text), calibrated, executor=pool)
     command = f"fccgrb batch {study.source.name}"
     trials: list[Job] = []
     for s in study.subjects:
@@ -146,7 +149,7 @@ def _run_study(study: Study, output: Path, where: Executors, accept_truncated: b
 
     if progress is not None and todo:
         progress(finished, len(trials), "")
-    run_jobs(todo, solved, workers=where.workers, executor=where.executor)
+    run_jobs(todo, solved, executor=pool)
     runs = [s.trial_name(t) for s in study.subjects for t in s.trials]
     order = [*(f"{s.name} (calibration)" for s in study.subjects), *runs]
     listed = tuple((name, failures[name]) for name in order if name in failures)
