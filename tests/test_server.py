@@ -326,6 +326,34 @@ def test_the_key_names_what_is_read_before_a_command_runs(tmp_path: Path) -> Non
         {"FCCGRB_SERVER": "off"})
 
 
+@pytest.mark.parametrize("setting", [None, "auto", "1", "0"])
+def test_by_default_only_commands_at_a_terminal_use_a_server(setting: str | None) -> None:
+    """Unset (or auto): a command whose stderr is a terminal may use and leave a server; one
+    whose stderr is a pipe (a script, CI, a harness) runs in its own process, its workers its
+    own children, and leaves nothing; FCCGRB_SERVER=1 or 0 decides either way."""
+    import pty
+
+    code = "from fccgrb_cli.cli import server; print(server.enabled())"
+    env = {k: v for k, v in os.environ.items() if k != "FCCGRB_SERVER"}
+    if setting is not None:
+        env["FCCGRB_SERVER"] = setting
+    said = {}
+    for where in ("pipe", "terminal"):
+        leader, follower = pty.openpty()
+        try:
+            done = subprocess.run([sys.executable, "-c", code], env=env, cwd="/", text=True,
+                                  stdout=subprocess.PIPE,
+                                  stderr=follower if where == "terminal" else subprocess.PIPE,
+                                  check=True)
+        finally:
+            os.close(leader)
+            os.close(follower)
+        said[where] = done.stdout.strip()
+    expected = {None: ("False", "True"), "auto": ("False", "True"), "1": ("True", "True"),
+                "0": ("False", "False")}[setting]
+    assert (said["pipe"], said["terminal"]) == expected
+
+
 def test_a_command_leaves_a_server_unless_turned_off(tmp_path: Path) -> None:
     pytest.importorskip("numba")
     run = [sys.executable, "-c", "from fccgrb_cli.entry import run; run()", "solve",

@@ -529,9 +529,10 @@ def compile_command() -> None:
               "fresh one.")
 @reports_input_errors
 def server_command(stop: bool) -> None:
-    """The warm servers that run your commands (one per install and environment; each ends
-    after 10 minutes without a command; FCCGRB_SERVER=0 turns them off): their process ids
-    and sockets, or --stop them. See docs/performance.md."""
+    """The warm servers that run the commands you type at a terminal (one per install and
+    environment; each ends after 10 minutes without a command; FCCGRB_SERVER=1 serves
+    scripts' commands too, FCCGRB_SERVER=0 none): their process ids and sockets, or --stop
+    them. See docs/performance.md."""
     from fccgrb_cli.cli import server
 
     if stop:
@@ -541,7 +542,8 @@ def server_command(stop: bool) -> None:
         return
     found = server.servers()
     if not server.enabled():
-        click.echo("fccgrb servers are turned off here (FCCGRB_SERVER=0, or not Linux)")
+        click.echo("this command would not use a fccgrb server (FCCGRB_SERVER=0, not Linux, "
+                   "or stderr not a terminal without FCCGRB_SERVER=1)")
     if not found:
         click.echo("no fccgrb server is up")
     for pid, path in found:

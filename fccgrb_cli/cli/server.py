@@ -40,7 +40,10 @@ What makes a server serve a command, and nothing else:
 Anything that stops a command from reaching a server (none running, another user's folder, a
 socket path too long, a closed descriptor, a refusal) runs it in its own process, as without
 one. The server ends after :data:`IDLE` seconds without a command. Linux only (``fork`` after
-numba and LLVM, ``pidfd``); ``FCCGRB_SERVER=0`` turns it off (the tests do)."""
+numba and LLVM, ``pidfd``). By default only commands typed at a terminal (stderr a terminal)
+use and leave servers: a script's or CI's commands keep the usual process tree (their workers
+their children) and leave nothing running; ``FCCGRB_SERVER=1`` serves them too,
+``FCCGRB_SERVER=0`` turns servers off (the tests do)."""
 
 from __future__ import annotations
 
@@ -61,7 +64,9 @@ from fccgrb_cli.core import scratch
 
 __all__ = ["IDLE", "SETTING", "attempt", "key", "offer", "serve", "source_stamp"]
 
-SETTING = "FCCGRB_SERVER"  # "0", "off", "no" or "false": never use nor leave a server
+# "0"/"off"/"no"/"false": never use nor leave a server; "1"/"on"/"yes"/"true": always;
+# unset or "auto": for commands whose stderr is a terminal (:func:`enabled`)
+SETTING = "FCCGRB_SERVER"
 IDLE = 600.0  # s without a command before the server ends
 MOST = 3  # servers of one user at once (each environment its own, ~200 MB each)
 PACKAGE = Path(__file__).resolve().parents[1]
@@ -80,10 +85,23 @@ SOCKET_PATH_MOST = 108  # bytes of a Unix socket's path on Linux, the closing NU
 
 
 def enabled(environ: dict[str, str] | os._Environ = os.environ) -> bool:
-    """Whether commands may use (and leave) a server here: Linux, and not turned off."""
+    """Whether this command may use (and leave) a server: on Linux, when ``FCCGRB_SERVER`` is
+    on, or unset (or ``auto``) and the command line's stderr is a terminal. The commands a
+    user types are served; a script's, a pipeline's, CI's or a test harness's (stderr a pipe
+    or a file) each run in a process of their own, a child of their caller, and leave no
+    process behind, unless they ask for the server (``FCCGRB_SERVER=1``)."""
+    if not (sys.platform.startswith("linux") and hasattr(os, "pidfd_open")
+            and hasattr(socket, "AF_UNIX")):
+        return False
     setting = environ.get(SETTING, "").strip().lower()
-    return (sys.platform.startswith("linux") and hasattr(os, "pidfd_open")
-            and hasattr(socket, "AF_UNIX") and setting not in ("0", "off", "no", "false"))
+    if setting in ("0", "off", "no", "false"):
+        return False
+    if setting in ("1", "on", "yes", "true"):
+        return True
+    try:
+        return os.isatty(2)
+    except OSError:
+        return False
 
 
 def key(environ: dict[str, str] | os._Environ = os.environ) -> str:
