@@ -164,7 +164,30 @@ sys.stdout = io.TextIOWrapper(io.BufferedWriter(Raw()))
 print("ready", flush=True)
 """
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                          env=environment(), timeout=60)
+                          env=environment(), timeout=60, preexec_fn=_child_setup())
+    name = signal.Signals(sig).name
+    assert done.returncode == 128 + sig, done.stderr
+    assert done.stderr == f"fccgrb: error: interrupted by {name}; the files being written " \
+                          "were removed\n"
+    assert not list(tmp_path.glob("being-written-*"))
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_with_stdout_closed_still_ends_in_one_line(tmp_path: Path, sig: int) -> None:
+    """A command started with descriptor 1 closed (``>&-``) has no sys.stdout (None): its
+    signal handler, which flushes stdout before its line, ended in a traceback and status 1."""
+    script = f"""
+import os, signal, sys, time
+from fccgrb_cli.core import scratch
+assert sys.stdout is None
+scratch.install()
+scratch.create({str(tmp_path)!r}, "being-written-", ".h5")
+os.kill(os.getpid(), {int(sig)})
+time.sleep(10)
+"""
+    done = subprocess.run(["sh", "-c", 'exec "$0" "$@" >&-', sys.executable, "-c", script],
+                          stderr=subprocess.PIPE, text=True, env=environment(), timeout=60,
+                          preexec_fn=_child_setup())
     name = signal.Signals(sig).name
     assert done.returncode == 128 + sig, done.stderr
     assert done.stderr == f"fccgrb: error: interrupted by {name}; the files being written " \

@@ -88,11 +88,13 @@ def _end(signum: int, frame) -> None:
     if _QUIET:
         os._exit(128 + signum)
     name = signal.Signals(signum).name
-    # The handler can run inside sys.stdout's own flush (Python checks for signals between a
-    # buffered writer's raw writes, holding its lock): flushing again there raises
-    # RuntimeError ("reentrant call"), which must not replace the interruption.
-    with contextlib.suppress(OSError, ValueError, RuntimeError):
-        sys.stdout.flush()
+    # Nothing stdout does may replace the interruption: the handler can run inside its own
+    # flush (Python checks for signals between a buffered writer's raw writes, holding its
+    # lock: flushing again raises RuntimeError, "reentrant call"), it may be closed or a
+    # broken pipe, or None (the command started with descriptor 1 closed, ``>&-``).
+    if sys.stdout is not None:
+        with contextlib.suppress(OSError, ValueError, RuntimeError):
+            sys.stdout.flush()
     with contextlib.suppress(OSError):
         os.write(2, f"fccgrb: error: interrupted by {name}; the files being written were "
                     "removed\n".encode())
