@@ -12,7 +12,8 @@ import contextlib
 import os
 import shutil
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -61,17 +62,43 @@ def pending(jobs: Iterable[Job], readable: Callable[[Path], bool],
     return todo
 
 
+class _LocalPool(Executor):
+    """``workers`` processes that end with this one (``scratch``), replaced by fresh ones when
+    a worker died (a crash, the OOM killer, kill -9): the jobs then in the pool fail with
+    BrokenProcessPool, and the jobs submitted after it run, as in a pool of their own."""
+
+    def __init__(self, workers: int) -> None:
+        self._workers = workers
+        self._pool = self._started()
+
+    def _started(self) -> ProcessPoolExecutor:
+        return ProcessPoolExecutor(max_workers=self._workers,
+                                   initializer=scratch.die_with_parent, initargs=(os.getpid(),))
+
+    def submit(self, fn: Callable[..., Any], /, *args: Any,
+               **kwargs: Any) -> Future[Any]:
+        try:
+            return self._pool.submit(fn, *args, **kwargs)
+        except BrokenProcessPool:
+            self._pool.shutdown()
+            self._pool = self._started()
+            return self._pool.submit(fn, *args, **kwargs)
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        self._pool.shutdown(wait=wait, cancel_futures=cancel_futures)
+
+
 @contextlib.contextmanager
 def local_pool(workers: int) -> Iterator[Executor | None]:
     """A pool of ``workers`` processes that end with this one (``scratch``), for one or several
     :func:`run_jobs` in turn: its workers keep what they loaded (the compiled kernels) from one
-    to the next. None when ``workers`` is 1 (the jobs run in this process). Left, it cancels
-    the jobs not started."""
+    to the next, and a worker's death fails only the jobs then in the pool (the next are run
+    by fresh workers). None when ``workers`` is 1 (the jobs run in this process). Left, it
+    cancels the jobs not started."""
     if workers <= 1:
         yield None
         return
-    pool = ProcessPoolExecutor(max_workers=workers, initializer=scratch.die_with_parent,
-                               initargs=(os.getpid(),))
+    pool = _LocalPool(workers)
     try:
         yield pool
     finally:
