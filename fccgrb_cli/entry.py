@@ -18,8 +18,13 @@ def run() -> None:
 
     scratch.install()
     from fccgrb_cli.cli import server
+    from fccgrb_cli.core.errors import InputError
 
-    served = server.attempt(sys.argv, environ)
+    try:
+        served = server.attempt(sys.argv, environ)
+    except InputError as error:  # FCCGRB_SERVER's value: one line, status 2, nothing run
+        sys.stderr.write(f"fccgrb: error: {error}\n")
+        served = 2
     if served is not None:
         leave(served)
     code = command()

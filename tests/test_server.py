@@ -326,7 +326,7 @@ def test_the_key_names_what_is_read_before_a_command_runs(tmp_path: Path) -> Non
         {"FCCGRB_SERVER": "off"})
 
 
-@pytest.mark.parametrize("setting", [None, "auto", "1", "0"])
+@pytest.mark.parametrize("setting", [None, "auto", "1", "0", "AUTO", " 1 ", "Off"])
 def test_by_default_only_commands_at_a_terminal_use_a_server(setting: str | None) -> None:
     """Unset (or auto): a command whose stderr is a terminal may use and leave a server; one
     whose stderr is a pipe (a script, CI, a harness) runs in its own process, its workers its
@@ -350,8 +350,26 @@ def test_by_default_only_commands_at_a_terminal_use_a_server(setting: str | None
             os.close(follower)
         said[where] = done.stdout.strip()
     expected = {None: ("False", "True"), "auto": ("False", "True"), "1": ("True", "True"),
-                "0": ("False", "False")}[setting]
+                "0": ("False", "False"), "AUTO": ("False", "True"), " 1 ": ("True", "True"),
+                "Off": ("False", "False")}[setting]
     assert (said["pipe"], said["terminal"]) == expected
+
+
+@pytest.mark.parametrize("setting", ["2", "force", "auto-on"])
+def test_another_server_setting_is_one_line_and_status_2(setting: str) -> None:
+    """A value that is none of on, off or auto (a typo, or a number other than 0 and 1) is
+    refused before the command runs, rather than taken for one of them."""
+    from fccgrb_cli.cli import server
+    from fccgrb_cli.core.errors import InputError
+
+    with pytest.raises(InputError, match="FCCGRB_SERVER"):
+        server.enabled({"FCCGRB_SERVER": setting})
+    done = subprocess.run([sys.executable, "-c", "from fccgrb_cli.entry import run; run()",
+                           "--version"], env={**os.environ, "FCCGRB_SERVER": setting},
+                          cwd="/", capture_output=True, text=True, timeout=60)
+    assert (done.returncode, done.stdout) == (2, ""), done.stderr
+    assert done.stderr == ("fccgrb: error: FCCGRB_SERVER: expected 1, 0 or auto (on/off, "
+                           f"yes/no, true/false), got {setting!r}\n")
 
 
 def test_a_command_leaves_a_server_unless_turned_off(tmp_path: Path) -> None:

@@ -61,12 +61,14 @@ from pathlib import Path
 from typing import Any
 
 from fccgrb_cli.core import scratch
+from fccgrb_cli.core.errors import InputError
 
 __all__ = ["IDLE", "SETTING", "attempt", "key", "offer", "serve", "source_stamp"]
 
 # "0"/"off"/"no"/"false": never use nor leave a server; "1"/"on"/"yes"/"true": always;
-# unset or "auto": for commands whose stderr is a terminal (:func:`enabled`)
+# unset or "auto": for commands whose stderr is a terminal (:func:`enabled`); else an error
 SETTING = "FCCGRB_SERVER"
+OFF, ON = ("0", "off", "no", "false"), ("1", "on", "yes", "true")
 IDLE = 600.0  # s without a command before the server ends
 MOST = 3  # servers of one user at once (each environment its own, ~200 MB each)
 PACKAGE = Path(__file__).resolve().parents[1]
@@ -89,14 +91,18 @@ def enabled(environ: dict[str, str] | os._Environ = os.environ) -> bool:
     on, or unset (or ``auto``) and the command line's stderr is a terminal. The commands a
     user types are served; a script's, a pipeline's, CI's or a test harness's (stderr a pipe
     or a file) each run in a process of their own, a child of their caller, and leave no
-    process behind, unless they ask for the server (``FCCGRB_SERVER=1``)."""
+    process behind, unless they ask for the server (``FCCGRB_SERVER=1``). InputError for any
+    other value, never taken silently for one of these."""
+    setting = environ.get(SETTING, "").strip().lower()
+    if setting not in (*OFF, *ON, "", "auto"):
+        raise InputError(f"{SETTING}: expected 1, 0 or auto (on/off, yes/no, true/false), "
+                         f"got {environ[SETTING]!r}")
     if not (sys.platform.startswith("linux") and hasattr(os, "pidfd_open")
             and hasattr(socket, "AF_UNIX")):
         return False
-    setting = environ.get(SETTING, "").strip().lower()
-    if setting in ("0", "off", "no", "false"):
+    if setting in OFF:
         return False
-    if setting in ("1", "on", "yes", "true"):
+    if setting in ON:
         return True
     try:
         return os.isatty(2)
@@ -156,7 +162,8 @@ def socket_path(environ: dict[str, str] | os._Environ = os.environ) -> Path | No
 # --- the command line's side ----------------------------------------------------------------
 def attempt(argv: list[str], environ: dict[str, str]) -> int | None:
     """Run the command ``argv`` in this install's server, if one is up for ``environ``: its
-    exit status, or None where no server took it (the caller runs it itself)."""
+    exit status, or None where no server took it (the caller runs it itself). InputError for
+    a ``FCCGRB_SERVER`` value that is none of :func:`enabled`'s."""
     if not enabled(environ):
         return None
     path = socket_path(environ)
