@@ -1,7 +1,9 @@
 """Signals filtered together, one call of the filter for many columns (the loop's cost is per
-sample, not per column): a trial's loads, the classical drive's angles and floating base. Each
-column is filtered alone, so the values must be those of one call per signal, to the bit, in
-C order (the compiled kernels take them), on generated cases."""
+sample, not per column): a trial's loads, the classical drive's angles and floating base, the
+reduction's prefiltered run, the markers of the kinematic gait events. Each column is filtered
+alone, so the values must be those of one call per signal, to the bit, in C order (the compiled
+kernels take them), on generated cases; a trial too short for the filter is still one line
+naming the option."""
 
 from __future__ import annotations
 
@@ -11,10 +13,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fccgrb_cli.core.errors import InputError
 from fccgrb_cli.dynamics.loads import ExternalLoad, lowpassed
+from fccgrb_cli.dynamics.reduction import Stage, prefiltered
+from fccgrb_cli.gait import events
 from fccgrb_cli.model import load_model
-from fccgrb_cli.signals.butterworth import lowpass
+from fccgrb_cli.signals import butterworth
+from fccgrb_cli.signals.butterworth import frames_needed, lowpass
 from fccgrb_cli.solvers.ad.baseline import drivers_from
+from fccgrb_cli.solvers.result import KinematicResult
 from fccgrb_cli.system import compile_system
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -71,3 +78,101 @@ def test_the_drive_filters_angles_and_base_as_each_alone(seed: int) -> None:
         a, b = getattr(inside, field.name), getattr(outside, field.name)
         assert np.array_equal(a, b), field.name
         assert a.flags.c_contiguous, field.name
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_loads_of_different_frames_are_each_filtered_as_alone(seed: int) -> None:
+    """Loads of different lengths (not a trial's, but the function takes any): each group of
+    one length is stacked, and each load comes out as filtered alone."""
+    rng = np.random.default_rng(100 + seed)
+    loads = [_load(rng, f"load {k}", int(rng.choice([60, 90, 150])), True) for k in range(4)]
+    rate, cutoff, order = 200.0, 6.0, 2
+    for load, out in zip(loads, lowpassed(loads, rate, cutoff, order), strict=True):
+        alone = load.filtered(lambda signal: lowpass(signal, rate, cutoff, order))
+        for field in ("force", "moment", "point"):
+            assert np.array_equal(getattr(out, field), getattr(alone, field)), field
+
+
+def _result(rng: np.random.Generator, frames: int, nq: int, angles: int,
+            rate: float) -> KinematicResult:
+    q = rng.normal(size=(frames, nq)).cumsum(axis=0) * 0.01
+    theta = rng.normal(size=(frames, angles)).cumsum(axis=0) * 0.01
+    ones = np.ones(frames)
+    return KinematicResult("nrm-wls", 1e-10, np.arange(frames) / rate, q, q, q, theta, theta,
+                           theta, tuple(f"a{k}" for k in range(angles)), ones, ones, ones, ones,
+                           ones.astype(bool))
+
+
+@pytest.mark.parametrize(("model", "seed"), [("lower_limb", 0), ("lower_limb", 1),
+                                             ("five_bar", 2)])
+def test_the_prefiltered_run_equals_angles_and_bases_each_alone(model: str, seed: int) -> None:
+    """The reduction's prefiltered run: its angles and each floating base's coordinates as
+    low-passed one by one, the other coordinates as they were."""
+    rng = np.random.default_rng(seed)
+    loaded = load_model(ROOT / "configs" / "models" / f"{model}.yaml")
+    system = compile_system(loaded, angles="driver")
+    frames, rate = int(rng.integers(30, 300)), float(rng.choice([100.0, 200.0]))
+    result = _result(rng, frames, system.layout.nq, len(loaded.angles), rate)
+    stage = Stage(rate, float(rng.uniform(3.0, 12.0)), int(rng.integers(1, 4)), 1e-10, "numpy")
+    out = prefiltered(loaded, result, stage)
+    q = result.q.copy()
+    for base in loaded.floating_bases:
+        block = system.layout.q_slice(base)
+        q[:, block] = lowpass(q[:, block], stage.rate, stage.cutoff, stage.order)
+    assert np.array_equal(out.q, q)
+    assert np.array_equal(out.theta, lowpass(result.theta, stage.rate, stage.cutoff,
+                                             stage.order))
+    assert out.q.flags.c_contiguous and out.theta.flags.c_contiguous
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_kinematic_events_equal_those_of_each_marker_filtered_alone(seed: int,
+                                                                    monkeypatch) -> None:
+    """Noisy walking markers with gaps: the events (times between frames, so any change in
+    the smoothed markers shows) equal those found with one call of the filter per marker."""
+    rng = np.random.default_rng(seed)
+    rate = float(rng.choice([100.0, 200.0]))
+    time = np.arange(int(rng.integers(300, 500))) / rate
+    pelvis = np.column_stack([1.2 * time, np.zeros_like(time), np.ones_like(time)])
+    markers = {"pelvis": pelvis}
+    for side, phase in (("left", 0.1), ("right", 0.65)):
+        swing = 0.4 * np.cos(2 * np.pi * (time - phase) / 1.1)
+        heel = pelvis + np.column_stack([swing, np.zeros_like(time), -np.ones_like(time)])
+        markers[f"{side}_heel"] = heel
+        markers[f"{side}_toe"] = heel + np.array([0.15, 0.0, 0.0])
+    for name in markers:
+        markers[name] = markers[name] + rng.normal(size=markers[name].shape) * 0.002
+        gap = int(rng.integers(20, len(time) - 20))
+        markers[name][gap:gap + 5] = np.nan
+    vertical = np.array([0.0, 0.0, 1.0])
+    together = events.kinematic_events(markers, rate, vertical, "synthetic")
+
+    def each_marker_alone(signal: np.ndarray, *args: float) -> np.ndarray:
+        assert signal.shape[1] == 3 * len(markers)  # every marker in one call
+        return np.concatenate([lowpass(signal[:, k:k + 3], *args)
+                               for k in range(0, signal.shape[1], 3)], axis=1)
+
+    monkeypatch.setattr(butterworth, "lowpass", each_marker_alone)  # events imports it late
+    alone = events.kinematic_events(markers, rate, vertical, "synthetic")
+    assert len(together) >= 4
+    assert np.array_equal(together.time, alone.time)
+    assert (together.side, together.kind) == (alone.side, alone.kind)
+
+
+def test_a_trial_too_short_for_the_filter_is_one_line_naming_the_option() -> None:
+    rng = np.random.default_rng(0)
+    frames = frames_needed(2) - 1
+    loads = [_load(rng, "plate 1", frames, False), _load(rng, "plate 2", frames, False)]
+    loads[1].force[2:5] = 100.0
+    expected = (f"--filter-cutoff: the trial has {frames} frames; the filter needs at least "
+                f"{frames_needed(2)}")
+    with pytest.raises(InputError) as error:
+        lowpassed(loads, 100.0, 6.0, 2)
+    assert str(error.value) == expected
+    system = compile_system(load_model(ROOT / "configs" / "models" / "lower_limb.yaml"),
+                            angles="driver")
+    theta = np.zeros((frames, len(system.model.angles)))
+    base = np.zeros((frames, system.n_base_slots, 3))
+    with pytest.raises(InputError) as error:
+        drivers_from(system, np.arange(frames) / 100.0, theta, base, 6.0, 2)
+    assert str(error.value) == expected

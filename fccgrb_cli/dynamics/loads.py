@@ -72,15 +72,20 @@ def lowpassed(loads: Sequence[ExternalLoad], rate: float, cutoff: float,
     """The loads with force and moment low-passed like the kinematics (the same cutoff keeps
     impact transients of the ground reaction from meeting smoothed accelerations:
     Kristianslund et al. 2012, J Biomech 45:666); a load never loaded is kept as it is. One
-    pass of the filter over every column at once: each column is filtered alone, so the
-    values are those of one call per signal, for one call's overhead."""
-    active = [k for k, load in enumerate(loads) if load.loaded().size]
+    pass of the filter over the columns of every load of the same frames (a trial's): each
+    column is filtered alone, so the values are those of one call per signal, for one call's
+    overhead."""
     out = list(loads)
-    if not active:
-        return out
-    stacked = lowpass(np.concatenate([np.concatenate([loads[k].force, loads[k].moment], axis=1)
-                                      for k in active], axis=1), rate, cutoff, order)
-    for j, k in enumerate(active):
-        out[k] = loads[k].with_filtered(np.ascontiguousarray(stacked[:, 6 * j:6 * j + 3]),
-                                        np.ascontiguousarray(stacked[:, 6 * j + 3:6 * j + 6]))
+    by_frames: dict[int, list[int]] = {}
+    for k, load in enumerate(loads):
+        if load.loaded().size:
+            by_frames.setdefault(len(load.force), []).append(k)
+    for group in by_frames.values():
+        stacked = lowpass(np.concatenate([np.concatenate([loads[k].force, loads[k].moment],
+                                                         axis=1) for k in group], axis=1),
+                          rate, cutoff, order)
+        for j, k in enumerate(group):
+            out[k] = loads[k].with_filtered(
+                np.ascontiguousarray(stacked[:, 6 * j:6 * j + 3]),
+                np.ascontiguousarray(stacked[:, 6 * j + 3:6 * j + 6]))
     return out
