@@ -239,18 +239,14 @@ def _vertex(signal: np.ndarray, f: int) -> float:
     return float(f + (0.5 * (a - c) / denominator if denominator else 0.0))
 
 
-def kinematic_events(markers: dict[str, np.ndarray], rate: float, vertical: np.ndarray,
-                     where: str) -> Events:
-    """Zeni et al. (2008) from marker trajectories (frames × 3, m): ``markers`` holds
-    ``pelvis`` (e.g. the mean of the ASIS and PSIS or sacrum markers), ``left_heel``,
-    ``right_heel``, ``left_toe`` and ``right_toe``; ``vertical`` is the unit vector up."""
+def smoothed_markers(markers: dict[str, np.ndarray], rate: float,
+                     where: str) -> dict[str, np.ndarray]:
+    """Each marker (frames × 3) with its gaps bridged (:func:`bridged`), then, in a trial of
+    more than 12 frames, low-passed forward and backward (2nd order, min(6 Hz, 0.4 × rate)):
+    every marker in one pass of the filter, each column alone, so each marker is what a call
+    of its own gives, to the bit, in C order. InputError for a marker never seen."""
     from fccgrb_cli.signals.butterworth import lowpass
 
-    absent = [k for k in ("pelvis", "left_heel", "right_heel", "left_toe", "right_toe")
-              if k not in markers]
-    if absent:
-        raise InputError(f"{where}: kinematic gait events need heel, toe and pelvis markers; "
-                         f"expected the landmarks {', '.join(absent)}")
     filled = {}
     for name, xyz in markers.items():
         bridge = bridged(xyz)
@@ -258,13 +254,25 @@ def kinematic_events(markers: dict[str, np.ndarray], rate: float, vertical: np.n
             raise InputError(f"{where}: kinematic gait events: the {name} marker is never "
                              "seen")
         filled[name] = bridge
-    frames = len(next(iter(filled.values())))
-    smooth = filled
-    if frames > 12:  # every marker in one pass of the filter (each column alone)
-        together = lowpass(np.concatenate(list(filled.values()), axis=1), rate,
-                           min(6.0, 0.4 * rate), 2)
-        smooth = {name: np.ascontiguousarray(together[:, 3 * k:3 * k + 3])
-                  for k, name in enumerate(filled)}
+    if len(next(iter(filled.values()), ())) <= 12:
+        return filled
+    together = lowpass(np.concatenate(list(filled.values()), axis=1), rate,
+                       min(6.0, 0.4 * rate), 2)
+    return {name: np.ascontiguousarray(together[:, 3 * k:3 * k + 3])
+            for k, name in enumerate(filled)}
+
+
+def kinematic_events(markers: dict[str, np.ndarray], rate: float, vertical: np.ndarray,
+                     where: str) -> Events:
+    """Zeni et al. (2008) from marker trajectories (frames × 3, m): ``markers`` holds
+    ``pelvis`` (e.g. the mean of the ASIS and PSIS or sacrum markers), ``left_heel``,
+    ``right_heel``, ``left_toe`` and ``right_toe``; ``vertical`` is the unit vector up."""
+    absent = [k for k in ("pelvis", "left_heel", "right_heel", "left_toe", "right_toe")
+              if k not in markers]
+    if absent:
+        raise InputError(f"{where}: kinematic gait events need heel, toe and pelvis markers; "
+                         f"expected the landmarks {', '.join(absent)}")
+    smooth = smoothed_markers(markers, rate, where)
     travel = smooth["pelvis"][-1] - smooth["pelvis"][0]
     travel -= (travel @ vertical) * vertical
     if np.linalg.norm(travel) < 0.1:
