@@ -13,6 +13,7 @@ import sys
 
 
 def run() -> None:
+    _open_closed_descriptors()
     environ = dict(os.environ)
     from fccgrb_cli.core import scratch
 
@@ -30,6 +31,26 @@ def run() -> None:
     code = command()
     server.offer(environ)
     leave(code)
+
+
+def _open_closed_descriptors() -> None:
+    """Standard descriptors closed when the program started (``>&-``, ``2>&-``, a daemon's)
+    opened on the null device, with their Python streams (None until then): what the command
+    says there is dropped, as it would be on /dev/null, instead of failing it (status 1, no
+    results), and no file the command opens takes their number (a library writing to its
+    stderr would write into that file)."""
+    for descriptor, name in enumerate(("stdin", "stdout", "stderr")):
+        try:
+            os.fstat(descriptor)
+        except OSError:
+            null = os.open(os.devnull, os.O_RDWR)
+            if null != descriptor:
+                os.dup2(null, descriptor)
+                os.close(null)
+            if getattr(sys, name) is None:  # the process's own stream, open until it ends
+                stream = open(descriptor, "r" if descriptor == 0 else "w",  # noqa: SIM115
+                              closefd=False)
+                setattr(sys, name, stream)
 
 
 def command() -> object:

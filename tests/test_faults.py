@@ -195,6 +195,29 @@ time.sleep(10)
     assert not list(tmp_path.glob("being-written-*"))
 
 
+@pytest.mark.parametrize("closed", ["<&-", ">&-", "2>&-"])
+def test_a_command_started_with_a_standard_descriptor_closed_runs(lab: Path, tmp_path: Path,
+                                                                  closed: str) -> None:
+    """Started with stdin, stdout or stderr closed (``>&-``, a daemon's): Python gives it no
+    stream there (None), and the progress bar's ``sys.stderr.isatty()`` or the exit's flush
+    failed the command with status 1, without its results. It runs as on /dev/null; a bad
+    input is still status 2."""
+    folder = copy_lab(lab, tmp_path / "lab")
+    shell = ["sh", "-c", f'exec "$0" "$@" {closed}', *command()]
+    done = subprocess.run([*shell, "solve", "model.yaml", "short.c3d", "-o", "new.h5",
+                           "--method", "nrm-ls"], cwd=folder, capture_output=True, text=True,
+                          env=environment(), timeout=300)
+    assert done.returncode == 0, done.stderr
+    with h5py.File(folder / "new.h5", "r") as h5:
+        assert len(h5["runs"]) == 1
+    done = subprocess.run([*shell, "solve", "absent.yaml", "short.c3d", "-o", "bad.h5"],
+                          cwd=folder, capture_output=True, text=True, env=environment(),
+                          timeout=300)
+    assert done.returncode == 2, done.stderr
+    if closed != "2>&-":
+        assert one_error(done.stderr).startswith("fccgrb: error:")
+
+
 def test_kill_9_of_a_solve_is_cleaned_by_the_next_solve(lab: Path, tmp_path: Path) -> None:
     """kill -9 leaves its scratch files (nothing can remove them); the next write of the same
     results file removes those of processes that no longer run, and adds its run."""
