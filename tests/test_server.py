@@ -141,6 +141,32 @@ def test_a_served_solve_equals_the_solve_in_its_own_process(warm, tmp_path: Path
     assert out.splitlines()[-1] == alone.stdout.splitlines()[-1].replace("alone", "served")
 
 
+def test_a_served_gait_solve_with_dynamics_equals_its_own_process(warm, tmp_path: Path) -> None:
+    """The warm server has scipy.signal loaded, so its filters run in lfilter's C loop, a
+    command of its own in the numpy loop: the loads', the drive's and the events' filters of
+    a real gait trial give the same bits either way."""
+    trial = ROOT.parent / "shared" / "data" / "c3d" / "Qualisys.c3d"
+    if not trial.exists():
+        pytest.skip("the shared data are absent")
+    alone_env = {**warm, "FCCGRB_SERVER": "0"}
+    entry = [sys.executable, "-c", "from fccgrb_cli.entry import run; run()"]
+    subprocess.run([*entry, "calibrate", str(ROOT / "configs" / "models" / "lower_limb.yaml"),
+                    str(trial), "--mass", "67", "-o", "personal.yaml"], env=alone_env,
+                   cwd=tmp_path, capture_output=True, text=True, check=True)
+    args = ["solve", "personal.yaml", str(trial), "--method", "nrm-wls", "--filter-cutoff", "6"]
+    alone = subprocess.run([*entry, *args, "-o", "alone.h5"], env=alone_env, cwd=tmp_path,
+                           capture_output=True, text=True, check=True)
+    assert "kernels loaded" in alone.stderr  # compiled kernels, as in the server
+    code, _, err = finish(fccgrb(warm, *args, "-o", "served.h5", cwd=tmp_path))
+    assert (code, err.splitlines()[-1]) == (0, "SERVED"), err
+    first, second = _without_times(tmp_path / "alone.h5"), _without_times(tmp_path / "served.h5")
+    assert first.keys() == second.keys()
+    assert any("gait/cycles" in name for name in first) and any("moments" in name
+                                                                for name in first)
+    for name, value in first.items():
+        assert np.array_equal(value, second[name], equal_nan=value.dtype.kind in "fc"), name
+
+
 def test_a_served_error_is_one_line_and_status_2(warm, tmp_path: Path) -> None:
     code, out, err = finish(fccgrb(warm, "solve", "missing.yaml", str(SAMPLE), cwd=tmp_path))
     lines = err.splitlines()
